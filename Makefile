@@ -1,0 +1,31 @@
+# Development entry points. `make test` builds a venv on first use.
+VENV ?= .venv
+PYTHON ?= python3
+STAMP := $(VENV)/.installed
+
+# Keep ROS 2 discovery on this host.
+export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
+
+.PHONY: all venv demo test bench clean
+
+all: test
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt setup.py
+	$(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install -r requirements.txt
+	$(VENV)/bin/python -m pip install -e .
+	touch $@
+
+demo: $(STAMP)
+	$(VENV)/bin/python -m bellow_ancf_ros.demo
+
+test: $(STAMP)
+	$(VENV)/bin/python -m pytest
+
+bench: $(STAMP)
+	$(VENV)/bin/python bench/run_bench.py
+
+clean:
+	rm -rf $(VENV)

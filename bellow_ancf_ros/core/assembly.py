@@ -1,0 +1,509 @@
+"""Robot assembly: degrees of freedom, rigid plates, constraints and loads.
+
+This is stage 2 of the model (paper section III.C-E) for a chain of ``m``
+segments with ``n_a`` actuators each:
+
+* every actuator is a chain of ``n`` gradient-deficient ANCF elements of
+  length ``le = lam*l0/n`` (eqs. 5-7, 19); elastic forces from
+  :mod:`bellow_ancf_ros.core.ancf` (eqs. 17, 18), gravity of the actuators
+  (eqs. 15, 16, linear density ``rho0/lam``) and point forces (eq. 14) are
+  summed over elements (eqs. 20, 21);
+* every plate except the fixed base plate is a rigid body with *natural
+  coordinates* ``[p, d1, d2, d3]`` (its centre and its three frame axes,
+  12 numbers) tied by six orthonormality constraints ``d_i.d_j = delta_ij``;
+  the base plate of segment ``j+1`` is the top plate of segment ``j`` moved by
+  the connector height ``h_c`` along its normal (paper eq. 23: same position,
+  fixed angle between gradients);
+* each actuator ``i`` is bonded to every plate of its segment at material
+  fraction ``s_k``: its point ``r(s_k l)`` coincides with the plate point
+  ``p + c_x d1 + c_y d2`` (3 equations) and its gradient is parallel to the
+  plate normal, written as ``d1.r_x = 0`` and ``d2.r_x = 0`` (2 equations)
+  (model_spec section 3).  Unlike the paper's squared parallel condition
+  (eq. 22) these rows keep full rank at the solution, so Newton's method
+  stays quadratic.
+
+Everything in these constraints is linear or bilinear in the unknowns, which
+keeps the constraint Hessian in the KKT Jacobian (eq. 27) exact and cheap.
+
+Unknowns ``x = [q, alpha]``: actuator nodal coordinates (actuator by
+actuator, node by node, ``[r, r_x]``), then plate coordinates, then the
+Lagrange multipliers.  The residual is eq. (25)::
+
+    R = [ dPi/dq + C_q^T alpha ;  C(q) ]
+
+with the potential ``Pi = sum W_e - Q_g.q - Q_f.q``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import ancf
+from .config import RobotConfig
+from .stage1 import Stage1
+
+__all__ = ["RobotModel", "Evaluation", "rotation_z"]
+
+_NODE_TOL = 1e-9
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def rotation_z(theta):
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass
+class Evaluation:
+    """Residual (eq. 25) and, on request, its Jacobian (eq. 27) at one point."""
+
+    residual: np.ndarray
+    jacobian: sp.csc_matrix | None = None
+    dres_dlam: np.ndarray | None = None  # (N, A) partial derivative w.r.t. stretches
+
+
+class RobotModel:
+    """Discretised robot: layout, residual, analytic Jacobians and read-outs.
+
+    Parameters
+    ----------
+    cfg : RobotConfig
+    n_elements : int, optional
+        ANCF elements per actuator (default: ``cfg.n_elements``).
+    """
+
+    def __init__(self, cfg: RobotConfig, n_elements: int | None = None):
+        n = int(cfg.n_elements if n_elements is None else n_elements)
+        if n < 1:
+            raise ValueError(f"n_elements must be >= 1, got {n}")
+        self.cfg = cfg
+        self.n = n
+        self.stage1 = Stage1.from_config(cfg)
+        self._build_layout()
+        self._build_pattern()
+
+    # ------------------------------------------------------------------ layout
+    def _build_layout(self):
+        cfg, n = self.cfg, self.n
+        seg_of_act, ang = [], []
+        for j, seg in enumerate(cfg.segments):
+            for i in range(seg.n_actuators):
+                seg_of_act.append(j)
+                ang.append(seg.theta0 + 2.0 * np.pi * i / seg.n_actuators)
+        self.A = A = len(seg_of_act)
+        self.seg_of_act = np.array(seg_of_act)
+        self.act_angle = np.array(ang)
+        radius = np.array([cfg.segments[j].pitch_radius for j in seg_of_act])
+        self.act_offset = np.stack([radius * np.cos(ang), radius * np.sin(ang), np.zeros(A)], axis=1)
+
+        self.n_nodes = n + 1
+        self.nq_act = A * self.n_nodes * 6
+        # element dofs: element e of actuator a uses nodes e, e+1 -> 12 contiguous dofs
+        a_idx, e_idx = np.meshgrid(np.arange(A), np.arange(n), indexing="ij")
+        self.elem_act = a_idx.ravel()
+        start = (a_idx * self.n_nodes + e_idx).ravel() * 6
+        self.elem_dofs = start[:, None] + np.arange(12)[None, :]  # (E, 12)
+        self.E = A * n
+
+        # plates: per segment, [base, intermediate..., top]; base of segment 0 is fixed
+        plates = []  # dicts with segment, fraction, unknown index
+        self.seg_plates = []
+        n_unknown = 0
+        for j, seg in enumerate(cfg.segments):
+            rows = []
+            for s in (0.0, *seg.plate_fractions, 1.0):
+                if s == 0.0:
+                    if j == 0:
+                        ref = (-1, 0.0)  # fixed world frame
+                    else:
+                        ref = (plates[self.seg_plates[j - 1][-1]]["unknown"], seg.connector_height)
+                    plates.append({"segment": j, "fraction": 0.0, "unknown": ref[0], "h": ref[1]})
+                else:
+                    plates.append({"segment": j, "fraction": s, "unknown": n_unknown, "h": 0.0})
+                    n_unknown += 1
+                rows.append(len(plates) - 1)
+            self.seg_plates.append(rows)
+        self.plates = plates
+        self.P = n_unknown
+        self.nq = self.nq_act + 12 * n_unknown
+        self.plate_dofs = self.nq_act + 12 * np.arange(n_unknown)[:, None] + np.arange(12)[None, :]
+
+        # attachments: actuator a at plate k of its segment
+        g_act, g_elem, g_xi, g_frame, g_h = [], [], [], [], []
+        for a in range(A):
+            for k in self.seg_plates[self.seg_of_act[a]]:
+                pl = plates[k]
+                e, xi = self._locate(pl["fraction"])
+                g_act.append(a)
+                g_elem.append(a * n + e)
+                g_xi.append(xi)
+                g_frame.append(pl["unknown"])
+                g_h.append(pl["h"])
+        self.G = len(g_act)
+        self.att_act = np.array(g_act)
+        self.att_elem = np.array(g_elem)
+        self.att_xi = np.array(g_xi)
+        self.att_frame = np.array(g_frame)
+        self.att_h = np.array(g_h)
+        self.att_c = self.act_offset[self.att_act]
+        self.att_free = self.att_frame >= 0
+        self.nc = 5 * self.G + 6 * self.P
+        self.N = self.nq + self.nc
+        self.h_att = ancf.hermite(self.att_xi, 0)
+        self.h1_att = ancf.hermite(self.att_xi, 1)
+
+        # point masses in plate frames: (unknown plate, offset along d3, mass)
+        masses = []
+        for j, seg in enumerate(cfg.segments):
+            rows = self.seg_plates[j]
+            for k in rows[1:-1]:
+                masses.append((plates[k]["unknown"], 0.0, seg.constraint_plate_mass))
+            masses.append((plates[rows[-1]]["unknown"], 0.0, seg.top_plate_mass))
+            if j > 0:
+                prev_top = plates[self.seg_plates[j - 1][-1]]["unknown"]
+                masses.append((prev_top, 0.5 * seg.connector_height, seg.connector_mass))
+        self.point_masses = masses
+        self.ee_plate = plates[self.seg_plates[-1][-1]]["unknown"]
+        self.ee_theta = cfg.segments[-1].theta0
+        self.gravity = np.asarray(cfg.gravity, dtype=float)
+        self.length_scale = sum(cfg.l0 for _ in cfg.segments) + sum(s.connector_height for s in cfg.segments)
+        self._build_scales()
+
+    def _locate(self, s):
+        """Element and local coordinate of material fraction ``s`` (eq. 6)."""
+        n = self.n
+        sn = s * n
+        k = round(sn)
+        if abs(sn - k) < _NODE_TOL:  # on a node
+            return (k, 0.0) if k < n else (n - 1, 1.0)
+        e = int(np.floor(sn))
+        return e, sn - e
+
+    def _build_scales(self):
+        """Residual scaling so that tolerances are relative to the robot."""
+        cfg = self.cfg
+        L = self.length_scale
+        k1 = self.stage1.k(1.0)
+        kb = cfg.d_a**2 * cfg.l0 * k1 / 8.0
+        weight = np.linalg.norm(self.gravity) * (
+            cfg.rho0 * cfg.l0 * self.A + sum(m for _, _, m in self.point_masses)
+        )
+        self.force_scale = F = kb / cfg.l0**2 + weight
+        s = np.empty(self.N)
+        act = np.zeros((self.A, self.n_nodes, 6))
+        act[..., :3] = 1.0 / F
+        act[..., 3:] = 1.0 / (F * L)
+        s[: self.nq_act] = act.ravel()
+        pl = np.full((self.P, 12), 1.0 / (F * L))
+        pl[:, :3] = 1.0 / F
+        s[self.nq_act : self.nq] = pl.ravel()
+        c = np.ones((self.G, 5))
+        c[:, :3] = 1.0 / L
+        s[self.nq : self.nq + 5 * self.G] = c.ravel()
+        s[self.nq + 5 * self.G :] = 1.0
+        self.residual_scale = s
+        # coordinate scale: positions by the robot length, gradients/axes as they are
+        pos = np.zeros((self.A, self.n_nodes, 6), bool)
+        pos[..., :3] = True
+        ppos = np.zeros((self.P, 12), bool)
+        ppos[:, :3] = True
+        self.position_dof = np.concatenate([pos.ravel(), ppos.ravel()])
+        self.dof_scale = np.where(self.position_dof, L, 1.0)
+
+    # --------------------------------------------------------- sparsity pattern
+    def _build_pattern(self):
+        """Fixed COO pattern of the KKT matrix and its map to CSC storage."""
+        nq, G, P = self.nq, self.G, self.P
+        free = self.att_free
+        ed = self.elem_dofs
+        aed = ed[self.att_elem].reshape(G, 4, 3)  # (G, 4, 3) element dofs at attachments
+        fr = np.where(free, self.att_frame, 0)
+        pdofs = self.plate_dofs[fr].reshape(G, 4, 3)  # [p, d1, d2, d3] dofs
+        r0 = 5 * np.arange(G)
+        rows, cols = [], []
+        # (1) element stiffness
+        rows.append(np.repeat(ed, 12, axis=1).ravel())
+        cols.append(np.tile(ed, (1, 12)).ravel())
+        # constraint Jacobian blocks, in the order values are produced in _constraints
+        crow, ccol = [], []
+        crow.append(np.broadcast_to(r0[:, None, None] + np.arange(3)[None, None, :], (G, 4, 3)).ravel())
+        ccol.append(aed.ravel())  # (a) position rows / element dofs
+        crow.append(np.broadcast_to(r0[free, None, None] + np.arange(3)[None, None, :], (free.sum(), 4, 3)).ravel())
+        ccol.append(pdofs[free].ravel())  # (b) position rows / frame dofs
+        prow = r0[:, None] + 3 + np.arange(2)[None, :]  # (G, 2)
+        crow.append(np.broadcast_to(prow[:, :, None, None], (G, 2, 4, 3)).ravel())
+        ccol.append(np.broadcast_to(aed[:, None], (G, 2, 4, 3)).ravel())  # (c) parallel rows / element dofs
+        crow.append(np.broadcast_to(prow[free][:, :, None], (free.sum(), 2, 3)).ravel())
+        ccol.append(pdofs[free][:, 1:3].ravel())  # (d) parallel rows / d1, d2
+        orow = 5 * G + 6 * np.arange(P)[:, None] + np.arange(6)[None, :]  # (P, 6)
+        pd = self.plate_dofs.reshape(P, 4, 3)
+        oc = np.empty((P, 6, 2, 3), dtype=int)
+        for m, (i, j) in enumerate(_PAIRS):
+            oc[:, m, 0] = pd[:, 1 + i]
+            oc[:, m, 1] = pd[:, 1 + j]
+        crow.append(np.broadcast_to(orow[:, :, None, None], (P, 6, 2, 3)).ravel())
+        ccol.append(oc.ravel())  # (e) orthonormality rows
+        self._c_rows = np.concatenate(crow)
+        self._c_cols = np.concatenate(ccol)
+        rows += [nq + self._c_rows, self._c_cols]
+        cols += [self._c_cols, nq + self._c_rows]
+        # Hessian of alpha.C: (f) parallel rows, (g) orthonormality rows
+        fe = np.broadcast_to(aed[free][:, None], (free.sum(), 2, 4, 3))
+        fd = np.broadcast_to(pdofs[free][:, 1:3, None, :], (free.sum(), 2, 4, 3))
+        rows += [fe.ravel(), fd.ravel()]
+        cols += [fd.ravel(), fe.ravel()]
+        rows += [oc[:, :, 0].ravel(), oc[:, :, 1].ravel()]
+        cols += [oc[:, :, 1].ravel(), oc[:, :, 0].ravel()]
+        rows = np.concatenate(rows)
+        cols = np.concatenate(cols)
+        key = cols * self.N + rows  # column-major order for CSC
+        uniq, inv = np.unique(key, return_inverse=True)
+        self._coo_map = inv
+        self._nnz = len(uniq)
+        self._csc_indices = (uniq % self.N).astype(np.int32)
+        ucols = uniq // self.N
+        self._csc_indptr = np.searchsorted(ucols, np.arange(self.N + 1)).astype(np.int32)
+        self._aed = aed
+        self._pdofs = pdofs
+
+    # -------------------------------------------------------------- parameters
+    def element_parameters(self, lam):
+        """Per-actuator ``le, k_t, k_b`` and their derivatives w.r.t. ``lam`` (eqs. 2, 4)."""
+        cfg = self.cfg
+        lam = np.asarray(lam, dtype=float)
+        k = self.stage1.k(lam)
+        dk = self.stage1.dk(lam)
+        le = lam * cfg.l0 / self.n
+        kt = k * cfg.l0
+        kb = cfg.d_a**2 * cfg.l0 * lam * k / 8.0
+        return {
+            "le": le, "kt": kt, "kb": kb,
+            "dle": np.full_like(lam, cfg.l0 / self.n),
+            "dkt": dk * cfg.l0,
+            "dkb": cfg.d_a**2 * cfg.l0 * (k + lam * dk) / 8.0,
+        }
+
+    # ------------------------------------------------------------------ loads
+    def external_forces(self, lam, load_scale=1.0, payload=0.0):
+        """Generalised gravity (eq. 16) and point forces (eq. 14), and their lam-derivative.
+
+        Returns ``(Q, dQ_dlam)`` with ``Q`` of length ``nq`` and ``dQ_dlam``
+        of shape ``(nq, A)``.
+        """
+        cfg = self.cfg
+        lam = np.asarray(lam, dtype=float)
+        g = self.gravity * load_scale
+        par = self.element_parameters(lam)
+        Q = np.zeros(self.nq)
+        dQ = np.zeros((self.nq, self.A))
+        le_e = par["le"][self.elem_act]
+        rho_e = cfg.rho0 / lam[self.elem_act]
+        w, dw = ancf.gravity_weights(le_e)  # (E, 4)
+        qg = (rho_e[:, None] * w)[:, :, None] * g[None, None, :]
+        np.add.at(Q, self.elem_dofs.ravel(), qg.ravel())
+        dwl = (-rho_e / lam[self.elem_act])[:, None] * w + (rho_e * par["dle"][self.elem_act])[:, None] * dw
+        dqg = (dwl[:, :, None] * g[None, None, :]).reshape(self.E, 12)
+        np.add.at(dQ, (self.elem_dofs.ravel(), np.repeat(self.elem_act, 12)), dqg.ravel())
+        for u, h, m in self.point_masses:
+            F = m * g
+            Q[self.plate_dofs[u, 0:3]] += F
+            Q[self.plate_dofs[u, 9:12]] += h * F
+        if payload:
+            F = payload * g
+            Q[self.plate_dofs[self.ee_plate, 0:3]] += F
+            Q[self.plate_dofs[self.ee_plate, 9:12]] += cfg.tool_length * F
+        return Q, dQ
+
+    # ------------------------------------------------------------- evaluation
+    def _constraints(self, q, alpha, le, want_lam=False, dle=None):
+        """Constraint values, Jacobian values (COO order), Hessian values, lam terms."""
+        G, P = self.G, self.P
+        free = self.att_free
+        qe = q[self._aed]  # (G, 4, 3)
+        le_g = le[self.att_act]
+        f0, df0 = ancf._le_powers(le_g, 0)
+        f1, df1 = ancf._le_powers(le_g, 1)
+        N, Nx = self.h_att * f0, self.h1_att * f1
+        r = np.einsum("ga,gai->gi", N, qe)
+        rx = np.einsum("ga,gai->gi", Nx, qe)
+        frame = q[self._pdofs]  # (G, 4, 3): p, d1, d2, d3 (garbage where fixed)
+        d12 = frame[:, 1:3].copy()
+        d12[~free] = np.eye(3)[:2]
+        X = self.att_c.copy()
+        Xf = frame[free, 0] + self.att_c[free, 0:1] * frame[free, 1] + self.att_c[free, 1:2] * frame[free, 2]
+        Xf += self.att_h[free, None] * frame[free, 3]
+        X[free] = Xf
+        C = np.empty(self.nc)
+        catt = C[: 5 * G].reshape(G, 5)
+        catt[:, :3] = r - X
+        catt[:, 3:] = np.einsum("gki,gi->gk", d12, rx)
+        pd = q[self.plate_dofs].reshape(P, 4, 3)
+        D = pd[:, 1:]
+        for m, (i, j) in enumerate(_PAIRS):
+            C[5 * G + m :: 6][:P] = np.einsum("pi,pi->p", D[:, i], D[:, j]) - (1.0 if i == j else 0.0)
+        nf = free.sum()
+        vals = [
+            np.broadcast_to(N[:, :, None], (G, 4, 3)).ravel(),
+            np.broadcast_to(
+                -np.stack([np.ones(nf), self.att_c[free, 0], self.att_c[free, 1], self.att_h[free]], axis=1)[:, :, None],
+                (nf, 4, 3),
+            ).ravel(),
+            (Nx[:, None, :, None] * d12[:, :, None, :]).ravel(),
+            np.broadcast_to(rx[free][:, None, :], (nf, 2, 3)).ravel(),
+        ]
+        ov = np.empty((P, 6, 2, 3))
+        for m, (i, j) in enumerate(_PAIRS):
+            ov[:, m, 0] = D[:, j]
+            ov[:, m, 1] = D[:, i]
+        vals.append(ov.ravel())
+        cvals = np.concatenate(vals)
+        aatt = alpha[: 5 * G].reshape(G, 5)
+        apar = aatt[:, 3:]
+        hv = np.broadcast_to((apar[free][:, :, None] * Nx[free][:, None, :])[:, :, :, None], (nf, 2, 4, 3)).ravel()
+        aort = alpha[5 * G :].reshape(P, 6)
+        ho = np.broadcast_to(aort[:, :, None], (P, 6, 3)).ravel()
+        hvals = np.concatenate([hv, hv, ho, ho])
+        out = {"C": C, "cvals": cvals, "hvals": hvals}
+        if want_lam:
+            # d/dlam of C and of C_q^T alpha (eq. 30), per attachment -> actuator column
+            dN, dNx = self.h_att * df0, self.h1_att * df1
+            dl = dle[self.att_act][:, None]
+            dr = np.einsum("ga,gai->gi", dN, qe) * dl
+            drx = np.einsum("ga,gai->gi", dNx, qe) * dl
+            dC = np.zeros((self.nc, self.A))
+            rows = 5 * np.arange(G)
+            for i in range(3):
+                dC[rows + i, self.att_act] = dr[:, i]
+            dpar = np.einsum("gki,gi->gk", d12, drx)
+            dC[rows + 3, self.att_act] = dpar[:, 0]
+            dC[rows + 4, self.att_act] = dpar[:, 1]
+            dCa = np.zeros((self.nq, self.A))
+            apos = aatt[:, :3]
+            contrib = dN[:, :, None] * apos[:, None, :] * dl[:, :, None]  # (G, 4, 3)
+            contrib += dNx[:, :, None] * np.einsum("gk,gki->gi", apar, d12)[:, None, :] * dl[:, :, None]
+            np.add.at(dCa, (self._aed.reshape(G, 12), np.repeat(self.att_act, 12).reshape(G, 12)),
+                      contrib.reshape(G, 12))
+            dd = apar[free][:, :, None] * drx[free][:, None, :]  # (nf, 2, 3)
+            pdf = self._pdofs[free][:, 1:3]
+            np.add.at(dCa, (pdf.reshape(-1), np.repeat(self.att_act[free], 6)), dd.reshape(-1))
+            out["dC"] = dC
+            out["dCa"] = dCa
+        return out
+
+    def evaluate(self, x, lam, load_scale=1.0, payload=0.0, jacobian=True, lam_derivative=False):
+        """Residual of eq. (25) at ``x = [q, alpha]``; Jacobian eq. (27); ``dR/dlam`` (eq. 30)."""
+        nq = self.nq
+        q, alpha = x[:nq], x[nq:]
+        par = self.element_parameters(lam)
+        ea = self.elem_act
+        le_e, kt_e, kb_e = par["le"][ea], par["kt"][ea], par["kb"][ea]
+        qe = q[self.elem_dofs].reshape(self.E, 4, 3)
+        ef = ancf.element_forces(qe, le_e, kt_e, kb_e, stiffness=jacobian, length_derivative=lam_derivative)
+        fe = kt_e[:, None, None] * ef["ft"] + kb_e[:, None, None] * ef["fb"]
+        Rq = np.bincount(self.elem_dofs.ravel(), weights=fe.ravel(), minlength=nq)
+        Q, dQ = self.external_forces(lam, load_scale, payload)
+        Rq -= Q
+        con = self._constraints(q, alpha, par["le"], want_lam=lam_derivative, dle=par["dle"])
+        Rq += np.bincount(self._c_cols, weights=con["cvals"] * alpha[self._c_rows], minlength=nq)
+        res = np.concatenate([Rq, con["C"]])
+        ev = Evaluation(residual=res)
+        if jacobian:
+            data = np.concatenate([ef["K"].ravel(), con["cvals"], con["cvals"], con["hvals"]])
+            csc = np.bincount(self._coo_map, weights=data, minlength=self._nnz)
+            ev.jacobian = sp.csc_matrix((csc, self._csc_indices, self._csc_indptr), shape=(self.N, self.N))
+        if lam_derivative:
+            d = np.zeros((self.N, self.A))
+            dfe = (par["dkt"][ea][:, None, None] * ef["ft"] + par["dkb"][ea][:, None, None] * ef["fb"]
+                   + par["dle"][ea][:, None, None] * (kt_e[:, None, None] * ef["dft"] + kb_e[:, None, None] * ef["dfb"]))
+            np.add.at(d, (self.elem_dofs.ravel(), np.repeat(ea, 12)), dfe.ravel())
+            d[:nq] -= dQ
+            d[:nq] += con["dCa"]
+            d[nq:] = con["dC"]
+            ev.dres_dlam = d
+        return ev
+
+    def potential(self, q, lam, load_scale=1.0, payload=0.0):
+        """Total potential ``Pi = sum W_e - Q.q`` (eqs. 15, 17): used by tests."""
+        par = self.element_parameters(lam)
+        ea = self.elem_act
+        qe = q[self.elem_dofs].reshape(self.E, 4, 3)
+        W = ancf.element_energy(qe, par["le"][ea], par["kt"][ea], par["kb"][ea]).sum()
+        Q, _ = self.external_forces(lam, load_scale, payload)
+        return W - Q @ q
+
+    # ------------------------------------------------------------ states
+    def straight_state(self, lam):
+        """Straight configuration with each segment at its mean stretch.
+
+        All constraints hold exactly; with ``lam = 1`` and no load it is the
+        exact equilibrium (alpha = 0).  Used as the cold start.
+        """
+        lam = np.asarray(lam, dtype=float)
+        q = np.zeros(self.nq)
+        act = q[: self.nq_act].reshape(self.A, self.n_nodes, 6)
+        pl = q[self.nq_act :].reshape(self.P, 12)
+        z0 = 0.0
+        frac = np.arange(self.n_nodes) / self.n
+        for j, seg in enumerate(self.cfg.segments):
+            if j > 0:
+                z0 += seg.connector_height
+            acts = np.flatnonzero(self.seg_of_act == j)
+            Lseg = lam[acts].mean() * self.cfg.l0
+            for a in acts:
+                act[a, :, 0:2] = self.act_offset[a, :2]
+                act[a, :, 2] = z0 + frac * Lseg
+                act[a, :, 5] = Lseg / (lam[a] * self.cfg.l0)
+            for k in self.seg_plates[j]:
+                u = self.plates[k]["unknown"]
+                if self.plates[k]["fraction"] > 0:
+                    pl[u, 2] = z0 + self.plates[k]["fraction"] * Lseg
+                    pl[u, 3:] = np.eye(3).ravel()
+            z0 += Lseg
+        return np.concatenate([q, np.zeros(self.nc)])
+
+    # ------------------------------------------------------------ read-outs
+    def plate_frame(self, q, u):
+        """Centre and rotation matrix (columns d1, d2, d3) of unknown plate ``u``."""
+        c = q[self.plate_dofs[u]]
+        return c[:3].copy(), c[3:].reshape(3, 3).T.copy()
+
+    def end_effector(self, q):
+        """End-effector position and rotation (model_spec section 1)."""
+        p, D = self.plate_frame(q, self.ee_plate)
+        return p + self.cfg.tool_length * D[:, 2], D @ rotation_z(self.ee_theta)
+
+    def plate_poses(self, q):
+        """List of ``(segment, fraction, position, rotation)`` for every plate, base first."""
+        out = []
+        for pl in self.plates:
+            u, h = pl["unknown"], pl["h"]
+            if u < 0:
+                p, D = np.zeros(3), np.eye(3)
+            else:
+                p, D = self.plate_frame(q, u)
+                p = p + h * D[:, 2]
+            out.append((pl["segment"], pl["fraction"], p, D))
+        return out
+
+    def backbones(self, q, lam, n_points=20):
+        """Actuator centre lines sampled at ``n_points`` equally spaced material points.
+
+        Returns an array ``(A, n_points, 3)`` (eq. 6).
+        """
+        n_points = int(n_points)
+        if n_points < 2:
+            raise ValueError("n_points must be >= 2")
+        s = np.linspace(0.0, 1.0, n_points) * self.n
+        e = np.minimum(np.floor(s).astype(int), self.n - 1)
+        xi = s - e
+        h = ancf.hermite(xi, 0)  # (n_points, 4)
+        le = self.element_parameters(lam)["le"]
+        out = np.empty((self.A, n_points, 3))
+        for a in range(self.A):
+            qe = q[self.elem_dofs[a * self.n + e]].reshape(n_points, 4, 3)
+            w = h * np.array([1.0, le[a], 1.0, le[a]])
+            out[a] = np.einsum("pa,pai->pi", w, qe)
+        return out

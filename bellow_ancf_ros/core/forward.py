@@ -1,0 +1,189 @@
+"""Forward kinetostatic problem (paper section IV.B).
+
+Pressures (gauge, Pa, one per actuator, segment by segment) and payload ->
+stretches by stage 1 (eq. 24) -> equilibrium of eq. (25) by Newton's method
+-> end-effector pose, plate poses, backbones, stability.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import solver
+from .assembly import RobotModel
+
+__all__ = ["ForwardResult", "solve_forward", "check_pressures", "UNSTABLE"]
+
+UNSTABLE = 6
+_STABILITY_RTOL = 1e-10
+
+
+@dataclass
+class ForwardResult:
+    """Converged (or not) configuration of the robot; SI units throughout.
+
+    ``success`` is true only for a converged *and* stable equilibrium: only
+    such a result is a usable configuration.
+    """
+
+    model: RobotModel
+    pressures_pa: np.ndarray
+    stretch: np.ndarray
+    payload_kg: float
+    x: np.ndarray
+    converged: bool
+    stable: bool | None
+    min_eigenvalue: float | None
+    status: int
+    message: str
+    iterations: int
+    residual_norm: float
+    history: list = field(default_factory=list, repr=False)
+    lu: object = field(default=None, repr=False)
+    jacobian: object = field(default=None, repr=False)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.converged and self.stable is not False)
+
+    @property
+    def q(self):
+        return self.x[: self.model.nq]
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.model.end_effector(self.q)[0]
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """Columns: end-effector x, y, z axes in the base frame."""
+        return self.model.end_effector(self.q)[1]
+
+    @property
+    def z_axis(self) -> np.ndarray:
+        return self.rotation[:, 2]
+
+    def plate_poses(self):
+        """``[(segment, fraction, position, rotation), ...]`` for every plate, base first."""
+        return self.model.plate_poses(self.q)
+
+    def backbones(self, n_points=20):
+        """Each actuator's centre line at ``n_points`` points: ``(A, n_points, 3)``."""
+        return self.model.backbones(self.q, self.stretch, n_points)
+
+    def to_dict(self):
+        """JSON-ready dictionary (the CLI's forward contract)."""
+        return {
+            "position_m": self.position.tolist(),
+            "rotation": self.rotation.tolist(),
+            "z_axis": self.z_axis.tolist(),
+            "stretch": self.stretch.tolist(),
+            "pressures_pa": self.pressures_pa.tolist(),
+            "payload_kg": float(self.payload_kg),
+            "converged": bool(self.converged),
+            "stable": None if self.stable is None else bool(self.stable),
+            "status": int(self.status),
+            "message": self.message,
+            "iterations": int(self.iterations),
+            "residual_norm": float(self.residual_norm),
+        }
+
+
+def check_pressures(model: RobotModel, pressures, limit_tol=1e-9):
+    """Validate a pressure vector: length, finiteness, limits.  Returns a float array."""
+    p = np.asarray(pressures, dtype=float).ravel()
+    if p.size != model.A:
+        raise ValueError(f"expected {model.A} pressures (one per actuator), got {p.size}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("pressures must be finite numbers")
+    cfg = model.cfg
+    span = cfg.p_max - cfg.p_min
+    bad = (p < cfg.p_min - limit_tol * span) | (p > cfg.p_max + limit_tol * span)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"pressure {i + 1} = {p[i] / 1e3:.6g} kPa is outside the limits "
+            f"[{cfg.p_min / 1e3:g}, {cfg.p_max / 1e3:g}] kPa"
+        )
+    return np.clip(p, cfg.p_min, cfg.p_max)
+
+
+def _stage2(model, lam, payload, warm, tol, max_iter):
+    """Solve eq. (25) for given stretches; ``warm = (x, lam, load_scale, payload)`` is an equilibrium."""
+    scale = model.residual_scale
+
+    def make(lam_t, load_t, pay_t):
+        return lambda x, jacobian=True: model.evaluate(x, lam_t, load_t, pay_t, jacobian=jacobian)
+
+    if warm is None:
+        # cold start: straight guess at the target stretches, then continuation
+        # from the exactly solved unloaded straight robot at lam = 1
+        res = solver.newton(make(lam, 1.0, payload), model.straight_state(lam), scale, tol, max_iter)
+        start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
+    else:
+        res = solver.newton(make(lam, 1.0, payload), warm[0], scale, tol, max_iter)
+        start = warm
+    if res.converged:
+        return res
+    first_iters = res.iterations
+    x0, lam0, s0, m0 = start
+
+    def make_t(t):
+        return make(lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0 + t * (payload - m0))
+
+    res = solver.continuation(make_t, x0, scale, tol, max_iter)
+    res.iterations += first_iters
+    return res
+
+
+def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
+                  check_stability=True, tol=1e-10, max_iter=25) -> ForwardResult:
+    """Forward kinetostatic problem.
+
+    Parameters
+    ----------
+    model : RobotModel
+    pressures : array_like, Pa (gauge), one per actuator, segment by segment;
+        must lie in ``[p_min, p_max]``.
+    payload_kg : mass at the end effector.
+    warm_start : ForwardResult, optional
+        A previous converged result (e.g. the last sample of a trajectory);
+        the solve starts from it and falls back to continuation from it.
+    check_stability : compute the reduced-Hessian stability test.
+    tol : tolerance on the scaled residual (forces relative to the robot's
+        bending/weight force scale, constraints relative to its length).
+    """
+    p = check_pressures(model, pressures)
+    payload = float(payload_kg)
+    if not np.isfinite(payload) or payload < 0:
+        raise ValueError(f"payload must be a finite non-negative mass in kg, got {payload_kg}")
+    lam = model.stage1.stretch(p)
+    warm = None
+    if warm_start is not None and warm_start.converged:
+        warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.payload_kg)
+    res = _stage2(model, lam, payload, warm, tol, max_iter)
+    out = ForwardResult(
+        model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
+        converged=res.converged, stable=None, min_eigenvalue=None, status=res.status,
+        message=res.message, iterations=res.iterations, residual_norm=res.residual_norm,
+        history=res.history, lu=res.lu, jacobian=res.jacobian,
+    )
+    if res.converged and check_stability:
+        assess_stability(out)
+    return out
+
+
+def assess_stability(result: ForwardResult):
+    """Fill ``stable``/``min_eigenvalue``; an unstable equilibrium gets status UNSTABLE."""
+    ev, ref = solver.reduced_hessian_min_eig(result.jacobian, result.model.nq, result.model.dof_scale)
+    result.min_eigenvalue = ev
+    result.stable = bool(ev > _STABILITY_RTOL * ref)
+    if not result.stable:
+        result.status = UNSTABLE
+        result.message = (
+            "converged to an unstable equilibrium (the robot would buckle): "
+            f"smallest reduced-Hessian eigenvalue {ev:.3g}"
+        )
+    return result

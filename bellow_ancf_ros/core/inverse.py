@@ -1,0 +1,329 @@
+"""Inverse kinetostatic problem (paper section IV.C, eqs. 28-30).
+
+Target -> stretches ``lam`` -> pressures by eq. (24).
+
+The paper solves eq. (29) for ``[lam, q, alpha]`` at once.  Here the same
+equations are solved in reduced form: ``lam`` is the unknown, eq. (25) is
+solved for ``q(lam)`` by the forward solver (warm-started), and the objective
+(eq. 28) ``O(lam) = O(q(lam))`` is differentiated exactly with the implicit
+function theorem, ``dx/dlam = -J^{-1} dR/dlam``, using the factorised
+Jacobian (eq. 27) and the analytic ``dR/dlam`` (first block column of
+eq. 30).  This keeps the pressure limits explicit box bounds on ``lam``
+(stage 1 is monotone, so ``p_min <= P <= p_max`` iff
+``lam_min <= lam <= lam_max``).
+
+* One segment: ``O = (p_ee - p_target)/L``; three equations, three stretches,
+  Newton's method.
+* Two or more segments: ``O = [(p_ee - p_target)/L, t1.z_ee, t2.z_ee]`` with
+  ``t1, t2`` orthonormal to the target axis (the end effector has 5 DOF,
+  eq. 28; ``gamma`` = 1 after scaling the position by the robot length ``L``).
+  There are more stretches than equations; the answer is made unique as the
+  stretch vector closest to a fixed reference ``lam_ref`` (the stretches at
+  mid-range pressure) among all exact solutions:
+  ``min |lam - lam_ref|^2  s.t.  O(lam) = 0``.  Its optimality condition
+  ``(I - J^+ J)(lam - lam_ref) = 0`` is met by the iteration
+  ``dlam = -J^+ O + (I - J^+ J)(lam_ref - lam)``; the answer depends on the
+  target only (not on the path), so it is smooth and repeatable along a
+  trajectory.
+* Limits: an interior Newton step is cut back to stay inside the bounds; if
+  the solution is not interior (target unreachable, or the step stalls at a
+  bound), a bound-constrained least-squares problem (scipy
+  ``least_squares``, trust-region reflective) gives the best reachable
+  stretches, and ``active_limits`` tells which pressures sit at a limit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .assembly import RobotModel
+from .forward import ForwardResult, solve_forward, assess_stability
+
+__all__ = ["InverseResult", "solve_inverse"]
+
+REACHED = 0
+UNREACHABLE = 1
+FAILED = 2
+UNSTABLE = 6
+
+
+@dataclass
+class InverseResult:
+    """Pressures for a target, with the pose they produce (the model's prediction)."""
+
+    pressures_pa: np.ndarray
+    stretch: np.ndarray
+    reachable: bool
+    position_error_m: float
+    angle_error_rad: float | None
+    active_limits: np.ndarray  # -1 at p_min, +1 at p_max, 0 free
+    forward: ForwardResult | None
+    success: bool
+    status: int
+    message: str
+    iterations: int
+    target_position: np.ndarray
+    target_z_axis: np.ndarray | None
+
+    @property
+    def converged(self):
+        return self.forward is not None and self.forward.converged
+
+    def to_dict(self):
+        d = self.forward.to_dict() if self.forward is not None else {
+            "position_m": None, "rotation": None, "z_axis": None, "stretch": self.stretch.tolist(),
+            "pressures_pa": self.pressures_pa.tolist(), "converged": False, "stable": None,
+            "iterations": self.iterations, "residual_norm": None,
+        }
+        d.update({
+            "pressures_pa": self.pressures_pa.tolist(),
+            "stretch": self.stretch.tolist(),
+            "status": int(self.status),
+            "message": self.message,
+            "iterations": int(self.iterations),
+            "success": bool(self.success),
+            "reachable": bool(self.reachable),
+            "position_error_m": float(self.position_error_m),
+            "angle_error_rad": None if self.angle_error_rad is None else float(self.angle_error_rad),
+            "active_limits": [int(v) for v in self.active_limits],
+            "target_position_m": self.target_position.tolist(),
+            "target_z_axis": None if self.target_z_axis is None else self.target_z_axis.tolist(),
+        })
+        return d
+
+
+class _Objective:
+    """Objective (eq. 28) as a function of the stretches, with warm-started forward solves."""
+
+    def __init__(self, model, position, z_axis, payload, warm, tol):
+        self.model = model
+        self.L = model.length_scale
+        self.pt = position
+        self.zt = z_axis
+        if z_axis is not None:
+            # orthonormal basis of the plane normal to the target axis
+            a = np.eye(3)[np.argmin(np.abs(z_axis))]
+            t1 = np.cross(z_axis, a)
+            t1 /= np.linalg.norm(t1)
+            self.T = np.stack([t1, np.cross(z_axis, t1)])
+        self.payload = payload
+        self.warm = warm
+        self.tol = tol
+        self.last = None  # (lam, ForwardResult, O, J)
+        self.n_forward = 0
+
+    def _forward(self, lam):
+        m = self.model
+        p = m.stage1.pressure(lam)
+        p = np.clip(p, m.cfg.p_min, m.cfg.p_max)
+        fw = solve_forward(m, p, self.payload, warm_start=self.warm, check_stability=False, tol=self.tol)
+        self.n_forward += 1
+        fw.stretch = np.array(lam, dtype=float)  # exact stretches (pressure round trip aside)
+        return fw
+
+    def evaluate(self, lam):
+        lam = np.asarray(lam, dtype=float)
+        if self.last is not None and np.array_equal(self.last[0], lam):
+            return self.last
+        m = self.model
+        fw = self._forward(lam)
+        if not fw.converged:
+            self.last = (lam.copy(), fw, None, None)
+            return self.last
+        self.warm = fw
+        q = fw.q
+        ev = m.evaluate(fw.x, lam, 1.0, self.payload, jacobian=False, lam_derivative=True)
+        dx = -fw.lu.solve(ev.dres_dlam)  # (N, A) implicit function theorem
+        pd = m.plate_dofs[m.ee_plate]
+        dp = dx[pd[0:3]] + m.cfg.tool_length * dx[pd[9:12]]
+        d3 = q[pd[9:12]]
+        p = q[pd[0:3]] + m.cfg.tool_length * d3
+        O = [(p - self.pt) / self.L]
+        J = [dp / self.L]
+        if self.zt is not None:
+            O.append(self.T @ d3)
+            J.append(self.T @ dx[pd[9:12]])
+        self.last = (lam.copy(), fw, np.concatenate(O), np.vstack(J))
+        return self.last
+
+
+def _errors(fw, position, z_axis):
+    pos_err = float(np.linalg.norm(fw.position - position))
+    ang = None
+    if z_axis is not None:
+        ang = float(np.arctan2(np.linalg.norm(np.cross(fw.z_axis, z_axis)), np.dot(fw.z_axis, z_axis)))
+    return pos_err, ang
+
+
+def _max_step_into_box(lam, d, lo, hi):
+    """Largest ``t <= 1`` with ``lo <= lam + t d <= hi``."""
+    t = 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = np.where(d > 0, (hi - lam) / d, np.inf)
+        dn = np.where(d < 0, (lo - lam) / d, np.inf)
+    return float(min(t, np.min(up), np.min(dn)))
+
+
+def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm_start=None,
+                  position_tol=None, angle_tol=1e-9, max_iter=30, tol=1e-10) -> InverseResult:
+    """Inverse kinetostatic problem: pressures for a target pose.
+
+    Parameters
+    ----------
+    position : (3,) target end-effector position [m] in the base frame.
+    z_axis : (3,) target end-effector z-axis (required for two or more
+        segments, ignored for one).  Normalised here.
+    warm_start : InverseResult or ForwardResult, optional
+        The previous solution along a trajectory.
+    position_tol : target tolerance [m]; default ``1e-9 * L``.
+    """
+    cfg = model.cfg
+    position = np.asarray(position, dtype=float).reshape(3)
+    if not np.all(np.isfinite(position)):
+        raise ValueError("target position must be finite")
+    multi = cfg.n_segments >= 2
+    if multi:
+        if z_axis is None:
+            raise ValueError("a robot with two or more segments needs a target z-axis")
+        z_axis = np.asarray(z_axis, dtype=float).reshape(3)
+        nz = np.linalg.norm(z_axis)
+        if not np.isfinite(nz) or nz < 1e-12:
+            raise ValueError("target z-axis must be a finite non-zero vector")
+        z_axis = z_axis / nz
+    else:
+        z_axis = None
+    payload = float(payload_kg)
+    if not np.isfinite(payload) or payload < 0:
+        raise ValueError(f"payload must be a finite non-negative mass in kg, got {payload_kg}")
+    L = model.length_scale
+    ptol = 1e-9 * L if position_tol is None else float(position_tol)
+    st = model.stage1
+    lo, hi = np.full(model.A, st.lam_min), np.full(model.A, st.lam_max)
+    lam_ref = np.full(model.A, float(st.stretch(0.5 * (cfg.p_min + cfg.p_max))))
+
+    warm_fw = warm_start.forward if isinstance(warm_start, InverseResult) else warm_start
+    if warm_fw is not None and not warm_fw.converged:
+        warm_fw = None
+    if warm_fw is not None and abs(warm_fw.payload_kg - payload) > 0:
+        warm_fw = solve_forward(model, warm_fw.pressures_pa, payload, warm_start=warm_fw, check_stability=False)
+        warm_fw = warm_fw if warm_fw.converged else None
+    lam = np.clip(warm_fw.stretch if warm_fw is not None else (lam_ref if multi else np.ones(model.A)), lo, hi)
+    obj = _Objective(model, position, z_axis, payload, warm_fw, tol)
+
+    def done(O, fw):
+        pe, ae = _errors(fw, position, z_axis)
+        return pe <= ptol and (ae is None or ae <= angle_tol)
+
+    # ---- interior Newton / minimum-norm Gauss-Newton iteration
+    status, iters, interior_ok = FAILED, 0, False
+    lam_cur, fw, O, J = obj.evaluate(lam)
+    stalled = fw is None or O is None
+    while not stalled and iters < max_iter:
+        if multi:
+            Jp = np.linalg.pinv(J)
+            null_step = (np.eye(model.A) - Jp @ J) @ (lam_ref - lam)
+            if done(O, fw) and np.max(np.abs(null_step)) <= 1e-9:
+                interior_ok = True
+                break
+            d = -Jp @ O + null_step
+        else:
+            if done(O, fw):
+                interior_ok = True
+                break
+            try:
+                d = -np.linalg.solve(J, O)
+            except np.linalg.LinAlgError:
+                break
+        d = d * min(1.0, 0.05 / max(np.max(np.abs(d)), 1e-300))  # trust limit on stretch change
+        t = _max_step_into_box(lam, d, lo, hi)
+        if t < 1e-12:
+            break  # pushing against a bound: the target needs the box solver
+        merit = np.dot(O, O)
+        step = t
+        accepted = False
+        while step > t / 64:
+            lam_try = np.clip(lam + step * d, lo, hi)
+            _, fw_t, O_t, J_t = obj.evaluate(lam_try)
+            if O_t is not None and (np.dot(O_t, O_t) < merit or multi and np.dot(O_t, O_t) <= merit + 1e-24):
+                accepted = True
+                break
+            step *= 0.5
+        iters += 1
+        if not accepted:
+            break
+        lam, fw, O, J = lam_try, fw_t, O_t, J_t
+        if t < 1.0 and step == t:
+            # the step was cut at a bound; keep iterating, the box solver takes over if it stalls
+            pass
+
+    if not interior_ok:
+        # ---- best reachable stretches inside the pressure limits
+        eps = 1e-4 if multi else 0.0
+
+        def fun(l):
+            _, f, Ov, _ = obj.evaluate(l)
+            if Ov is None:
+                raise _ForwardFailure(f.message)
+            return np.concatenate([Ov, eps * (l - lam_ref)]) if multi else Ov
+
+        def jac(l):
+            _, _, _, Jv = obj.evaluate(l)
+            return np.vstack([Jv, eps * np.eye(model.A)]) if multi else Jv
+
+        try:
+            ls = least_squares(fun, lam, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0,
+                               ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200)
+            lam = ls.x
+            iters += int(ls.nfev)
+            _, fw, O, J = obj.evaluate(lam)
+            # polish an interior solution exactly (the regularisation biased it)
+            if fw is not None and O is not None and not done(O, fw) and np.all((lam > lo) & (lam < hi)):
+                sub = solve_inverse(model, position, z_axis, payload, warm_start=fw,
+                                    position_tol=position_tol, angle_tol=angle_tol, max_iter=max_iter, tol=tol)
+                if sub.reachable:
+                    sub.iterations += iters
+                    return sub
+        except _ForwardFailure as exc:
+            fw = None
+            msg = str(exc)
+
+    if fw is None or O is None or not fw.converged:
+        # never hand out NaN: fall back to the last good pressures (or vent)
+        base = warm_fw.pressures_pa if warm_fw is not None else np.zeros(model.A)
+        p = np.clip(np.nan_to_num(base), cfg.p_min, cfg.p_max)
+        return InverseResult(
+            pressures_pa=p, stretch=st.stretch(p), reachable=False, position_error_m=float("inf"),
+            angle_error_rad=None if z_axis is None else float("inf"), active_limits=np.zeros(model.A, int),
+            forward=None, success=False, status=FAILED,
+            message="forward solve failed during the inverse iteration", iterations=iters,
+            target_position=position, target_z_axis=z_axis,
+        )
+
+    pressures = np.clip(st.pressure(lam), cfg.p_min, cfg.p_max)
+    fw.pressures_pa = pressures
+    assess_stability(fw)
+    pe, ae = _errors(fw, position, z_axis)
+    reachable = done(O, fw)
+    span = hi - lo
+    active = np.where(lam <= lo + 1e-9 * span, -1, np.where(lam >= hi - 1e-9 * span, 1, 0))
+    if not fw.stable:
+        status, msg = UNSTABLE, fw.message
+    elif reachable:
+        status, msg = REACHED, "target reached"
+    else:
+        status = UNREACHABLE
+        msg = (f"target unreachable within the pressure limits: best position error {pe * 1e3:.4g} mm"
+               + ("" if ae is None else f", angle error {np.degrees(ae):.4g} deg"))
+    return InverseResult(
+        pressures_pa=pressures, stretch=lam.copy(), reachable=bool(reachable), position_error_m=pe,
+        angle_error_rad=ae, active_limits=active.astype(int), forward=fw,
+        success=bool(reachable and fw.stable), status=status, message=msg, iterations=iters,
+        target_position=position, target_z_axis=z_axis,
+    )
+
+
+class _ForwardFailure(RuntimeError):
+    pass

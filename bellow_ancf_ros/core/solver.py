@@ -1,0 +1,171 @@
+"""Newton solver for the saddle-point equations (25) with load continuation.
+
+The paper solves eq. (25) with Levenberg-Marquardt (eq. 26).  Here the same
+residual and the same analytic Jacobian (eq. 27) drive a Newton method on
+``x = [q, alpha]`` with a backtracking line search on the scaled residual
+norm (the Newton direction is always a descent direction of ``|r|^2``), so the
+convergence is quadratic near the solution.  When a step fails, the
+actuation and the loads are applied in increments (continuation from the last
+converged state), in the style of cardillo's static solver.
+
+Stability: an equilibrium is stable when the Hessian of the Lagrangian
+``d2Pi/dq2 + sum alpha_i d2C_i/dq2`` is positive definite on the tangent
+space of the constraints, ``Z^T H Z > 0`` with ``C_q Z = 0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["NewtonResult", "newton", "continuation", "reduced_hessian_min_eig", "limit_blas_threads"]
+
+# status codes (like scipy.optimize)
+CONVERGED = 0
+MAX_ITER = 1
+LINE_SEARCH = 2
+SINGULAR = 3
+NONFINITE = 4
+STEP_TOO_SMALL = 5
+
+MESSAGES = {
+    CONVERGED: "converged",
+    MAX_ITER: "maximum number of Newton iterations reached",
+    LINE_SEARCH: "line search failed to reduce the residual",
+    SINGULAR: "singular Jacobian",
+    NONFINITE: "non-finite residual",
+    STEP_TOO_SMALL: "continuation step became too small",
+}
+
+
+@dataclass
+class NewtonResult:
+    x: np.ndarray
+    converged: bool
+    status: int
+    message: str
+    iterations: int
+    residual_norm: float  # scaled infinity norm
+    history: list = field(default_factory=list)
+    lu: object = None  # factorisation of the Jacobian at x (when converged)
+    jacobian: object = None  # Jacobian at x (when converged)
+
+
+def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7):
+    """Damped Newton on ``fun(x, jacobian=True) -> Evaluation``.
+
+    ``scale`` multiplies the residual component-wise; convergence when the
+    scaled infinity norm drops below ``tol``, or when it stops decreasing
+    below ``floor_tol`` (round-off floor: fine meshes cannot reach ``tol``).  ``history`` holds the scaled
+    residual norm of every iterate (for the quadratic-convergence test).
+    """
+    x = np.array(x0, dtype=float)
+    ev = fun(x, jacobian=True)
+    r = ev.residual * scale
+    if not np.all(np.isfinite(r)):
+        return NewtonResult(x, False, NONFINITE, MESSAGES[NONFINITE], 0, np.inf, [np.inf])
+    norm = np.max(np.abs(r))
+    hist = [norm]
+    for it in range(max_iter + 1):
+        try:
+            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
+        except RuntimeError:
+            return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
+        # converged, or stagnating at the round-off floor of a fine discretisation
+        if norm <= tol or (norm <= floor_tol and len(hist) > 1 and norm > 0.25 * hist[-2]):
+            return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist, lu, ev.jacobian)
+        if it == max_iter:
+            break
+        dx = -lu.solve(ev.residual)
+        if not np.all(np.isfinite(dx)):
+            return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
+        merit = np.dot(r, r)
+        step = 1.0
+        while True:
+            xt = x + step * dx
+            evt = fun(xt, jacobian=True)
+            rt = evt.residual * scale
+            if np.all(np.isfinite(rt)) and np.dot(rt, rt) <= (1.0 - 1e-4 * step) * merit:
+                break
+            step *= 0.5
+            if step < min_alpha:
+                return NewtonResult(x, False, LINE_SEARCH, MESSAGES[LINE_SEARCH], it, norm, hist)
+        x, ev, r = xt, evt, rt
+        norm = np.max(np.abs(r))
+        hist.append(norm)
+    return NewtonResult(x, False, MAX_ITER, MESSAGES[MAX_ITER], max_iter, norm, hist)
+
+
+def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 / 1024):
+    """Follow ``make_fun(t)`` from ``t = 0`` (solved by ``x_start``) to ``t = 1``.
+
+    First tries the full step; on failure halves the increment, and doubles it
+    again after successes.  Returns the :class:`NewtonResult` at ``t = 1``
+    (``iterations`` counts all Newton iterations), or the failure.
+    """
+    t, dt, x = 0.0, 1.0, np.array(x_start, dtype=float)
+    total = 0
+    hist = []
+    while True:
+        tn = min(1.0, t + dt)
+        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=max_iter)
+        total += res.iterations
+        if res.converged:
+            t, x = tn, res.x
+            hist = res.history
+            if t >= 1.0:
+                res.iterations = total
+                res.history = hist
+                return res
+            dt = min(2.0 * dt, 1.0 - t)
+        else:
+            dt *= 0.5
+            if dt < min_step:
+                res.iterations = total
+                res.status = STEP_TOO_SMALL
+                res.message = f"{MESSAGES[STEP_TOO_SMALL]} at load fraction {t:.4g} (last: {res.message})"
+                return res
+
+
+def reduced_hessian_min_eig(jacobian, nq, dof_scale=None):
+    """Smallest eigenvalue of the Lagrangian Hessian on the constraint tangent space.
+
+    ``jacobian`` is the KKT matrix (eq. 27) ``[[H, C_q^T], [C_q, 0]]``; the
+    null space ``Z`` of ``C_q`` comes from a complete QR factorisation of
+    ``C_q^T``.  ``dof_scale`` (length ``nq``) rescales the coordinates
+    (``q = D y``) so that the eigenvalue has one unit (energy) whatever mix of
+    positions and gradients the coordinates hold.  Returns
+    ``(min_eigenvalue, max_abs_hessian_entry)``; the second is the reference
+    for a relative threshold.
+    """
+    J = jacobian.tocsc() if hasattr(jacobian, "tocsc") else sp.csc_matrix(jacobian)
+    H = J[:nq, :nq]
+    Cq = J[nq:, :nq]
+    if dof_scale is not None:
+        D = sp.diags(dof_scale)
+        H = D @ H @ D
+        Cq = Cq @ D
+    Q, _ = sla.qr(Cq.toarray().T, mode="full")
+    Z = Q[:, Cq.shape[0]:]
+    Hr = Z.T @ (H @ Z)
+    Hr = 0.5 * (Hr + Hr.T)
+    ev = float(sla.eigvalsh(Hr, subset_by_index=[0, 0])[0])
+    return ev, float(abs(H).max())
+
+
+def limit_blas_threads(n=1):
+    """Limit BLAS to ``n`` threads (if threadpoolctl is installed).
+
+    The matrices here are small (a few hundred rows); multithreaded BLAS only
+    adds overhead, and on a loaded 2-core machine it can be ten times slower.
+    Entry points (CLI, nodes, benchmarks) call this once.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # optional dependency
+        return None
+    return threadpool_limits(limits=n, user_api="blas")

@@ -1,0 +1,57 @@
+"""Setup script of the ``bellow_ancf_ros`` ament_python package.
+
+Works both for ``colcon build`` on a ROS 2 Jazzy machine and for a plain
+``pip install`` / ``pip install -e .`` in a virtual environment.  The ROS 2
+client libraries are deliberately *not* listed in ``install_requires``: on a
+ROS machine they come from ``/opt/ros/jazzy``, in a venv from
+``requirements.txt``.
+"""
+
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = 'bellow_ancf_ros'
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def _files(pattern):
+    """Repository-relative files matching ``pattern`` (sorted, may be empty)."""
+    return sorted(os.path.relpath(p, HERE) for p in glob(os.path.join(HERE, pattern)))
+
+
+data_files = [
+    ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
+    ('share/' + PACKAGE_NAME, ['package.xml']),
+    ('share/' + PACKAGE_NAME + '/config', _files('config/*.yaml')),
+]
+_launch_files = _files('launch/*.launch.py')
+if _launch_files:
+    data_files.append(('share/' + PACKAGE_NAME + '/launch', _launch_files))
+
+setup(
+    name=PACKAGE_NAME,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=data_files,
+    install_requires=[
+        'numpy',
+        'scipy',
+        'PyYAML',
+        'matplotlib',
+    ],
+    extras_require={'test': ['pytest', 'hypothesis']},
+    python_requires='>=3.10',
+    zip_safe=True,
+    maintainer='bellow_ancf_ros maintainers',
+    maintainer_email='maintainer@example.com',
+    description='Kinetostatic ANCF model of bellow-shaped pneumatic soft '
+                'continuum robots, with ROS 2 nodes.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'bellow-ancf = bellow_ancf_ros.cli:main',
+        ],
+    },
+)
