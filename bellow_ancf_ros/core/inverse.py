@@ -167,8 +167,72 @@ def _max_step_into_box(lam, d, lo, hi):
     return float(min(t, np.min(up), np.min(dn)))
 
 
+def _iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
+    """Newton / minimum-norm Gauss-Newton on the free stretches (the others stay fixed).
+
+    Minimises the residual of the optimality conditions: the target
+    equations ``O`` and, when there are more free stretches than equations,
+    the null-space condition ``(I - J^+ J)(lam - lam_ref) = 0``.  Returns
+    ``(lam, fw, O, J, reached, iterations)``; ``reached`` is false when the
+    iteration stalls (a bound, an unreachable target, a failed forward solve).
+    """
+    free = free.copy()
+    nf = int(free.sum())
+
+    def merit_of(lam_v, O_v, J_v):
+        Jf = J_v[:, free]
+        Jp = np.linalg.pinv(Jf)
+        null = None
+        val = float(np.dot(O_v, O_v))
+        if multi and nf > len(O_v):
+            null = (np.eye(nf) - Jp @ Jf) @ (lam_ref - lam_v)[free]
+            val += float(np.dot(null, null))
+        return val, Jp, null
+
+    _, fw, O, J = obj.evaluate(lam)
+    if O is None or nf == 0:
+        return lam, fw, O, J, O is not None and done(fw), 0
+    merit, Jp, null = merit_of(lam, O, J)
+    for it in range(max_iter):
+        if done(fw) and (null is None or np.max(np.abs(null)) <= 1e-9):
+            return lam, fw, O, J, True, it
+        d = np.zeros_like(lam)
+        d[free] = -Jp @ O + (0.0 if null is None else null)
+        d *= min(1.0, 0.05 / max(np.max(np.abs(d)), 1e-300))  # trust limit on the stretch change
+        t = _max_step_into_box(lam, d, lo, hi)
+        if t < 1e-12:
+            # blocked by a bound: those stretches become active (held at the limit)
+            span = hi - lo
+            block = ((lam <= lo + 1e-10 * span) & (d < 0)) | ((lam >= hi - 1e-10 * span) & (d > 0))
+            if not block.any() or not (free & ~block).any():
+                return lam, fw, O, J, False, it
+            lam = np.where(block & (d < 0), lo, np.where(block & (d > 0), hi, lam))
+            free = free & ~block
+            nf = int(free.sum())
+            _, fw, O, J = obj.evaluate(lam)
+            if O is None:
+                return lam, fw, O, J, False, it
+            merit, Jp, null = merit_of(lam, O, J)
+            continue
+        if np.max(np.abs(d)) < 1e-15:
+            return lam, fw, O, J, False, it
+        step = t
+        while step > t / 64:
+            lam_try = np.clip(lam + step * d, lo, hi)
+            _, fw_t, O_t, J_t = obj.evaluate(lam_try)
+            if O_t is not None:
+                merit_t, Jp_t, null_t = merit_of(lam_try, O_t, J_t)
+                if merit_t < merit:
+                    break
+            step *= 0.5
+        else:
+            return lam, fw, O, J, False, it + 1
+        lam, fw, O, J, merit, Jp, null = lam_try, fw_t, O_t, J_t, merit_t, Jp_t, null_t
+    return lam, fw, O, J, done(fw), max_iter
+
+
 def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm_start=None,
-                  position_tol=None, angle_tol=1e-9, max_iter=30, tol=1e-10) -> InverseResult:
+                  position_tol=None, angle_tol=None, max_iter=30, tol=1e-10) -> InverseResult:
     """Inverse kinetostatic problem: pressures for a target pose.
 
     Parameters
@@ -178,7 +242,8 @@ def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm
         segments, ignored for one).  Normalised here.
     warm_start : InverseResult or ForwardResult, optional
         The previous solution along a trajectory.
-    position_tol : target tolerance [m]; default ``1e-9 * L``.
+    position_tol, angle_tol : a target counts as reached (``reachable``)
+        within these errors; defaults ``1e-8 * L`` and ``1e-8`` rad.
     """
     cfg = model.cfg
     position = np.asarray(position, dtype=float).reshape(3)
@@ -199,7 +264,8 @@ def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm
     if not np.isfinite(payload) or payload < 0:
         raise ValueError(f"payload must be a finite non-negative mass in kg, got {payload_kg}")
     L = model.length_scale
-    ptol = 1e-9 * L if position_tol is None else float(position_tol)
+    ptol = 1e-8 * L if position_tol is None else float(position_tol)
+    atol = 1e-8 if angle_tol is None else float(angle_tol)
     st = model.stage1
     lo, hi = np.full(model.A, st.lam_min), np.full(model.A, st.lam_max)
     lam_ref = np.full(model.A, float(st.stretch(0.5 * (cfg.p_min + cfg.p_max))))
@@ -207,88 +273,47 @@ def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm
     warm_fw = warm_start.forward if isinstance(warm_start, InverseResult) else warm_start
     if warm_fw is not None and not warm_fw.converged:
         warm_fw = None
-    if warm_fw is not None and abs(warm_fw.payload_kg - payload) > 0:
+    if warm_fw is not None and warm_fw.payload_kg != payload:
         warm_fw = solve_forward(model, warm_fw.pressures_pa, payload, warm_start=warm_fw, check_stability=False)
         warm_fw = warm_fw if warm_fw.converged else None
     lam = np.clip(warm_fw.stretch if warm_fw is not None else (lam_ref if multi else np.ones(model.A)), lo, hi)
     obj = _Objective(model, position, z_axis, payload, warm_fw, tol)
 
-    def done(O, fw):
+    def done(fw):
         pe, ae = _errors(fw, position, z_axis)
-        return pe <= ptol and (ae is None or ae <= angle_tol)
+        return pe <= ptol and (ae is None or ae <= atol)
 
-    # ---- interior Newton / minimum-norm Gauss-Newton iteration
-    status, iters, interior_ok = FAILED, 0, False
-    lam_cur, fw, O, J = obj.evaluate(lam)
-    stalled = fw is None or O is None
-    while not stalled and iters < max_iter:
-        if multi:
-            Jp = np.linalg.pinv(J)
-            null_step = (np.eye(model.A) - Jp @ J) @ (lam_ref - lam)
-            if done(O, fw) and np.max(np.abs(null_step)) <= 1e-9:
-                interior_ok = True
-                break
-            d = -Jp @ O + null_step
-        else:
-            if done(O, fw):
-                interior_ok = True
-                break
-            try:
-                d = -np.linalg.solve(J, O)
-            except np.linalg.LinAlgError:
-                break
-        d = d * min(1.0, 0.05 / max(np.max(np.abs(d)), 1e-300))  # trust limit on stretch change
-        t = _max_step_into_box(lam, d, lo, hi)
-        if t < 1e-12:
-            break  # pushing against a bound: the target needs the box solver
-        merit = np.dot(O, O)
-        step = t
-        accepted = False
-        while step > t / 64:
-            lam_try = np.clip(lam + step * d, lo, hi)
-            _, fw_t, O_t, J_t = obj.evaluate(lam_try)
-            if O_t is not None and (np.dot(O_t, O_t) < merit or multi and np.dot(O_t, O_t) <= merit + 1e-24):
-                accepted = True
-                break
-            step *= 0.5
-        iters += 1
-        if not accepted:
-            break
-        lam, fw, O, J = lam_try, fw_t, O_t, J_t
-        if t < 1.0 and step == t:
-            # the step was cut at a bound; keep iterating, the box solver takes over if it stalls
-            pass
-
-    if not interior_ok:
-        # ---- best reachable stretches inside the pressure limits
+    # 1) interior iteration from the warm start
+    free = np.ones(model.A, bool)
+    lam, fw, O, J, reached, iters = _iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter)
+    if not reached:
+        # 2) best reachable stretches inside the pressure limits (trust-region reflective) ...
         eps = 1e-4 if multi else 0.0
 
-        def fun(l):
-            _, f, Ov, _ = obj.evaluate(l)
+        def fun(v):
+            _, _, Ov, _ = obj.evaluate(v)
             if Ov is None:
-                raise _ForwardFailure(f.message)
-            return np.concatenate([Ov, eps * (l - lam_ref)]) if multi else Ov
+                raise _ForwardFailure()
+            return np.concatenate([Ov, eps * (v - lam_ref)]) if multi else Ov
 
-        def jac(l):
-            _, _, _, Jv = obj.evaluate(l)
+        def jac(v):
+            Jv = obj.evaluate(v)[3]
             return np.vstack([Jv, eps * np.eye(model.A)]) if multi else Jv
 
         try:
-            ls = least_squares(fun, lam, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0,
-                               ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200)
-            lam = ls.x
+            ls = least_squares(fun, np.clip(lam, lo + 1e-12, hi - 1e-12), jac=jac, bounds=(lo, hi),
+                               method="trf", ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=50)
             iters += int(ls.nfev)
-            _, fw, O, J = obj.evaluate(lam)
-            # polish an interior solution exactly (the regularisation biased it)
-            if fw is not None and O is not None and not done(O, fw) and np.all((lam > lo) & (lam < hi)):
-                sub = solve_inverse(model, position, z_axis, payload, warm_start=fw,
-                                    position_tol=position_tol, angle_tol=angle_tol, max_iter=max_iter, tol=tol)
-                if sub.reachable:
-                    sub.iterations += iters
-                    return sub
-        except _ForwardFailure as exc:
-            fw = None
-            msg = str(exc)
+            # ... 3) then polished exactly on the face it found: variables at a bound stay there
+            lam = ls.x.copy()
+            lam[ls.active_mask < 0] = lo[ls.active_mask < 0]
+            lam[ls.active_mask > 0] = hi[ls.active_mask > 0]
+            span = hi - lo
+            free = (ls.active_mask == 0) & (lam > lo + 1e-10 * span) & (lam < hi - 1e-10 * span)
+            lam, fw, O, J, reached, it2 = _iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter)
+            iters += it2
+        except _ForwardFailure:
+            fw, O = None, None
 
     if fw is None or O is None or not fw.converged:
         # never hand out NaN: fall back to the last good pressures (or vent)
@@ -306,21 +331,19 @@ def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm
     fw.pressures_pa = pressures
     assess_stability(fw)
     pe, ae = _errors(fw, position, z_axis)
-    reachable = done(O, fw)
-    span = hi - lo
-    active = np.where(lam <= lo + 1e-9 * span, -1, np.where(lam >= hi - 1e-9 * span, 1, 0))
+    active = np.where(lam <= lo, -1, np.where(lam >= hi, 1, 0))
     if not fw.stable:
         status, msg = UNSTABLE, fw.message
-    elif reachable:
+    elif reached:
         status, msg = REACHED, "target reached"
     else:
         status = UNREACHABLE
         msg = (f"target unreachable within the pressure limits: best position error {pe * 1e3:.4g} mm"
                + ("" if ae is None else f", angle error {np.degrees(ae):.4g} deg"))
     return InverseResult(
-        pressures_pa=pressures, stretch=lam.copy(), reachable=bool(reachable), position_error_m=pe,
+        pressures_pa=pressures, stretch=lam.copy(), reachable=bool(reached), position_error_m=pe,
         angle_error_rad=ae, active_limits=active.astype(int), forward=fw,
-        success=bool(reachable and fw.stable), status=status, message=msg, iterations=iters,
+        success=bool(reached and fw.stable), status=status, message=msg, iterations=iters,
         target_position=position, target_z_axis=z_axis,
     )
 

@@ -1,0 +1,119 @@
+"""Inverse kinetostatic problem: round trips, limits, uniqueness and smoothness."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solve_inverse
+
+
+@pytest.fixture(scope="module")
+def one():
+    return RobotModel(load_robot("one_segment"))
+
+
+@pytest.fixture(scope="module")
+def two():
+    return RobotModel(load_robot("two_segment"))
+
+
+def _angle(a, b):
+    return np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)
+
+
+def test_round_trip_one_segment(one):
+    rng = np.random.default_rng(11)
+    prev = None
+    for k in range(8):
+        p = rng.uniform(one.cfg.p_min, one.cfg.p_max, 3)
+        payload = [0.0, 0.05, 0.1][k % 3]
+        fw = solve_forward(one, p, payload)
+        inv = solve_inverse(one, fw.position, payload_kg=payload, warm_start=prev)
+        assert inv.success and inv.reachable, inv.message
+        assert np.linalg.norm(inv.forward.position - fw.position) < 1e-6
+        assert inv.position_error_m < 1e-6 and inv.angle_error_rad is None
+        # one segment: three equations, three stretches -> the pressures themselves come back
+        np.testing.assert_allclose(inv.pressures_pa, p, atol=1.0)  # Pa
+        assert not inv.active_limits.any()
+        prev = inv
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.floats(0.0, 1.0), min_size=6, max_size=6), st.sampled_from([0.0, 0.05]))
+def test_round_trip_two_segments(two, u, payload):
+    lo, hi = two.cfg.p_min, two.cfg.p_max
+    p = lo + np.array(u) * (hi - lo)
+    fw = solve_forward(two, p, payload)
+    if not fw.success:  # only usable (stable) configurations are targets
+        return
+    inv = solve_inverse(two, fw.position, fw.z_axis, payload)
+    assert inv.reachable and inv.success, inv.message
+    assert np.linalg.norm(inv.forward.position - fw.position) < 1e-6
+    assert _angle(inv.forward.z_axis, fw.z_axis) < 1e-4
+    assert np.all(inv.pressures_pa >= lo) and np.all(inv.pressures_pa <= hi)
+
+
+def test_unreachable_targets_give_best_in_limit_pressures(one, two):
+    cases = [(one, [0.0, 0.0, 0.2], None), (one, [0.08, 0.0, 0.05], None),
+             (two, [0.0, 0.0, 0.3], [0, 0, 1.0]), (two, [0.15, 0.0, 0.1], [1.0, 0, 0])]
+    for model, pos, z in cases:
+        inv = solve_inverse(model, pos, z)
+        assert not inv.reachable and not inv.success and inv.status == 1, inv.message
+        p = inv.pressures_pa
+        assert np.all(np.isfinite(p)) and np.all(p >= model.cfg.p_min) and np.all(p <= model.cfg.p_max)
+        assert inv.active_limits.any()
+        assert inv.position_error_m > 1e-3
+        assert "unreachable" in inv.message
+    # straight up and too high: everything at p_max
+    inv = solve_inverse(one, [0.0, 0.0, 0.2])
+    np.testing.assert_array_equal(inv.active_limits, [1, 1, 1])
+    np.testing.assert_allclose(inv.pressures_pa, one.cfg.p_max)
+    # the answer is the best reachable: it beats the corners and the middle of the pressure box
+    target = np.array([0.08, 0.0, 0.05])
+    best = solve_inverse(one, target).position_error_m
+    for p in ([150e3, -50e3, -50e3], [-50e3, 150e3, 150e3], [50e3] * 3):
+        assert best <= np.linalg.norm(solve_forward(one, p).position - target) + 1e-9
+
+
+def test_redundant_solution_is_unique_and_smooth_along_a_path(two):
+    """Two segments: the same target gives the same pressures whatever the warm start, and a
+    smooth path of targets gives a smooth path of pressures."""
+    fw = solve_forward(two, [90e3, -20e3, 10e3, -30e3, 60e3, 0.0])
+    p0, z0 = fw.position, fw.z_axis
+    # a short arc of targets: rotate the pose about the base z axis in 1-degree steps
+    pressures, prev = [], None
+    for k in range(7):
+        a = np.radians(k)
+        Rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+        inv = solve_inverse(two, Rz @ p0, Rz @ z0, warm_start=prev)
+        assert inv.success, inv.message
+        pressures.append(inv.pressures_pa)
+        prev = inv
+    P = np.array(pressures)
+    # smooth: second differences much smaller than first differences
+    d1 = np.abs(np.diff(P, axis=0)).max()
+    d2 = np.abs(np.diff(P, 2, axis=0)).max()
+    assert d2 < 0.1 * d1, (d1, d2)
+    # unique: a cold solve of the last target gives the same pressures as the warm path
+    cold = solve_inverse(two, prev.target_position, prev.target_z_axis)
+    np.testing.assert_allclose(cold.pressures_pa, prev.pressures_pa, atol=1.0)  # Pa
+
+
+def test_warm_start_is_used(one):
+    fw = solve_forward(one, [60e3, 0.0, -20e3])
+    cold = solve_inverse(one, fw.position + [1e-3, 0, 0])
+    warm = solve_inverse(one, fw.position + [1e-3, 0, 0], warm_start=fw)
+    assert warm.success and cold.success
+    assert warm.iterations < cold.iterations
+    np.testing.assert_allclose(warm.pressures_pa, cold.pressures_pa, atol=1e-3)
+
+
+def test_bad_targets_are_refused(one, two):
+    with pytest.raises(ValueError, match="finite"):
+        solve_inverse(one, [np.nan, 0, 0.1])
+    with pytest.raises(ValueError, match="z-axis"):
+        solve_inverse(two, [0, 0, 0.2])
+    with pytest.raises(ValueError, match="z-axis"):
+        solve_inverse(two, [0, 0, 0.2], [0, 0, 0])
+    with pytest.raises(ValueError, match="payload"):
+        solve_inverse(one, [0, 0, 0.1], payload_kg=np.inf)
