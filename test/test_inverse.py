@@ -99,12 +99,23 @@ def test_redundant_solution_is_unique_and_smooth_along_a_path(two):
     np.testing.assert_allclose(cold.pressures_pa, prev.pressures_pa, atol=1.0)  # Pa
 
 
-def test_warm_start_is_used(one):
+def test_warm_start_is_used(one, monkeypatch):
+    calls = []
+    original = one.evaluate
+    monkeypatch.setattr(one, "evaluate", lambda *a, **k: calls.append(1) or original(*a, **k))
     fw = solve_forward(one, [60e3, 0.0, -20e3])
-    cold = solve_inverse(one, fw.position + [1e-3, 0, 0])
-    warm = solve_inverse(one, fw.position + [1e-3, 0, 0], warm_start=fw)
-    assert warm.success and cold.success
-    assert warm.iterations < cold.iterations
+    target = fw.position + [1e-3, 0, 0]
+    calls.clear()
+    cold = solve_inverse(one, target)
+    n_cold = len(calls)
+    calls.clear()
+    warm = solve_inverse(one, target, warm_start=fw)
+    n_warm = len(calls)
+    calls.clear()
+    warmer = solve_inverse(one, target + [0, 1e-3, 0], warm_start=warm)  # carries its sensitivities
+    n_warmer = len(calls)
+    assert warm.success and cold.success and warmer.success
+    assert n_warmer <= n_warm < n_cold / 3, (n_cold, n_warm, n_warmer)
     np.testing.assert_allclose(warm.pressures_pa, cold.pressures_pa, atol=1e-3)
 
 

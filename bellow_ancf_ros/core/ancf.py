@@ -103,24 +103,29 @@ _H2 = hermite(GAUSS_XI, 2)  # (G, 4)
 
 
 def _kinematics(qe, le):
-    """Gauss-point kinematics of all elements (vectorised)."""
+    """Gauss-point kinematics of all elements (vectorised, batched matrix products)."""
     f1, df1 = _le_powers(le, 1)  # (E, 4)
     f2, df2 = _le_powers(le, 2)
     Nx = _H1[None, :, :] * f1[:, None, :]  # (E, G, 4)
     Nxx = _H2[None, :, :] * f2[:, None, :]
     dNx = _H1[None, :, :] * df1[:, None, :]
     dNxx = _H2[None, :, :] * df2[:, None, :]
-    rx = np.einsum("ega,eai->egi", Nx, qe)
-    rxx = np.einsum("ega,eai->egi", Nxx, qe)
-    eps = 0.5 * (np.einsum("egi,egi->eg", rx, rx) - 1.0)
+    rx = Nx @ qe  # (E, G, 3)
+    rxx = Nxx @ qe
+    eps = 0.5 * ((rx * rx).sum(-1) - 1.0)
     return Nx, Nxx, dNx, dNxx, rx, rxx, eps
+
+
+def _wsum(N, w, r):
+    """``sum_g w[e,g] N[e,g,a] r[e,g,i]`` -> (E, 4, 3)."""
+    return (N * w[:, :, None]).transpose(0, 2, 1) @ r
 
 
 def element_energy(qe, le, kt, kb):
     """Elastic energy of every element, eq. (17), shape ``(E,)``."""
     qe = np.asarray(qe, dtype=float)
     _, _, _, _, rx, rxx, eps = _kinematics(qe, le)
-    dens = kt[:, None] * eps**2 + kb[:, None] * np.einsum("egi,egi->eg", rxx, rxx)
+    dens = kt[:, None] * eps**2 + kb[:, None] * (rxx * rxx).sum(-1)
     return 0.5 * le * (dens @ GAUSS_W)
 
 
@@ -145,31 +150,24 @@ def element_forces(qe, le, kt, kb, stiffness=True, length_derivative=False):
     le = np.asarray(le, dtype=float)
     Nx, Nxx, dNx, dNxx, rx, rxx, eps = _kinematics(qe, le)
     wle = GAUSS_W[None, :] * le[:, None]  # (E, G) quadrature weight * jacobian
-    out = {}
-    out["ft"] = np.einsum("eg,ega,egi->eai", wle * eps, Nx, rx)
-    out["fb"] = np.einsum("eg,ega,egi->eai", wle, Nxx, rxx)
+    out = {"ft": _wsum(Nx, wle * eps, rx), "fb": _wsum(Nxx, wle, rxx)}
     if stiffness:
         E = qe.shape[0]
-        eye = np.eye(3)
-        # tensile: kt * sum_g w le Nx_a Nx_b (rx_i rx_j + eps delta_ij)
-        A = np.einsum("eg,ega,egb->egab", wle * kt[:, None], Nx, Nx)
-        K = np.einsum("egab,egi,egj->eaibj", A, rx, rx)
-        K += np.einsum("egab,eg,ij->eaibj", A, eps, eye)
-        Bm = np.einsum("eg,ega,egb->eab", wle * kb[:, None], Nxx, Nxx)
-        K += np.einsum("eab,ij->eaibj", Bm, eye)
+        # tensile: kt * sum_g w le Nx_a Nx_b (rx_i rx_j + eps delta_ij); bending: kb Nxx_a Nxx_b delta_ij
+        M = (Nx[:, :, :, None] * rx[:, :, None, :]).reshape(E, -1, 12)
+        K = (M * (wle * kt[:, None])[:, :, None]).transpose(0, 2, 1) @ M
+        S = (Nx * (wle * eps * kt[:, None])[:, :, None]).transpose(0, 2, 1) @ Nx
+        S += (Nxx * (wle * kb[:, None])[:, :, None]).transpose(0, 2, 1) @ Nxx
+        K = K.reshape(E, 4, 3, 4, 3)
+        for i in range(3):
+            K[:, :, i, :, i] += S
         out["K"] = K.reshape(E, 12, 12)
     if length_derivative:
-        drx = np.einsum("ega,eai->egi", dNx, qe)
-        drxx = np.einsum("ega,eai->egi", dNxx, qe)
-        deps = np.einsum("egi,egi->eg", rx, drx)
-        w = GAUSS_W[None, :] * np.ones_like(le)[:, None]
-        dft = np.einsum("eg,ega,egi->eai", w * eps, Nx, rx)
-        dft += np.einsum("eg,ega,egi->eai", wle * deps, Nx, rx)
-        dft += np.einsum("eg,ega,egi->eai", wle * eps, dNx, rx)
-        dft += np.einsum("eg,ega,egi->eai", wle * eps, Nx, drx)
-        dfb = np.einsum("eg,ega,egi->eai", w, Nxx, rxx)
-        dfb += np.einsum("eg,ega,egi->eai", wle, dNxx, rxx)
-        dfb += np.einsum("eg,ega,egi->eai", wle, Nxx, drxx)
-        out["dft"] = dft
-        out["dfb"] = dfb
+        drx = dNx @ qe
+        drxx = dNxx @ qe
+        deps = (rx * drx).sum(-1)
+        w = np.broadcast_to(GAUSS_W[None, :], wle.shape)
+        out["dft"] = (_wsum(Nx, w * eps + wle * deps, rx) + _wsum(dNx, wle * eps, rx)
+                      + _wsum(Nx, wle * eps, drx))
+        out["dfb"] = _wsum(Nxx, w, rxx) + _wsum(dNxx, wle, rxx) + _wsum(Nxx, wle, drxx)
     return out

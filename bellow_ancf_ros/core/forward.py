@@ -35,7 +35,6 @@ class ForwardResult:
     x: np.ndarray
     converged: bool
     stable: bool | None
-    min_eigenvalue: float | None
     status: int
     message: str
     iterations: int
@@ -43,6 +42,13 @@ class ForwardResult:
     history: list = field(default_factory=list, repr=False)
     lu: object = field(default=None, repr=False)
     jacobian: object = field(default=None, repr=False)
+    _reduced_hessian: object = field(default=None, repr=False)
+    _sensitivity: object = field(default=None, repr=False)  # dx/dlam near x (inverse predictor)
+
+    @property
+    def min_eigenvalue(self) -> float | None:
+        """Smallest eigenvalue of the reduced Hessian (scaled coordinates); None before the check."""
+        return None if self._reduced_hessian is None else self._reduced_hessian.min_eigenvalue
 
     @property
     def success(self) -> bool:
@@ -166,7 +172,7 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     res = _stage2(model, lam, payload, warm, tol, max_iter)
     out = ForwardResult(
         model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
-        converged=res.converged, stable=None, min_eigenvalue=None, status=res.status,
+        converged=res.converged, stable=None, status=res.status,
         message=res.message, iterations=res.iterations, residual_norm=res.residual_norm,
         history=res.history, lu=res.lu, jacobian=res.jacobian,
     )
@@ -176,14 +182,18 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
 
 
 def assess_stability(result: ForwardResult):
-    """Fill ``stable``/``min_eigenvalue``; an unstable equilibrium gets status UNSTABLE."""
-    ev, ref = solver.reduced_hessian_min_eig(result.jacobian, result.model.nq, result.model.dof_scale)
-    result.min_eigenvalue = ev
-    result.stable = bool(ev > _STABILITY_RTOL * ref)
+    """Fill ``stable``; an unstable equilibrium gets status UNSTABLE.
+
+    Stable: the Hessian of the Lagrangian is positive definite on the
+    constraint tangent space (smallest eigenvalue above a relative 1e-10).
+    """
+    red = solver.ReducedHessian(result.jacobian, result.model.nq, result.model.dof_scale)
+    result._reduced_hessian = red
+    result.stable = red.is_positive_definite(_STABILITY_RTOL)
     if not result.stable:
         result.status = UNSTABLE
         result.message = (
             "converged to an unstable equilibrium (the robot would buckle): "
-            f"smallest reduced-Hessian eigenvalue {ev:.3g}"
+            f"smallest reduced-Hessian eigenvalue {red.min_eigenvalue:.3g}"
         )
     return result

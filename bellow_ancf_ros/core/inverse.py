@@ -37,10 +37,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse.linalg as spla
 from scipy.optimize import least_squares
 
 from .assembly import RobotModel
-from .forward import ForwardResult, solve_forward, assess_stability
+from . import solver
+from .forward import ForwardResult, assess_stability, solve_forward
 
 __all__ = ["InverseResult", "solve_inverse"]
 
@@ -231,6 +233,102 @@ def _iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
     return lam, fw, O, J, done(fw), max_iter
 
 
+def _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8):
+    """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30).
+
+    The bordered Jacobian is eliminated by its Schur complement: with
+    ``J_x`` factorised once per iteration, ``J_x^{-1}[R, dR/dlam]`` gives the
+    reduced objective Jacobian ``J_O`` and the equilibrium correction, the
+    stretch step solves ``J_O dlam = -(O - O_x J_x^{-1} R)`` (minimum-norm
+    plus null-space term for redundant robots, as in the reduced iteration)
+    and ``dx = -J_x^{-1}(R + dR/dlam dlam)``.  One factorisation per
+    iteration and quadratic convergence: the fast path for warm-started
+    targets along a trajectory.  Returns a converged ForwardResult or None
+    (then the robust reduced iteration takes over): it never leaves the
+    pressure box and gives up on any sign of trouble.
+    """
+    nq = model.nq
+    L = model.length_scale
+    pd = model.plate_dofs[model.ee_plate]
+    tool = model.cfg.tool_length
+    multi = z_axis is not None
+    if multi:
+        a = np.eye(3)[np.argmin(np.abs(z_axis))]
+        t1 = np.cross(z_axis, a)
+        t1 /= np.linalg.norm(t1)
+        T = np.stack([t1, np.cross(z_axis, t1)])
+
+    def objective(v):
+        """Target quantities, linear in the end-plate coordinates (works on columns too)."""
+        o = [(v[pd[0:3]] + tool * v[pd[9:12]]) / L]
+        if multi:
+            o.append(T @ v[pd[9:12]])
+        return np.concatenate(o)
+
+    x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
+    target = np.concatenate([position / L, np.zeros(2)] if multi else [position / L])
+    null_norm = [np.inf]
+
+    def stretch_step(w0, W):
+        """Stretch increment of the Schur-complement Newton step (None: leave the fast path)."""
+        JO = -objective(W)
+        Ot = objective(x) - target - objective(w0)
+        if multi:
+            Jp = np.linalg.pinv(JO)
+            null = (np.eye(model.A) - Jp @ JO) @ (lam_ref - lam)
+            d = -Jp @ Ot + null
+            null_norm[0] = float(np.max(np.abs(null)))
+        else:
+            null_norm[0] = 0.0
+            try:
+                d = -np.linalg.solve(JO, Ot)
+            except np.linalg.LinAlgError:
+                return None
+        if np.max(np.abs(d)) > 0.05 or np.any(lam + d < lo) or np.any(lam + d > hi):
+            return None
+        return d
+
+    hist, W = [], None
+    pred = warm_fw._sensitivity
+    if pred is not None:
+        # predictor: the warm start is an equilibrium (R ~ 0) and its sensitivities are known
+        W = pred
+        dlam = stretch_step(np.zeros(model.N), W)
+        if dlam is None:
+            return None
+        x = x - W @ dlam
+        lam = lam + dlam
+    for it in range(max_iter + 1):
+        ev = model.evaluate(x, lam, 1.0, payload, jacobian=True, lam_derivative=True)
+        R = ev.residual
+        rn = float(np.max(np.abs(R * model.residual_scale)))
+        hist.append(rn)
+        if not np.isfinite(rn) or (it >= 2 and rn > 1e-2):
+            return None
+        if rn <= tol and null_norm[0] <= 1e-9:
+            fw = ForwardResult(
+                model=model, pressures_pa=np.clip(model.stage1.pressure(lam), model.cfg.p_min, model.cfg.p_max),
+                stretch=lam.copy(), payload_kg=payload, x=x, converged=True, stable=None,
+                status=solver.CONVERGED, message=solver.MESSAGES[solver.CONVERGED], iterations=it,
+                residual_norm=rn, history=hist, lu=None, jacobian=ev.jacobian, _sensitivity=W)
+            if done(fw):
+                return fw
+        if it == max_iter:
+            break
+        try:
+            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
+        except RuntimeError:
+            return None
+        sol = lu.solve(np.column_stack([R, ev.dres_dlam]))
+        w0, W = sol[:, 0], sol[:, 1:]
+        dlam = stretch_step(w0, W)
+        if dlam is None:
+            return None
+        x = x - (w0 + W @ dlam)
+        lam = lam + dlam
+    return None
+
+
 def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm_start=None,
                   position_tol=None, angle_tol=None, max_iter=30, tol=1e-10) -> InverseResult:
     """Inverse kinetostatic problem: pressures for a target pose.
@@ -283,9 +381,16 @@ def solve_inverse(model: RobotModel, position, z_axis=None, payload_kg=0.0, warm
         pe, ae = _errors(fw, position, z_axis)
         return pe <= ptol and (ae is None or ae <= atol)
 
-    # 1) interior iteration from the warm start
-    free = np.ones(model.A, bool)
-    lam, fw, O, J, reached, iters = _iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter)
+    # 0) fast path: full-space Newton from a warm start
+    fw = None
+    if warm_fw is not None:
+        fw = _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, hi, done, tol)
+    if fw is not None:
+        lam, O, reached, iters = fw.stretch, 0.0, True, fw.iterations
+    else:
+        # 1) reduced iteration from the warm start (forward solves nested in the stretch iteration)
+        free = np.ones(model.A, bool)
+        lam, fw, O, J, reached, iters = _iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter)
     if not reached:
         # 2) best reachable stretches inside the pressure limits (trust-region reflective) ...
         eps = 1e-4 if multi else 0.0

@@ -22,7 +22,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["NewtonResult", "newton", "continuation", "reduced_hessian_min_eig", "limit_blas_threads"]
+__all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads"]
 
 # status codes (like scipy.optimize)
 CONVERGED = 0
@@ -131,30 +131,53 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
                 return res
 
 
-def reduced_hessian_min_eig(jacobian, nq, dof_scale=None):
-    """Smallest eigenvalue of the Lagrangian Hessian on the constraint tangent space.
+class ReducedHessian:
+    """Lagrangian Hessian on the constraint tangent space (stability, model_spec section 3).
 
-    ``jacobian`` is the KKT matrix (eq. 27) ``[[H, C_q^T], [C_q, 0]]``; the
-    null space ``Z`` of ``C_q`` comes from a complete QR factorisation of
-    ``C_q^T``.  ``dof_scale`` (length ``nq``) rescales the coordinates
-    (``q = D y``) so that the eigenvalue has one unit (energy) whatever mix of
-    positions and gradients the coordinates hold.  Returns
-    ``(min_eigenvalue, max_abs_hessian_entry)``; the second is the reference
-    for a relative threshold.
+    ``jacobian`` is the KKT matrix (eq. 27) ``[[H, C_q^T], [C_q, 0]]``.  A
+    basis ``Z`` of the null space of ``C_q`` comes from an LU factorisation
+    with partial pivoting ``P C_q^T = [L1; L2] U``: ``Z = P^T [-L1^{-T} L2^T; I]``
+    (then ``C_q Z = 0``).  ``Z`` is not orthonormal, so the eigenvalues of
+    the reduced Hessian are those of the pencil ``(Z^T H Z, Z^T Z)``; by
+    Sylvester's law of inertia its definiteness is that of ``Q^T H Q`` for
+    any orthonormal basis ``Q``.  ``dof_scale`` rescales the coordinates
+    (``q = D y``) so that positions and gradients weigh alike.
+
+    ``is_positive_definite(rtol)`` is one Cholesky factorisation (cheap);
+    ``min_eigenvalue`` solves the small generalised eigenproblem on demand.
     """
-    J = jacobian.tocsc() if hasattr(jacobian, "tocsc") else sp.csc_matrix(jacobian)
-    H = J[:nq, :nq]
-    Cq = J[nq:, :nq]
-    if dof_scale is not None:
-        D = sp.diags(dof_scale)
-        H = D @ H @ D
-        Cq = Cq @ D
-    Q, _ = sla.qr(Cq.toarray().T, mode="full")
-    Z = Q[:, Cq.shape[0]:]
-    Hr = Z.T @ (H @ Z)
-    Hr = 0.5 * (Hr + Hr.T)
-    ev = float(sla.eigvalsh(Hr, subset_by_index=[0, 0])[0])
-    return ev, float(abs(H).max())
+
+    def __init__(self, jacobian, nq, dof_scale=None):
+        J = jacobian.tocsc() if hasattr(jacobian, "tocsc") else sp.csc_matrix(jacobian)
+        H = J[:nq, :nq]
+        Cq = J[nq:, :nq]
+        if dof_scale is not None:
+            D = sp.diags(dof_scale)
+            H = D @ H @ D
+            Cq = Cq @ D
+        nc = Cq.shape[0]
+        perm, L, _ = sla.lu(Cq.toarray().T, p_indices=True)  # Cq^T = L[perm] @ U
+        L1, L2 = L[:nc], L[nc:]
+        W = np.empty((nq, nq - nc))
+        W[:nc] = -sla.solve_triangular(L1, L2.T, trans="T", unit_diagonal=True, lower=True)
+        W[nc:] = np.eye(nq - nc)
+        Z = W[perm]  # then (L[perm])^T Z = L^T W = 0, i.e. C_q Z = 0
+        Hr = Z.T @ (H @ Z)
+        self.H = 0.5 * (Hr + Hr.T)
+        self.B = Z.T @ Z
+        self.ref = float(abs(H).max())
+
+    def is_positive_definite(self, rtol=1e-10):
+        """Smallest eigenvalue above ``rtol * max|H|``?"""
+        try:
+            sla.cholesky(self.H - rtol * self.ref * self.B, lower=True)
+        except sla.LinAlgError:
+            return False
+        return True
+
+    @property
+    def min_eigenvalue(self):
+        return float(sla.eigh(self.H, self.B, eigvals_only=True, subset_by_index=[0, 0])[0])
 
 
 def limit_blas_threads(n=1):
