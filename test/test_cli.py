@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros import cli, demo
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+from bellow_ancf_ros.core import solve_forward
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -84,16 +84,6 @@ def run_subprocess(*argv, stdin=None):
         [sys.executable, '-m', 'bellow_ancf_ros.cli', *[str(a) for a in argv]],
         cwd=REPO, env=subprocess_env(), input=stdin, capture_output=True, text=True, timeout=300,
     )
-
-
-@pytest.fixture(scope='module')
-def one_segment():
-    return RobotModel(load_robot('one_segment'))
-
-
-@pytest.fixture(scope='module')
-def two_segment():
-    return RobotModel(load_robot('two_segment'))
 
 
 # ----------------------------------------------------------------- forward
@@ -258,8 +248,8 @@ def test_inverse_round_trip_one_segment(capsys):
     assert d['position_m'] == pytest.approx(position, abs=1e-6)
 
 
-def test_inverse_human_summary(capsys, one_segment):
-    fw = solve_forward(one_segment, [60e3, 0.0, 10e3])
+def test_inverse_human_summary(capsys, one):
+    fw = solve_forward(one, [60e3, 0.0, 10e3])
     code, out, err = run(capsys, 'inverse', '--position', *nums(fw.position))
     assert code == 0, err
     assert 'reachable      yes' in out
@@ -267,8 +257,8 @@ def test_inverse_human_summary(capsys, one_segment):
     assert 'kPa' in out and 'target' in out
 
 
-def test_inverse_one_segment_z_axis_is_ignored_with_warning(capsys, one_segment):
-    fw = solve_forward(one_segment, [60e3, 0.0, 10e3])
+def test_inverse_one_segment_z_axis_is_ignored_with_warning(capsys, one):
+    fw = solve_forward(one, [60e3, 0.0, 10e3])
     code, out, err = run(capsys, 'inverse', '--position', *nums(fw.position),
                          '--z-axis', 0, 0, 1, '--json')
     assert code == 0
@@ -276,9 +266,9 @@ def test_inverse_one_segment_z_axis_is_ignored_with_warning(capsys, one_segment)
     assert one_json(out)['target_z_axis'] is None
 
 
-def test_inverse_two_segment_with_z_axis(capsys, two_segment):
+def test_inverse_two_segment_with_z_axis(capsys, two):
     pressures = np.array([40.0, 0.0, -20.0, 30.0, 0.0, 10.0]) * 1e3
-    fw = solve_forward(two_segment, pressures)
+    fw = solve_forward(two, pressures)
     assert fw.success
     code, out, err = run(capsys, 'inverse', '--config', 'two_segment',
                          '--position', *nums(fw.position),
@@ -291,7 +281,7 @@ def test_inverse_two_segment_with_z_axis(capsys, two_segment):
     assert p.shape == (6,) and np.all((p >= TWO_SEG_LIMITS_PA[0]) & (p <= TWO_SEG_LIMITS_PA[1]))
     assert d['target_z_axis'] == pytest.approx(list(fw.z_axis), abs=1e-12)
     # the returned pressures really produce the pose
-    check = solve_forward(two_segment, p)
+    check = solve_forward(two, p)
     assert np.linalg.norm(check.position - fw.position) < 1e-6
     assert np.linalg.norm(check.z_axis - fw.z_axis) < 1e-6
 
@@ -310,8 +300,8 @@ def test_inverse_unreachable_target(capsys):
     assert 'unreachable' in d['message']
 
 
-def test_inverse_targets_csv_one_segment(capsys, tmp_path, one_segment):
-    targets = [solve_forward(one_segment, np.array(p) * 1e3).position
+def test_inverse_targets_csv_one_segment(capsys, tmp_path, one):
+    targets = [solve_forward(one, np.array(p) * 1e3).position
                for p in [(100, 0, 0), (110, 0, 0)]]
     path = write(tmp_path, 't.csv', f'z,y,x\n{_zyx(targets[0])}\n1,2\n{_zyx(targets[1])}\n')
     code, out, err = run(capsys, 'inverse', '--targets-csv', path, '--json')
@@ -331,8 +321,8 @@ def _zyx(t):
     return ','.join(repr(float(v)) for v in (t[2], t[1], t[0]))
 
 
-def test_inverse_targets_csv_two_segment(capsys, tmp_path, two_segment):
-    fws = [solve_forward(two_segment, np.array(p) * 1e3)
+def test_inverse_targets_csv_two_segment(capsys, tmp_path, two):
+    fws = [solve_forward(two, np.array(p) * 1e3)
            for p in [(40, 0, -20, 30, 0, 10), (45, 0, -20, 30, 0, 10)]]
     body = 'x,y,z,zx,zy,zz\n' + ''.join(
         ','.join(repr(float(v)) for v in (*f.position, *f.z_axis)) + '\n' for f in fws)

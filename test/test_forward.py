@@ -7,16 +7,6 @@ from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
 from bellow_ancf_ros.core.forward import UNSTABLE
 
 
-@pytest.fixture(scope="module")
-def one():
-    return RobotModel(load_robot("one_segment"))
-
-
-@pytest.fixture(scope="module")
-def two():
-    return RobotModel(load_robot("two_segment"))
-
-
 def _extreme(model):
     p = np.full(model.A, model.cfg.p_min)
     p[0] = model.cfg.p_max

@@ -4,17 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solve_inverse
-
-
-@pytest.fixture(scope="module")
-def one():
-    return RobotModel(load_robot("one_segment"))
-
-
-@pytest.fixture(scope="module")
-def two():
-    return RobotModel(load_robot("two_segment"))
+from bellow_ancf_ros.core import solve_forward, solve_inverse
 
 
 def _angle(a, b):

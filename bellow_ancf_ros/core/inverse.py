@@ -247,7 +247,6 @@ def _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, h
     (then the robust reduced iteration takes over): it never leaves the
     pressure box and gives up on any sign of trouble.
     """
-    nq = model.nq
     L = model.length_scale
     pd = model.plate_dofs[model.ee_plate]
     tool = model.cfg.tool_length
