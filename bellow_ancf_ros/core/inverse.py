@@ -2,15 +2,18 @@
 
 Target -> stretches ``lam`` -> pressures by eq. (24).
 
-The paper solves eq. (29) for ``[lam, q, alpha]`` at once.  Here the same
-equations are solved in reduced form: ``lam`` is the unknown, eq. (25) is
-solved for ``q(lam)`` by the forward solver (warm-started), and the objective
-(eq. 28) ``O(lam) = O(q(lam))`` is differentiated exactly with the implicit
-function theorem, ``dx/dlam = -J^{-1} dR/dlam``, using the factorised
-Jacobian (eq. 27) and the analytic ``dR/dlam`` (first block column of
-eq. 30).  This keeps the pressure limits explicit box bounds on ``lam``
-(stage 1 is monotone, so ``p_min <= P <= p_max`` iff
-``lam_min <= lam <= lam_max``).
+The paper solves eq. (29) for ``[lam, q, alpha]`` at once.  Here, from a
+warm start (the previous solution along a trajectory), exactly that is done:
+full-space Newton on eq. (29) with the bordered Jacobian (eq. 30) eliminated
+by its Schur complement (one factorisation per iteration).  Without a usable
+warm start, or when that path meets a pressure limit, the same equations are
+solved in reduced form: ``lam`` is the unknown, eq. (25) is solved for
+``q(lam)`` by the forward solver (warm-started), and the objective (eq. 28)
+``O(lam) = O(q(lam))`` is differentiated exactly with the implicit function
+theorem, ``dx/dlam = -J^{-1} dR/dlam``, using the factorised Jacobian
+(eq. 27) and the analytic ``dR/dlam`` (first block column of eq. 30).  The
+pressure limits are box bounds on ``lam`` (stage 1 is monotone, so
+``p_min <= P <= p_max`` iff ``lam_min <= lam <= lam_max``).
 
 * One segment: ``O = (p_ee - p_target)/L``; three equations, three stretches,
   Newton's method.
@@ -97,20 +100,43 @@ class InverseResult:
         return d
 
 
+class _Target:
+    """Objective equations (eq. 28), linear in the end-plate coordinates.
+
+    ``O = [(p_ee - p_target)/L, t1.z_ee, t2.z_ee]`` (axis rows only with a target
+    z-axis; ``t1, t2`` span the plane normal to it).  ``linear(v)`` applies the
+    linear map to a state vector or to the columns of a matrix.
+    """
+
+    def __init__(self, model, position, z_axis):
+        self.L = model.length_scale
+        self.pd = model.plate_dofs[model.ee_plate]
+        self.tool = model.cfg.tool_length
+        self.T = None
+        if z_axis is not None:
+            a = np.eye(3)[np.argmin(np.abs(z_axis))]
+            t1 = np.cross(z_axis, a)
+            t1 /= np.linalg.norm(t1)
+            self.T = np.stack([t1, np.cross(z_axis, t1)])
+        self.offset = np.concatenate([position / self.L] + ([np.zeros(2)] if z_axis is not None else []))
+
+    def linear(self, v):
+        pd = self.pd
+        o = [(v[pd[0:3]] + self.tool * v[pd[9:12]]) / self.L]
+        if self.T is not None:
+            o.append(self.T @ v[pd[9:12]])
+        return np.concatenate(o)
+
+    def __call__(self, x):
+        return self.linear(x) - self.offset
+
+
 class _Objective:
     """Objective (eq. 28) as a function of the stretches, with warm-started forward solves."""
 
     def __init__(self, model, position, z_axis, payload, warm, tol):
         self.model = model
-        self.L = model.length_scale
-        self.pt = position
-        self.zt = z_axis
-        if z_axis is not None:
-            # orthonormal basis of the plane normal to the target axis
-            a = np.eye(3)[np.argmin(np.abs(z_axis))]
-            t1 = np.cross(z_axis, a)
-            t1 /= np.linalg.norm(t1)
-            self.T = np.stack([t1, np.cross(z_axis, t1)])
+        self.target = _Target(model, position, z_axis)
         self.payload = payload
         self.warm = warm
         self.tol = tol
@@ -136,19 +162,9 @@ class _Objective:
             self.last = (lam.copy(), fw, None, None)
             return self.last
         self.warm = fw
-        q = fw.q
         ev = m.evaluate(fw.x, lam, 1.0, self.payload, jacobian=False, lam_derivative=True)
         dx = -fw.lu.solve(ev.dres_dlam)  # (N, A) implicit function theorem
-        pd = m.plate_dofs[m.ee_plate]
-        dp = dx[pd[0:3]] + m.cfg.tool_length * dx[pd[9:12]]
-        d3 = q[pd[9:12]]
-        p = q[pd[0:3]] + m.cfg.tool_length * d3
-        O = [(p - self.pt) / self.L]
-        J = [dp / self.L]
-        if self.zt is not None:
-            O.append(self.T @ d3)
-            J.append(self.T @ dx[pd[9:12]])
-        self.last = (lam.copy(), fw, np.concatenate(O), np.vstack(J))
+        self.last = (lam.copy(), fw, self.target(fw.x), self.target.linear(dx))
         return self.last
 
 
@@ -247,31 +263,16 @@ def _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, h
     (then the robust reduced iteration takes over): it never leaves the
     pressure box and gives up on any sign of trouble.
     """
-    L = model.length_scale
-    pd = model.plate_dofs[model.ee_plate]
-    tool = model.cfg.tool_length
     multi = z_axis is not None
-    if multi:
-        a = np.eye(3)[np.argmin(np.abs(z_axis))]
-        t1 = np.cross(z_axis, a)
-        t1 /= np.linalg.norm(t1)
-        T = np.stack([t1, np.cross(z_axis, t1)])
-
-    def objective(v):
-        """Target quantities, linear in the end-plate coordinates (works on columns too)."""
-        o = [(v[pd[0:3]] + tool * v[pd[9:12]]) / L]
-        if multi:
-            o.append(T @ v[pd[9:12]])
-        return np.concatenate(o)
+    target = _Target(model, position, z_axis)
 
     x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
-    target = np.concatenate([position / L, np.zeros(2)] if multi else [position / L])
     null_norm = [np.inf]
 
     def stretch_step(w0, W):
         """Stretch increment of the Schur-complement Newton step (None: leave the fast path)."""
-        JO = -objective(W)
-        Ot = objective(x) - target - objective(w0)
+        JO = -target.linear(W)
+        Ot = target(x) - target.linear(w0)
         if multi:
             Jp = np.linalg.pinv(JO)
             null = (np.eye(model.A) - Jp @ JO) @ (lam_ref - lam)
