@@ -25,6 +25,7 @@ data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
     ('share/' + PACKAGE_NAME, ['package.xml']),
     ('share/' + PACKAGE_NAME + '/config', _files('config/*.yaml')),
+    ('share/' + PACKAGE_NAME + '/data', _files('data/*.csv')),
 ]
 _launch_files = _files('launch/*.launch.py')
 if _launch_files:

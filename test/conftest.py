@@ -20,3 +20,15 @@ def one():
 def two():
     """The default two-segment robot model."""
     return RobotModel(load_robot("two_segment"))
+
+
+@pytest.fixture(scope="session")
+def one_cfg():
+    """The default one-segment robot description."""
+    return load_robot("one_segment")
+
+
+@pytest.fixture(scope="session")
+def two_cfg():
+    """The default two-segment robot description."""
+    return load_robot("two_segment")
