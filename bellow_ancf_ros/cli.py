@@ -22,8 +22,9 @@ This interface is a contract other programs script against:
   still printed, ``converged`` false) or the solver failed internally; 2 bad
   input, reported as one line ``bellow-ancf: error: ...`` on stderr (in batch
   mode: 2 at the end if any row was bad).
-* Further subcommands can be added by a module ``bellow_ancf_ros.cli_tools``
-  with a function ``register(subparsers)``; every subcommand's parser sets
+* The identification and study subcommands (``identify``, ``convergence``,
+  ``workspace``, ``compare-pcc``, ``track``) live in ``bellow_ancf_ros.cli_tools``,
+  added through its ``register(subparsers)``; every subcommand's parser sets
   ``func`` (``set_defaults(func=...)``), a callable taking the parsed
   arguments and returning the exit status.
 
