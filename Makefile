@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # Keep ROS 2 discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 
-.PHONY: all venv demo test bench clean
+.PHONY: all venv demo demo-offline test bench clean
 
 all: test
 
@@ -18,7 +18,12 @@ $(STAMP): requirements.txt setup.py
 	$(VENV)/bin/python -m pip install -e .
 	touch $@
 
+# main job: the ROS pipeline (three nodes as processes, two-segment robot, ~20 s trajectory)
 demo: $(STAMP)
+	$(VENV)/bin/python -m bellow_ancf_ros.ros_demo
+
+# the core alone: forward and inverse problems printed (no ROS)
+demo-offline: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demo
 
 test: $(STAMP)

@@ -53,6 +53,9 @@ setup(
     entry_points={
         'console_scripts': [
             'bellow-ancf = bellow_ancf_ros.cli:main',
+            'inverse_kinetostatic_node = bellow_ancf_ros.nodes.inverse_kinetostatic_node:main',
+            'forward_kinetostatic_node = bellow_ancf_ros.nodes.forward_kinetostatic_node:main',
+            'trajectory_publisher = bellow_ancf_ros.nodes.trajectory_publisher:main',
         ],
     },
 )

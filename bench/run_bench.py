@@ -3,7 +3,8 @@
 Paper (MATLAB, AMD Ryzen 7 3700X): 0.62 s (one segment) and 5.32 s (two segments)
 to compute the maximum-deformation configuration.  Targets on a 2-core machine:
 forward from the straight configuration <= 10 ms (one segment) / 30 ms (two);
-inverse warm-started along a trajectory with 1 mm steps <= 2 ms / 5 ms per target.
+inverse warm-started along a trajectory with 1 mm steps <= 2 ms / 5 ms per target;
+end-to-end ROS latency target_pose -> pressure_command across processes: median 10 ms.
 
 Timing is wall-clock on a shared machine: read medians, not single runs.
 """
@@ -96,6 +97,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=30, help="repetitions of each forward solve")
     ap.add_argument("--laps", type=int, default=2, help="laps of the inverse circle")
+    ap.add_argument("--no-ros", action="store_true", help="skip the end-to-end ROS latency benchmark")
     args = ap.parse_args(argv)
     limit_blas_threads()
     rows = []
@@ -113,6 +115,9 @@ def main(argv=None):
         print(f"{r['case']:<78} {r['median_s'] * 1e3:7.2f}ms {r['p99_s'] * 1e3:7.2f}ms {paper:>9} {target:>9}")
         if "no_stability_median_s" in r:
             print(f"{'   (same without the stability eigenvalue check)':<78} {r['no_stability_median_s'] * 1e3:7.2f}ms")
+    if not args.no_ros:
+        import ros_latency  # same folder; needs the ROS 2 client libraries of the venv
+        ros_latency.main()
     print("vs paper: paper time / our median (faster = larger); vs target: our median / target (<= 1 meets it)")
     return 0
 

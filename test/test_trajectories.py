@@ -17,6 +17,7 @@ from bellow_ancf_ros.core.trajectories import (
     TRAJECTORY_NAMES,
     default_parameters,
     trajectory,
+    trajectory_parameters,
     workspace_estimate,
 )
 
@@ -210,3 +211,18 @@ def test_two_segment_defaults_reachable_with_margin(name, beta, scale, two):
     assert worst_p < 1e-6 and worst_a < 1e-6
     if scale == 1.0:
         assert margin >= PRESSURE_MARGIN
+
+
+def test_trajectory_parameters_are_the_ones_used(two):
+    cfg = two.cfg
+    p = trajectory_parameters('bending_circle', cfg, bending_angle_deg=20.0, height=0.21)
+    assert p['bending_angle_deg'] == 20.0
+    assert p['center'] == (0.0, 0.0, 0.21)
+    assert p['radius'] == default_parameters('bending_circle', cfg, 20.0)['radius']
+    assert p['period'] == default_parameters('bending_circle', cfg, 20.0)['period']
+    assert p['period'] != default_parameters('bending_circle', cfg)['period']   # 10 deg default
+    # one period of samples closes the curve
+    pos, _ = trajectory('bending_circle', [0.0, p['period']], cfg, bending_angle_deg=20.0)
+    np.testing.assert_allclose(pos[0], pos[1], atol=1e-15)
+    with pytest.raises(ValueError, match='unknown trajectory parameter'):
+        trajectory_parameters('planar_circle', cfg, radios=1.0)

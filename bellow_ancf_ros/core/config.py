@@ -524,7 +524,9 @@ def shipped_robot_names() -> list[str]:
     names = set()
     for d in config_dirs():
         if d.is_dir():
-            names.update(p.stem for p in d.glob('*.yaml'))
+            # ROS parameter files (config/nodes.yaml) share the folder; they are not robots
+            names.update(p.stem for p in d.glob('*.yaml')
+                         if 'ros__parameters' not in p.read_text(encoding='utf-8', errors='replace'))
     return sorted(names)
 
 

@@ -447,9 +447,8 @@ def tracking_study(model: RobotModel, name: str, n_points: int = 100, payload_kg
         raise ValueError(f"controller must be 'ancf' or 'pcc', got {controller!r}")
     cfg = model.cfg
     pcc = PccModel(cfg) if controller == 'pcc' else None
-    params = dict(params or {})
-    merged = trajectories.default_parameters(name, cfg)
-    merged.update({k: v for k, v in params.items() if v is not None})
+    params = {k: v for k, v in (params or {}).items() if v is not None}
+    merged = trajectories.trajectory_parameters(name, cfg, **params)
     period = float(merged['period'])
     t = np.arange(n_points) * period / n_points
     pos, zax = trajectories.trajectory(name, t, config=cfg, **params)

@@ -54,9 +54,9 @@ the pressures of the defaults keep a margin to the limits.
 
 from __future__ import annotations
 
-from functools import lru_cache
 import math
 import os
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -65,13 +65,14 @@ from .config import RobotConfig, load_robot
 from .stage1 import Stage1
 
 __all__ = [
-    'TRAJECTORY_NAMES',
-    'ONE_SEGMENT_TRAJECTORIES',
     'MULTI_SEGMENT_TRAJECTORIES',
+    'ONE_SEGMENT_TRAJECTORIES',
     'PAPER_BENDING_ANGLES_DEG',
     'QUASI_STATIC_SPEED',
+    'TRAJECTORY_NAMES',
     'default_parameters',
     'trajectory',
+    'trajectory_parameters',
     'workspace_estimate',
 ]
 
@@ -248,6 +249,15 @@ def _merge(name: str, cfg: RobotConfig, params: dict) -> dict:
     else:
         p.pop('bending_angle_deg', None)
     return p
+
+
+def trajectory_parameters(name: str, config: Any = 'one_segment', **params: Any) -> dict:
+    """The parameters :func:`trajectory` uses for ``name`` with ``params``: the defaults
+    (for the given bending angle) with the overrides applied and ``height`` folded into
+    ``center``.  Raises ``ValueError`` like :func:`trajectory`."""
+    cfg = _config(config)
+    _check_name(name, cfg)
+    return _merge(name, cfg, params)
 
 
 def trajectory(name: str, t: Any, config: Any = 'one_segment', **params: Any):

@@ -1,0 +1,12 @@
+"""ROS 2 nodes around the pure-Python core.
+
+* :mod:`.inverse_kinetostatic_node` -- managed (lifecycle) feedforward
+  controller: ``target_pose`` -> ``pressure_command``.
+* :mod:`.forward_kinetostatic_node` -- pressures -> ``predicted_pose`` and
+  ``predicted_shape`` (RViz markers).
+* :mod:`.trajectory_publisher` -- the paper's trajectories on ``target_pose``.
+* :mod:`.common` -- message-free helpers (no rclpy import) shared by the nodes.
+
+Every node module has a ``main(args=None)`` and runs with
+``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``.
+"""

@@ -1,0 +1,283 @@
+"""Forward-kinetostatic prediction node.
+
+Pressures -> forward kinetostatics (core
+:func:`~bellow_ancf_ros.core.solve_forward`) -> predicted end-effector pose
+and robot shape for RViz.
+
+Topics
+------
+subscribes
+    ``pressure_command`` (std_msgs/Float64MultiArray): one gauge pressure per
+    actuator, segment by segment, in ``pressure_unit`` (Pa by default).
+    Remap it to a measured-pressure topic to predict from measurements
+    (``--ros-args -r pressure_command:=measured_pressure``).  An array whose
+    ``layout.dim[0].label`` names the other unit (``..._pa`` vs ``..._kpa``)
+    is refused rather than misread by a factor of 1000.
+publishes
+    ``predicted_pose`` (geometry_msgs/PoseStamped) in ``base_frame``.
+    ``predicted_shape`` (visualization_msgs/MarkerArray) in ``base_frame``:
+    namespace ``backbones``, one LINE_STRIP per actuator (width = the
+    actuator diameter D_a); namespace ``plates``, one CYLINDER per plate (base,
+    constraint and top plates of every segment).
+    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): one status per solve
+    (solve time, iterations, residual) and per refused input (WARN).
+
+QoS: reliable, keep-last, depth 5 for the pressures and the outputs;
+``/diagnostics`` keep-last 10.  Like the inverse node it works on the latest
+input only (one-item slot, worker thread, at most ``max_rate_hz`` solves per
+second), warm-started from the previous solution.
+
+Bad input (wrong length, NaN/inf, outside the robot's pressure limits, wrong
+unit label): refused with a throttled warning and a WARN diagnostic; the
+node keeps running and the last prediction stands.  A solve that does not
+converge to a stable equilibrium publishes nothing and reports ERROR.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import Point, PoseStamped
+from rcl_interfaces.msg import IntegerRange, ParameterType, SetParametersResult
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..core import RobotModel, load_robot, solve_forward
+from . import common
+from .inverse_kinetostatic_node import (
+    REFUSAL_DIAG_INTERVAL_S,
+    WARN_THROTTLE_S,
+    command_qos,
+    descriptor,
+    diagnostic_status,
+    diagnostics_qos,
+    init_rclpy,
+    pose_message,
+    run_node,
+)
+
+__all__ = ['ForwardKinetostaticNode', 'main', 'shape_markers']
+
+PLATE_THICKNESS_M = 0.002
+
+
+def shape_markers(fw, frame_id: str, stamp, n_points: int = 20) -> MarkerArray:
+    """MarkerArray of a forward result: backbones (LINE_STRIP) and plates (CYLINDER)."""
+    cfg = fw.model.cfg
+    arr = MarkerArray()
+    backbones = fw.backbones(n_points)
+    for i, line in enumerate(backbones):
+        m = Marker()
+        m.header.frame_id = frame_id
+        m.header.stamp = stamp
+        m.ns = 'backbones'
+        m.id = i
+        m.type = Marker.LINE_STRIP
+        m.action = Marker.ADD
+        m.pose.orientation.w = 1.0
+        m.scale.x = float(cfg.d_a)
+        m.color.r, m.color.g, m.color.b, m.color.a = 0.85, 0.55, 0.2, 0.8
+        m.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in line]
+        arr.markers.append(m)
+    for k, (seg, _frac, pos, R) in enumerate(fw.plate_poses()):
+        seg_cfg = cfg.segments[int(seg)]
+        q = common.quaternion_from_rotation(R)
+        m = Marker()
+        m.header.frame_id = frame_id
+        m.header.stamp = stamp
+        m.ns = 'plates'
+        m.id = k
+        m.type = Marker.CYLINDER
+        m.action = Marker.ADD
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in pos)
+        (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+         m.pose.orientation.w) = (float(v) for v in q)
+        diameter = 2.0 * seg_cfg.pitch_radius + cfg.d_a
+        m.scale.x = m.scale.y = float(diameter)
+        m.scale.z = PLATE_THICKNESS_M
+        m.color.r, m.color.g, m.color.b, m.color.a = 0.3, 0.5, 0.8, 0.6
+        arr.markers.append(m)
+    return arr
+
+
+class ForwardKinetostaticNode(Node):
+    """Predicts the robot's pose and shape from pressures."""
+
+    def __init__(self, node_name: str = 'forward_kinetostatic_node', **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        D, S, I = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                   ParameterType.PARAMETER_INTEGER)
+        self.declare_parameter('robot_config', 'one_segment', descriptor(
+            'Robot description: a shipped robot name (one_segment, two_segment; the files in '
+            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read at start-up.', S,
+            read_only=True))
+        self.declare_parameter('payload_kg', 0.0, descriptor(
+            'Payload mass at the end effector [kg]; may be changed at run time.', D,
+            lo=0.0, hi=common.PAYLOAD_MAX_KG))
+        self.declare_parameter('base_frame', 'base', descriptor(
+            'Frame of predicted_pose and predicted_shape (robot base).', S))
+        self.declare_parameter('pressure_unit', 'Pa', descriptor(
+            'Unit of the incoming gauge pressures: Pa (default, REP-103) or kPa.', S,
+            constraints="one of: 'Pa', 'kPa'"))
+        self.declare_parameter('max_rate_hz', 100.0, descriptor(
+            'Maximum prediction rate [Hz]; only the newest pressure array is solved.', D,
+            lo=0.1, hi=1000.0))
+        d = descriptor('Points per actuator backbone in predicted_shape.', I)
+        d.integer_range = [IntegerRange(from_value=2, to_value=200, step=1)]
+        self.declare_parameter('backbone_points', 20, d)
+        for name in ('payload_kg', 'pressure_unit'):
+            reason = self._parameter_problem(self.get_parameter(name))
+            if reason:
+                raise ValueError(f'parameter {name}: {reason}')
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        robot = self.get_parameter('robot_config').value
+        self.cfg = load_robot(robot)   # ConfigError: the node does not start
+        self.model = RobotModel(self.cfg)
+        self._lock = threading.Lock()
+        self._warm = solve_forward(self.model, common.vent_pressures(
+            self.model.A, self.cfg.p_min, self.cfg.p_max))
+        if not self._warm.success:
+            self._warm = None
+        self.stats = {'received': 0, 'refused': 0, 'solved': 0, 'published': 0, 'failed': 0}
+        self.last_refusal_reason = ''
+        self._last_refusal = ('', 0.0)
+        self.solve_times_s: list = []
+        qos = command_qos()
+        self._pub_pose = self.create_publisher(PoseStamped, 'predicted_pose', qos)
+        self._pub_shape = self.create_publisher(MarkerArray, 'predicted_shape', qos)
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
+                                           name='forward-solver')
+        self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
+                                             self._on_pressures, qos)
+        self.get_logger().info(
+            f'robot {self.cfg.name!r}: {self.model.A} actuators, limits '
+            f'[{self.cfg.p_min / 1e3:g}, {self.cfg.p_max / 1e3:g}] kPa gauge; listening on '
+            f'{self._sub.topic_name!r} in {self.get_parameter("pressure_unit").value}')
+
+    # ------------------------------------------------------------ params
+    @staticmethod
+    def _parameter_problem(p) -> str:
+        try:
+            if p.name == 'payload_kg':
+                common.validate_payload(p.value)
+            elif p.name == 'pressure_unit':
+                common.check_unit(p.value)
+            elif p.name == 'base_frame' and (not isinstance(p.value, str) or not p.value):
+                return 'base_frame must be a non-empty string'
+        except ValueError as exc:
+            return str(exc)
+        return ''
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        for p in params:
+            reason = self._parameter_problem(p)
+            if reason:
+                self.get_logger().warning(f'refused parameter change: {reason}')
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _min_period(self) -> float:
+        return 1.0 / float(self.get_parameter('max_rate_hz').value)
+
+    # ------------------------------------------------------------ input
+    def _on_pressures(self, msg: Float64MultiArray) -> None:
+        self.stats['received'] += 1
+        label = msg.layout.dim[0].label if len(msg.layout.dim) else None
+        try:
+            p = common.validate_pressure_input(
+                msg.data, self.get_parameter('pressure_unit').value, self.model.A,
+                self.cfg.p_min, self.cfg.p_max, label)
+        except common.InputError as exc:
+            self._refuse(str(exc))
+            return
+        self._worker.submit(p)
+
+    def _refuse(self, reason: str) -> None:
+        self.stats['refused'] += 1
+        self.last_refusal_reason = reason
+        self.get_logger().warning(f'pressures refused: {reason}', throttle_duration_sec=WARN_THROTTLE_S)
+        now = time.monotonic()
+        if reason != self._last_refusal[0] or now - self._last_refusal[1] >= REFUSAL_DIAG_INTERVAL_S:
+            self._last_refusal = (reason, now)
+            self._publish_diag(DiagnosticStatus.WARN, f'pressures refused: {reason}',
+                               {'refused_inputs': self.stats['refused']})
+
+    # ------------------------------------------------------------ solving
+    def _on_worker_error(self, exc: BaseException) -> None:
+        self.stats['failed'] += 1
+        self.get_logger().error(f'forward solve raised {type(exc).__name__}: {exc}',
+                                throttle_duration_sec=WARN_THROTTLE_S)
+        self._publish_diag(DiagnosticStatus.ERROR, f'solver exception: {type(exc).__name__}: {exc}', {})
+
+    def _solve(self, pressures_pa: np.ndarray) -> None:
+        payload = float(self.get_parameter('payload_kg').value)
+        t0 = time.perf_counter()
+        fw = solve_forward(self.model, pressures_pa, payload_kg=payload, warm_start=self._warm)
+        dt = time.perf_counter() - t0
+        self.stats['solved'] += 1
+        self.solve_times_s.append(dt)
+        if len(self.solve_times_s) > 10000:
+            del self.solve_times_s[:5000]
+        values = {
+            'solve_time_ms': f'{dt * 1e3:.3f}',
+            'iterations': fw.iterations,
+            'residual_norm': f'{fw.residual_norm:.3e}',
+            'converged': str(bool(fw.converged)).lower(),
+            'stable': str(fw.stable).lower(),
+            'payload_kg': payload,
+        }
+        if not fw.success:
+            self.stats['failed'] += 1
+            msg = f'forward solve failed: {fw.message}'
+            self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.ERROR, msg, values)
+            return
+        self._warm = fw
+        frame = self.get_parameter('base_frame').value
+        stamp = self.get_clock().now().to_msg()
+        pos, R = fw.position, fw.rotation
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(R))):
+            self._publish_diag(DiagnosticStatus.ERROR, 'non-finite pose from the solver', values)
+            return
+        self._pub_pose.publish(pose_message(pos, common.quaternion_from_rotation(R), frame, stamp))
+        self._pub_shape.publish(shape_markers(fw, frame, stamp,
+                                              int(self.get_parameter('backbone_points').value)))
+        self.stats['published'] += 1
+        values['position_m'] = ' '.join(f'{v:.6g}' for v in pos)
+        self._publish_diag(DiagnosticStatus.OK, 'prediction published', values)
+
+    def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [diagnostic_status(f'{self.get_name()}: forward kinetostatics', self.cfg.name,
+                                        level, message, values)]
+        try:
+            self._pub_diag.publish(arr)
+        except Exception:  # noqa: BLE001 - destroyed meanwhile
+            pass
+
+    def destroy_node(self):
+        self._worker.stop()
+        return super().destroy_node()
+
+
+def main(args=None) -> None:
+    init_rclpy(args)
+    try:
+        node = ForwardKinetostaticNode()
+    except Exception:
+        rclpy.try_shutdown()
+        raise
+    run_node(node)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,557 @@
+"""Inverse-kinetostatic feedforward controller (managed / lifecycle node).
+
+``target_pose`` (geometry_msgs/PoseStamped) -> inverse kinetostatics (core
+:func:`~bellow_ancf_ros.core.solve_inverse`) -> ``pressure_command``
+(std_msgs/Float64MultiArray).
+
+Topics
+------
+subscribes
+    ``target_pose`` (geometry_msgs/PoseStamped) in ``base_frame``.  One
+    segment: the position only (the orientation is ignored, said once in the
+    log).  Two or more segments: the position and the local z-axis of the
+    orientation (the rotation about that axis cannot be controlled and is
+    ignored).
+publishes
+    ``pressure_command`` (std_msgs/Float64MultiArray): one gauge pressure per
+    actuator, segment by segment, actuator 1, 2, ... within a segment;
+    ``layout.dim[0]`` has ``label = 'actuator_pressure_gauge_pa'`` (or
+    ``..._kpa``), ``size = stride =`` number of actuators.  Unit Pa (REP-103)
+    unless ``pressure_unit`` is ``kPa``.
+    ``commanded_pose`` (geometry_msgs/PoseStamped): the end-effector pose the
+    model predicts for the command (stamp = the target's stamp, or the solve
+    time if the target had none).
+    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): one status per solve
+    (solve time, iterations, residual, reachable, active pressure limits) and
+    per refused target (WARN, throttled).
+
+QoS
+---
+``target_pose`` and ``pressure_command``/``commanded_pose``: reliable,
+keep-last, depth 5 (:data:`QOS_DEPTH`): a slow consumer loses old samples,
+never the newest, and nothing queues without bound.  ``/diagnostics``:
+reliable, keep-last 10.
+
+Latest target only
+------------------
+The subscription callback only validates a target and stores it in a
+one-item slot (:class:`~bellow_ancf_ros.nodes.common.LatestWorker`); a worker
+thread solves the newest stored target, warm-started from the previous
+solution, with solve starts at least ``1/max_rate_hz`` apart.  Targets that
+arrive while a solve runs overwrite each other: stale ones are dropped,
+memory is bounded, and the output rate is at most ``max_rate_hz``.
+
+Lifecycle and safety
+--------------------
+* Pressures are published only while the node is *active*; targets that
+  arrive while inactive are ignored.  On deactivate and on shutdown (also on
+  Ctrl-C / SIGTERM) the node publishes the vent command, 0 Pa gauge on every
+  actuator, once.  ``autostart`` (default true) configures and activates the
+  node at start-up, so a plain ``ros2 run`` works.
+* Every published pressure passes :func:`~bellow_ancf_ros.nodes.common.safe_pressures`:
+  never NaN, inf or outside ``[p_min, p_max]`` of the robot file.
+* Refused targets (wrong frame, NaN/inf position, zero or non-finite
+  quaternion when the orientation is used): throttled warning, diagnostics
+  WARN, last command unchanged, the node keeps running.
+* Unreachable target with a converged, stable best fit: the best reachable
+  in-limit pressures are published, diagnostics WARN.  Failed or unstable
+  solve (or any exception in the solver): nothing new is published (the last
+  good command stands), diagnostics ERROR, the node keeps serving.
+* No tf2 (not installable from PyPI): targets must already be in
+  ``base_frame``.
+
+Signals: ``main`` initialises rclpy without its signal handlers and turns
+SIGINT/SIGTERM into ``KeyboardInterrupt``, so that the context is still valid
+when the vent command goes out.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.lifecycle import Node as LifecycleNode
+from rclpy.lifecycle import State, TransitionCallbackReturn
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
+from ..core.solver import limit_blas_threads
+from . import common
+
+__all__ = [
+    'QOS_DEPTH',
+    'InverseKinetostaticNode',
+    'command_qos',
+    'descriptor',
+    'diagnostic_status',
+    'diagnostics_qos',
+    'main',
+    'pose_message',
+    'pressure_message',
+    'run_node',
+]
+
+QOS_DEPTH = 5
+WARN_THROTTLE_S = 2.0
+#: Minimum interval between two WARN diagnostics of the same refusal reason [s].
+REFUSAL_DIAG_INTERVAL_S = 0.1
+VENT_ACK_TIMEOUT_S = 1.0
+
+
+# -------------------------------------------------------------- shared helpers
+def command_qos() -> QoSProfile:
+    """Reliable, keep-last, depth :data:`QOS_DEPTH` (targets, pressures, poses)."""
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=QOS_DEPTH)
+
+
+def diagnostics_qos() -> QoSProfile:
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=10)
+
+
+def descriptor(description: str, ptype: int, *, lo: float | None = None,
+               hi: float | None = None, read_only: bool = False,
+               constraints: str = '') -> ParameterDescriptor:
+    """A ParameterDescriptor with description, optional range and constraints text."""
+    d = ParameterDescriptor(description=description, type=ptype, read_only=read_only,
+                            additional_constraints=constraints)
+    if lo is not None and hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi),
+                                                     step=0.0)]
+    return d
+
+
+def pose_message(position: Any, quaternion: Any, frame_id: str, stamp) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp
+    p = np.asarray(position, dtype=float)
+    q = np.asarray(quaternion, dtype=float)
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in p)
+    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+     msg.pose.orientation.w) = (float(v) for v in q)
+    return msg
+
+
+def pressure_message(pressures_pa: Any, unit: str) -> Float64MultiArray:
+    """Float64MultiArray of pressures (given in Pa) in ``unit`` with a labelled layout."""
+    values = common.to_unit(pressures_pa, unit)
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=common.pressure_label(unit), size=len(values),
+                                          stride=len(values))]
+    msg.layout.data_offset = 0
+    msg.data = [float(v) for v in values]
+    return msg
+
+
+def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
+                      values: dict) -> DiagnosticStatus:
+    st = DiagnosticStatus()
+    st.name = name
+    st.hardware_id = hardware_id
+    st.level = level
+    st.message = message
+    st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    return st
+
+
+def _sigterm_to_keyboard_interrupt(signum, frame):  # pragma: no cover - signal path
+    raise KeyboardInterrupt
+
+
+def run_node(node, before_destroy=None) -> None:
+    """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
+
+    ``before_destroy(node)`` runs while the context is still valid (vent).
+    """
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        try:
+            if before_destroy is not None and rclpy.ok():
+                before_destroy(node)
+        finally:
+            executor.remove_node(node)
+            node.destroy_node()
+            rclpy.try_shutdown()
+
+
+def init_rclpy(args=None) -> None:
+    """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt."""
+    limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _sigterm_to_keyboard_interrupt)
+
+
+# ------------------------------------------------------------------- the node
+class InverseKinetostaticNode(LifecycleNode):
+    """Managed feedforward controller: target poses -> actuator pressures."""
+
+    def __init__(self, node_name: str = 'inverse_kinetostatic_node', **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                   ParameterType.PARAMETER_BOOL)
+        self.declare_parameter('robot_config', 'one_segment', descriptor(
+            'Robot description: a shipped robot name (one_segment, two_segment; the files in '
+            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure.', S))
+        self.declare_parameter('payload_kg', 0.0, descriptor(
+            'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
+            'on the next solve. Negative or larger values than the range are refused.', D,
+            lo=0.0, hi=common.PAYLOAD_MAX_KG))
+        self.declare_parameter('base_frame', 'base', descriptor(
+            'Frame of targets and outputs (robot base). Targets in any other frame are refused '
+            '(no tf2 transform).', S))
+        self.declare_parameter('pressure_unit', 'Pa', descriptor(
+            'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
+            '(relative to atmosphere); the layout label says the unit.', S,
+            constraints="one of: 'Pa', 'kPa'"))
+        self.declare_parameter('max_rate_hz', 100.0, descriptor(
+            'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
+            lo=0.1, hi=1000.0))
+        self.declare_parameter('autostart', True, descriptor(
+            'Configure and activate at start-up (so that a plain ros2 run works).', B,
+            read_only=True))
+        self._check_initial_parameters()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._lock = threading.RLock()    # active flag + publishing + warm start
+        self._active = False
+        self._configured = False
+        self._model: RobotModel | None = None
+        self._cfg = None
+        self._warm = None
+        self._worker: common.LatestWorker | None = None
+        self._pub_cmd = self._pub_pose = self._pub_diag = None
+        self._sub = None
+        self._said_orientation_ignored = False
+        self._last_refusal = ('', 0.0)
+        self.last_command_pa: np.ndarray | None = None
+        self.last_refusal_reason = ''
+        self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
+                      'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0}
+        self.solve_times_s: list = []
+
+        if self.get_parameter('autostart').value:
+            if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+                self.trigger_activate()
+
+    # ---------------------------------------------------------- parameters
+    def _check_initial_parameters(self) -> None:
+        for p in (self.get_parameter('payload_kg'), self.get_parameter('pressure_unit')):
+            reason = self._parameter_problem(p)
+            if reason:
+                raise ValueError(f'parameter {p.name}: {reason}')
+
+    @staticmethod
+    def _parameter_problem(p) -> str:
+        try:
+            if p.name == 'payload_kg':
+                common.validate_payload(p.value)
+            elif p.name == 'pressure_unit':
+                common.check_unit(p.value)
+            elif p.name == 'max_rate_hz':
+                if not (isinstance(p.value, float) and math.isfinite(p.value) and p.value > 0):
+                    return f'max_rate_hz must be a positive number, got {p.value}'
+            elif p.name == 'base_frame':
+                if not isinstance(p.value, str) or not p.value:
+                    return 'base_frame must be a non-empty string'
+            elif p.name == 'robot_config':
+                load_robot(p.value)   # takes effect on the next configure
+        except ValueError as exc:     # ConfigError is a ValueError
+            return str(exc)
+        return ''
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        for p in params:
+            reason = self._parameter_problem(p)
+            if reason:
+                self.get_logger().warning(f'refused parameter change: {reason}')
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _min_period(self) -> float:
+        return 1.0 / float(self.get_parameter('max_rate_hz').value)
+
+    # ---------------------------------------------------------- lifecycle
+    def on_configure(self, state: State) -> TransitionCallbackReturn:
+        name = self.get_parameter('robot_config').value
+        try:
+            cfg = load_robot(name)
+            model = RobotModel(cfg)
+            # straight robot at vent pressure: first warm start (also warms caches)
+            fw0 = solve_forward(model, common.vent_pressures(model.A, cfg.p_min, cfg.p_max))
+        except (ConfigError, ValueError, OSError) as exc:
+            self.get_logger().error(f'configure failed: robot_config {name!r}: {exc}')
+            return TransitionCallbackReturn.FAILURE
+        with self._lock:
+            self._cfg, self._model = cfg, model
+            self._warm = fw0 if fw0.success else None
+        qos = command_qos()
+        self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
+        self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
+        self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
+                                           name='inverse-solver')
+        self._configured = True
+        self.get_logger().info(
+            f'configured: robot {cfg.name!r} ({cfg.n_segments} segment(s), {model.A} actuators, '
+            f'pressure limits [{cfg.p_min / 1e3:g}, {cfg.p_max / 1e3:g}] kPa gauge), '
+            f'targets in {self.get_parameter("base_frame").value!r}, pressure_command in '
+            f'{self._unit()} gauge, at most {self.get_parameter("max_rate_hz").value:g} solves/s')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: State) -> TransitionCallbackReturn:
+        with self._lock:
+            self._active = True
+        self.get_logger().info('active: pressure commands enabled')
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: State) -> TransitionCallbackReturn:
+        self._go_inactive_and_vent('deactivate')
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: State) -> TransitionCallbackReturn:
+        self._release()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: State) -> TransitionCallbackReturn:
+        if self._configured:
+            self._go_inactive_and_vent('shutdown')
+            self._wait_vent_acked()
+        self._release()
+        return super().on_shutdown(state)
+
+    def on_error(self, state: State) -> TransitionCallbackReturn:
+        if self._configured:
+            self._go_inactive_and_vent('error')
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _go_inactive_and_vent(self, why: str) -> None:
+        with self._lock:
+            self._active = False
+            if self._worker is not None:
+                self._worker.clear()
+            cfg = self._cfg
+            vent = common.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
+            self._pub_cmd.publish(pressure_message(vent, self._unit()))
+            self.last_command_pa = vent
+            self.stats['vents'] += 1
+        self.get_logger().info(f'{why}: vent command (0 Pa gauge) published, commands disabled')
+
+    def _wait_vent_acked(self) -> None:
+        try:
+            if self._pub_cmd is not None and self._pub_cmd.get_subscription_count() > 0:
+                self._pub_cmd.wait_for_all_acked(Duration(seconds=VENT_ACK_TIMEOUT_S))
+        except Exception:  # noqa: BLE001 - best effort on the way out
+            pass
+
+    def _release(self) -> None:
+        with self._lock:
+            self._active = False
+            self._configured = False
+        if self._worker is not None:
+            self._worker.stop()
+            self._worker = None
+        for attr, destroy in (('_sub', self.destroy_subscription), ('_pub_cmd', self.destroy_publisher),
+                              ('_pub_pose', self.destroy_publisher),
+                              ('_pub_diag', self.destroy_publisher)):
+            ent = getattr(self, attr)
+            if ent is not None:
+                destroy(ent)
+                setattr(self, attr, None)
+        with self._lock:
+            self._model = self._cfg = self._warm = None
+
+    def vent_and_shutdown(self) -> None:
+        """Shutdown transition from any primary state (vents if configured)."""
+        try:
+            self.trigger_shutdown()
+        except Exception as exc:  # noqa: BLE001 - already finalized etc.
+            self.get_logger().debug(f'shutdown transition: {exc}')
+
+    @property
+    def is_active(self) -> bool:
+        with self._lock:
+            return self._active
+
+    @property
+    def model(self) -> RobotModel | None:
+        return self._model
+
+    def _unit(self) -> str:
+        return self.get_parameter('pressure_unit').value
+
+    # ---------------------------------------------------------- input
+    def _on_target(self, msg: PoseStamped) -> None:
+        with self._lock:
+            active, cfg = self._active, self._cfg
+        if not active or cfg is None:
+            self.stats['ignored_inactive'] += 1
+            self.get_logger().info('target ignored: node not active',
+                                   throttle_duration_sec=WARN_THROTTLE_S)
+            return
+        self.stats['received'] += 1
+        use_orientation = cfg.n_segments >= 2
+        if not use_orientation and not self._said_orientation_ignored:
+            self._said_orientation_ignored = True
+            self.get_logger().info('one-segment robot: target orientation is ignored '
+                                   '(position control only)')
+        o = msg.pose.orientation
+        try:
+            pos, z = common.validate_target(
+                (msg.pose.position.x, msg.pose.position.y, msg.pose.position.z),
+                (o.x, o.y, o.z, o.w), msg.header.frame_id,
+                self.get_parameter('base_frame').value, use_orientation)
+        except common.InputError as exc:
+            self._refuse(str(exc))
+            return
+        stamp = msg.header.stamp
+        self._worker.submit((pos, z, stamp, time.monotonic()))
+
+    def _refuse(self, reason: str) -> None:
+        self.stats['refused'] += 1
+        self.last_refusal_reason = reason
+        self.get_logger().warning(f'target refused: {reason}', throttle_duration_sec=WARN_THROTTLE_S)
+        now = time.monotonic()
+        last_reason, last_t = self._last_refusal
+        if reason != last_reason or now - last_t >= REFUSAL_DIAG_INTERVAL_S:
+            self._last_refusal = (reason, now)
+            self._publish_diag(DiagnosticStatus.WARN, f'target refused: {reason}',
+                               {'refused_targets': self.stats['refused']})
+
+    # ---------------------------------------------------------- solving
+    def _on_worker_error(self, exc: BaseException) -> None:
+        self.stats['failed'] += 1
+        self.get_logger().error(f'inverse solve raised {type(exc).__name__}: {exc}',
+                                throttle_duration_sec=WARN_THROTTLE_S)
+        self._publish_diag(DiagnosticStatus.ERROR, f'solver exception: {type(exc).__name__}: {exc}',
+                           {})
+
+    def _solve(self, item) -> None:
+        pos, z, stamp, _t_recv = item
+        with self._lock:
+            model, cfg, warm, active = self._model, self._cfg, self._warm, self._active
+        if model is None or not active:
+            return
+        payload = float(self.get_parameter('payload_kg').value)
+        t0 = time.perf_counter()
+        try:
+            inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm)
+        except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
+            dt = time.perf_counter() - t0
+            self.stats['failed'] += 1
+            self.get_logger().error(f'inverse solve raised {type(exc).__name__}: {exc}',
+                                    throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.ERROR,
+                               f'solver exception ({type(exc).__name__}); last command kept',
+                               {'solve_time_ms': f'{dt * 1e3:.3f}', 'payload_kg': payload})
+            return
+        dt = time.perf_counter() - t0
+        self.stats['solved'] += 1
+        self.solve_times_s.append(dt)
+        if len(self.solve_times_s) > 10000:
+            del self.solve_times_s[:5000]
+        fw = inv.forward
+        usable = fw is not None and fw.converged and fw.stable is not False
+        values = {
+            'solve_time_ms': f'{dt * 1e3:.3f}',
+            'iterations': inv.iterations,
+            'residual_norm': 'nan' if fw is None else f'{fw.residual_norm:.3e}',
+            'position_error_m': f'{inv.position_error_m:.3e}',
+            'angle_error_rad': 'n/a' if inv.angle_error_rad is None else f'{inv.angle_error_rad:.3e}',
+            'reachable': str(bool(inv.reachable)).lower(),
+            'active_limits': ' '.join(str(int(v)) for v in inv.active_limits),
+            'status': inv.status,
+            'payload_kg': payload,
+            'pressure_unit': self._unit(),
+        }
+        if not usable:
+            self.stats['failed'] += 1
+            msg = f'solve failed ({inv.message}); last command kept'
+            self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.ERROR, msg, values)
+            return
+        try:
+            p = common.safe_pressures(inv.pressures_pa, cfg.p_min, cfg.p_max, model.A)
+        except common.UnsafePressureError as exc:
+            self.stats['failed'] += 1
+            msg = f'solver output refused by the safety gate ({exc}); last command kept'
+            self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.ERROR, msg, values)
+            return
+        unit = self._unit()
+        with self._lock:
+            if not self._active or self._model is not model:
+                return   # deactivated while solving: the vent command stands
+            self._warm = inv
+            if stamp.sec == 0 and stamp.nanosec == 0:
+                stamp = self.get_clock().now().to_msg()
+            self._pub_cmd.publish(pressure_message(p, unit))
+            self._pub_pose.publish(pose_message(
+                fw.position, common.quaternion_from_rotation(fw.rotation),
+                self.get_parameter('base_frame').value, stamp))
+            self.last_command_pa = p
+            self.stats['published'] += 1
+        values['pressures'] = ' '.join(f'{v:.6g}' for v in common.to_unit(p, unit))
+        if inv.reachable:
+            self._publish_diag(DiagnosticStatus.OK, 'target reached', values)
+        else:
+            self.stats['unreachable'] += 1
+            self.get_logger().warning(f'target unreachable: {inv.message}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.WARN,
+                               f'target unreachable, best reachable pressures sent: {inv.message}',
+                               values)
+
+    def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
+        pub, cfg = self._pub_diag, self._cfg
+        if pub is None:
+            return
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [diagnostic_status(f'{self.get_name()}: inverse kinetostatics',
+                                        cfg.name if cfg is not None else '', level, message, values)]
+        try:
+            pub.publish(arr)
+        except Exception:  # noqa: BLE001 - publisher destroyed meanwhile
+            pass
+
+
+def main(args=None) -> None:
+    init_rclpy(args)
+    try:
+        node = InverseKinetostaticNode()
+    except Exception:
+        rclpy.try_shutdown()
+        raise
+    run_node(node, before_destroy=lambda n: n.vent_and_shutdown())
+
+
+if __name__ == '__main__':
+    main()

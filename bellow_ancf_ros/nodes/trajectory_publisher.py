@@ -1,0 +1,175 @@
+"""Trajectory source: publishes ``target_pose`` along the paper's trajectories.
+
+Publishes ``target_pose`` (geometry_msgs/PoseStamped, reliable, keep-last 5)
+in ``base_frame`` at ``rate_hz``, following
+:func:`bellow_ancf_ros.core.trajectories.trajectory`: ``space_spiral``,
+``space_rose``, ``planar_circle``, ``planar_spiral``, ``planar_rose`` and,
+for robots with two or more segments, ``bending_circle`` (constant bending
+angle ``bending_angle_deg``, paper: 0, 10 or 20 deg).  For one segment the
+orientation is the identity (the controller ignores it); for two or more the
+orientation is the smallest rotation taking base z onto the target z-axis.
+
+Parameters (all with descriptors): ``trajectory``, ``rate_hz``, ``period_s``
+(0 = the trajectory's default, derived from the robot), ``radius_m`` and
+``height_m`` (0 = default), ``robot_config``, ``base_frame``,
+``bending_angle_deg``, ``loop`` (repeat, default true; otherwise stop after
+one period), ``start_delay_s`` (time to wait before the first target, e.g. for
+the controller to come up).  Trajectory parameters may be changed at run
+time; an invalid combination is refused with the reason and the old one stays.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import ParameterType, SetParametersResult
+from rclpy.node import Node
+
+from ..core import load_robot
+from ..core.trajectories import TRAJECTORY_NAMES, trajectory, trajectory_parameters
+from . import common
+from .inverse_kinetostatic_node import (
+    command_qos,
+    descriptor,
+    init_rclpy,
+    pose_message,
+    run_node,
+)
+
+__all__ = ['TrajectoryPublisher', 'main']
+
+_TRAJ_PARAMS = ('trajectory', 'period_s', 'radius_m', 'height_m', 'bending_angle_deg')
+
+
+class TrajectoryPublisher(Node):
+    """Publishes target poses along a reference trajectory."""
+
+    def __init__(self, node_name: str = 'trajectory_publisher', **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                   ParameterType.PARAMETER_BOOL)
+        self.declare_parameter('robot_config', 'one_segment', descriptor(
+            'Robot description (shipped name or YAML path); sets the default trajectory size. '
+            'Read at start-up.', S, read_only=True))
+        self.declare_parameter('trajectory', 'planar_circle', descriptor(
+            'Trajectory name: ' + ', '.join(TRAJECTORY_NAMES) + ' (bending_circle: two or more '
+            'segments only).', S, constraints='one of: ' + ', '.join(TRAJECTORY_NAMES)))
+        self.declare_parameter('rate_hz', 10.0, descriptor(
+            'Publishing rate [Hz] (read at start-up).', D, lo=0.1, hi=1000.0, read_only=True))
+        self.declare_parameter('period_s', 0.0, descriptor(
+            'Trajectory period [s]; 0 = the default (quasi-static speed, about 2 mm/s).', D,
+            lo=0.0, hi=3600.0))
+        self.declare_parameter('radius_m', 0.0, descriptor(
+            'Trajectory radius [m]; 0 = the default for the robot.', D, lo=0.0, hi=1.0))
+        self.declare_parameter('height_m', 0.0, descriptor(
+            'Height of the trajectory centre above the base [m]; 0 = the default.', D,
+            lo=0.0, hi=10.0))
+        self.declare_parameter('bending_angle_deg', 0.0, descriptor(
+            'Bending angle of bending_circle [deg]: angle between the end-effector z-axis and '
+            'the base z-axis, tilted radially outward (paper: 0, 10, 20). Two or more segments.',
+            D, lo=0.0, hi=60.0))
+        self.declare_parameter('base_frame', 'base', descriptor(
+            'frame_id of the published targets (robot base).', S))
+        self.declare_parameter('loop', True, descriptor(
+            'Repeat the trajectory; false: stop publishing after one period.', B))
+        self.declare_parameter('start_delay_s', 0.0, descriptor(
+            'Wait this long after start-up before publishing [s].', D, lo=0.0, hi=3600.0))
+
+        self.cfg = load_robot(self.get_parameter('robot_config').value)
+        self._kwargs = self._trajectory_kwargs({})   # raises ValueError on a bad start-up set
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._pub = self.create_publisher(PoseStamped, 'target_pose', command_qos())
+        self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
+        self.published = 0
+        self.finished = False
+        rate = float(self.get_parameter('rate_hz').value)
+        self._timer = self.create_timer(1.0 / rate, self._tick)
+        self.get_logger().info(
+            f"publishing {self.get_parameter('trajectory').value!r} for robot {self.cfg.name!r} "
+            f'at {rate:g} Hz: {self._describe()}')
+
+    def _effective(self) -> dict:
+        """The trajectory parameters in use (defaults with the overrides applied)."""
+        kw = dict(self._kwargs)
+        name = kw.pop('name')
+        return trajectory_parameters(name, self.cfg, **kw)
+
+    def _describe(self) -> str:
+        p = self._effective()
+        return (f"period {p['period']:g} s, radius {p['radius'] * 1e3:.2f} mm, centre height "
+                f"{p['center'][2] * 1e3:.2f} mm"
+                + (f", bending angle {p['bending_angle_deg']:g} deg" if 'bending_angle_deg' in p else ''))
+
+    def _trajectory_kwargs(self, override: dict) -> dict:
+        """Trajectory keyword arguments from the parameters (``override``: name -> new value)."""
+        def val(name):
+            return override[name] if name in override else self.get_parameter(name).value
+        kw = {'name': val('trajectory')}
+        if val('period_s') > 0:
+            kw['period'] = float(val('period_s'))
+        if val('radius_m') > 0:
+            kw['radius'] = float(val('radius_m'))
+        if val('height_m') > 0:
+            kw['height'] = float(val('height_m'))
+        if self.cfg.n_segments >= 2:
+            kw['bending_angle_deg'] = float(val('bending_angle_deg'))
+        elif val('bending_angle_deg') != 0.0:
+            raise ValueError('bending_angle_deg needs a robot with two or more segments')
+        args = dict(kw)
+        name = args.pop('name')
+        trajectory(name, 0.0, self.cfg, **args)   # validates: ValueError with the reason
+        return kw
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        override = {p.name: p.value for p in params if p.name in _TRAJ_PARAMS}
+        if not override:
+            return SetParametersResult(successful=True)
+        try:
+            kw = self._trajectory_kwargs(override)
+        except (ValueError, TypeError) as exc:
+            self.get_logger().warning(f'refused parameter change: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._kwargs = kw
+        return SetParametersResult(successful=True)
+
+    def pose_at(self, t: float):
+        """(position (3,), quaternion (4,)) of the target at time ``t`` [s]."""
+        kw = dict(self._kwargs)
+        name = kw.pop('name')
+        pos, z = trajectory(name, t, self.cfg, **kw)
+        q = np.array([0.0, 0.0, 0.0, 1.0]) if z is None else common.quaternion_from_z_axis(z[0])
+        return pos[0], q
+
+    def _period(self) -> float:
+        return float(self._effective()['period'])
+
+    def _tick(self) -> None:
+        t = time.monotonic() - self._t0
+        if t < 0 or self.finished:
+            return
+        if not self.get_parameter('loop').value and t > self._period():
+            self.finished = True
+            self.get_logger().info('trajectory finished (loop is false)')
+            return
+        pos, q = self.pose_at(t)
+        self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
+                                       self.get_clock().now().to_msg()))
+        self.published += 1
+
+
+def main(args=None) -> None:
+    init_rclpy(args)
+    try:
+        node = TrajectoryPublisher()
+    except Exception:
+        rclpy.try_shutdown()
+        raise
+    run_node(node)
+
+
+if __name__ == '__main__':
+    main()

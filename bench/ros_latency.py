@@ -1,0 +1,85 @@
+"""End-to-end latency across processes: ``target_pose`` publish -> ``pressure_command`` receipt.
+
+Starts ``inverse_kinetostatic_node`` as its own process (isolated
+``ROS_DOMAIN_ID``, localhost discovery), then sends targets one at a time
+(1 mm apart on a circle of the one-segment robot) and times each answer.
+Prints the median and p99.  Target: median 10 ms.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+
+def main(n_targets=150, robot="one_segment"):
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 101)))
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from std_msgs.msg import Float64MultiArray
+
+    from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+    from bellow_ancf_ros.nodes.inverse_kinetostatic_node import command_qos
+
+    node_proc = subprocess.Popen(
+        [sys.executable, "-m", "bellow_ancf_ros.nodes.inverse_kinetostatic_node", "--ros-args",
+         "-p", f"robot_config:={robot}", "-p", "max_rate_hz:=1000.0"],
+        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    rclpy.init()
+    node = rclpy.create_node("latency_bench")
+    got = []
+    node.create_subscription(Float64MultiArray, "pressure_command", lambda m: got.append(time.perf_counter()),
+                             command_qos())
+    pub = node.create_publisher(PoseStamped, "target_pose", command_qos())
+    try:
+        deadline = time.monotonic() + 30
+        while (pub.get_subscription_count() == 0 or node.count_publishers("pressure_command") == 0):
+            rclpy.spin_once(node, timeout_sec=0.05)
+            if time.monotonic() > deadline or node_proc.poll() is not None:
+                raise RuntimeError("inverse_kinetostatic_node did not come up")
+        model = RobotModel(load_robot(robot))
+        centre = solve_forward(model, np.full(model.A, 40e3)).position
+        radius = 0.01
+        lat = []
+        for k in range(n_targets + 10):
+            phi = k * 1e-3 / radius
+            msg = PoseStamped()
+            msg.header.frame_id = "base"
+            msg.pose.position.x = float(centre[0] + radius * np.cos(phi))
+            msg.pose.position.y = float(centre[1] + radius * np.sin(phi))
+            msg.pose.position.z = float(centre[2])
+            msg.pose.orientation.w = 1.0
+            got.clear()
+            t0 = time.perf_counter()
+            pub.publish(msg)
+            deadline = time.monotonic() + 5
+            while not got and time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.001)
+            if got and k >= 10:  # the first answers include discovery and warm-up
+                lat.append(got[0] - t0)
+        lat = np.array(lat)
+        print(f"{'end-to-end target_pose -> pressure_command (' + robot + ', separate processes)':<78} "
+              f"{np.median(lat) * 1e3:7.2f}ms {np.percentile(lat, 99) * 1e3:7.2f}ms {'-':>9} "
+              f"{np.median(lat) / 0.010:9.2f}")
+        print(f"   ({len(lat)} of {n_targets} targets answered)")
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+        try:
+            os.killpg(node_proc.pid, signal.SIGINT)
+            node_proc.wait(timeout=10)
+        except (ProcessLookupError, subprocess.TimeoutExpired):
+            os.killpg(node_proc.pid, signal.SIGKILL)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
