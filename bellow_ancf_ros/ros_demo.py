@@ -18,8 +18,9 @@ Tracking error = target pose vs the pose the forward node predicts from the
 pressures the inverse node commanded: the model's feedforward controller
 closed through the model itself, across three processes.  Each prediction is
 paired with its target through the inverse node's ``commanded_pose`` (which
-carries the target's stamp): among the commands received in the second
-before the prediction, the one whose pose the prediction reproduces.
+carries the target's stamp): among the commands received from one second
+before to half a second after the prediction, the one whose pose the
+prediction reproduces.
 
 Exit status 0 when the nodes came up, enough samples were paired, every
 pressure was finite and within the limits, and the errors are below
@@ -184,8 +185,10 @@ def analyse(rec: dict, t_start: float, t_end: float) -> dict:
         if not (t_start <= t_p <= t_end):
             continue
         p_pos, p_z = _pose(m)
+        # the command's pose may arrive after the prediction made from it (separate topics,
+        # loaded machine): look 1 s back and 0.5 s ahead, the matching pose wins by distance
         cands = [(np.linalg.norm(c_pos - p_pos), stamp) for t_c, stamp, c_pos in commanded
-                 if t_p - 1.0 <= t_c <= t_p and stamp in targets]
+                 if t_p - 1.0 <= t_c <= t_p + 0.5 and stamp in targets]
         if not cands:
             continue
         _, stamp = min(cands, key=lambda c: c[0])

@@ -26,7 +26,7 @@ def main(n_targets=150, robot="one_segment"):
     from std_msgs.msg import Float64MultiArray
 
     from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-    from bellow_ancf_ros.nodes.inverse_kinetostatic_node import command_qos
+    from bellow_ancf_ros.nodes.ros_util import command_qos
 
     node_proc = subprocess.Popen(
         [sys.executable, "-m", "bellow_ancf_ros.nodes.inverse_kinetostatic_node", "--ros-args",

@@ -31,7 +31,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.core.trajectories import default_parameters  # noqa: E402
-from bellow_ancf_ros.nodes.inverse_kinetostatic_node import command_qos  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 STARTUP_TIMEOUT = 30.0

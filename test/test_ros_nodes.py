@@ -37,10 +37,8 @@ from bellow_ancf_ros.core.trajectories import default_parameters, trajectory  # 
 from bellow_ancf_ros.nodes import common  # noqa: E402
 from bellow_ancf_ros.nodes import inverse_kinetostatic_node as inv_mod  # noqa: E402
 from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
-from bellow_ancf_ros.nodes.inverse_kinetostatic_node import (  # noqa: E402
-    InverseKinetostaticNode,
-    command_qos,
-)
+from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
 
 TIMEOUT = 10.0
@@ -508,7 +506,10 @@ def test_latest_target_only_in_process(h, one):
     assert node.stats['solved'] <= 10             # ... and solved only the newest ones
     assert answer_delay < 1.0                     # without working through a backlog
     times = [t for t, _ in h.msgs['pressure_command']]
-    assert np.min(np.diff(times)) > 0.5 / 20.0 if len(times) > 1 else True   # rate bound
+    # rate bound: publishes are >= 1/20 s apart; receipt times may bunch on a loaded machine,
+    # so bound the count over the whole window (with 0.1 s of delivery jitter)
+    if len(times) > 1:
+        assert len(times) - 1 <= 20.0 * (times[-1] - times[0] + 0.1), np.diff(times)
     for _, m in h.msgs['pressure_command']:
         assert_safe(m.data, one.cfg)
 

@@ -180,6 +180,32 @@ def validate_payload(value: Any, maximum: float = PAYLOAD_MAX_KG) -> float:
     return v
 
 
+def parameter_problem(name: str, value: Any) -> str:
+    """Why a node parameter value is refused ('' if it is fine).
+
+    Shared by the nodes' set-parameters callbacks: ``payload_kg``,
+    ``pressure_unit``, ``max_rate_hz``, ``base_frame``, ``robot_config``
+    (must load); other names are not checked here.
+    """
+    try:
+        if name == 'payload_kg':
+            validate_payload(value)
+        elif name == 'pressure_unit':
+            check_unit(value)
+        elif name == 'max_rate_hz':
+            if not (isinstance(value, float) and math.isfinite(value) and value > 0):
+                return f'max_rate_hz must be a positive number, got {value}'
+        elif name == 'base_frame':
+            if not isinstance(value, str) or not value:
+                return 'base_frame must be a non-empty string'
+        elif name == 'robot_config':
+            from ..core import load_robot
+            load_robot(value)  # takes effect on the next configure
+    except ValueError as exc:  # ConfigError is a ValueError
+        return str(exc)
+    return ''
+
+
 # ------------------------------------------------------------ quaternions
 def _unit_quaternion(q: Sequence[float]) -> np.ndarray:
     arr = np.array(q, dtype=float).ravel()

@@ -40,26 +40,25 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Point, PoseStamped
-from rcl_interfaces.msg import IntegerRange, ParameterType, SetParametersResult
+from rcl_interfaces.msg import IntegerRange, ParameterType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core import RobotModel, load_robot, solve_forward
 from . import common
-from .inverse_kinetostatic_node import (
+from .ros_util import (
     REFUSAL_DIAG_INTERVAL_S,
     WARN_THROTTLE_S,
     command_qos,
     descriptor,
     diagnostic_status,
     diagnostics_qos,
-    init_rclpy,
+    guard_parameters,
+    main_for,
     pose_message,
-    run_node,
 )
 
 __all__ = ['ForwardKinetostaticNode', 'main', 'shape_markers']
@@ -131,11 +130,7 @@ class ForwardKinetostaticNode(Node):
         d = descriptor('Points per actuator backbone in predicted_shape.', I)
         d.integer_range = [IntegerRange(from_value=2, to_value=200, step=1)]
         self.declare_parameter('backbone_points', 20, d)
-        for name in ('payload_kg', 'pressure_unit'):
-            reason = self._parameter_problem(self.get_parameter(name))
-            if reason:
-                raise ValueError(f'parameter {name}: {reason}')
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        guard_parameters(self, ('payload_kg', 'pressure_unit'))
 
         robot = self.get_parameter('robot_config').value
         self.cfg = load_robot(robot)   # ConfigError: the node does not start
@@ -163,27 +158,6 @@ class ForwardKinetostaticNode(Node):
             f'{self._sub.topic_name!r} in {self.get_parameter("pressure_unit").value}')
 
     # ------------------------------------------------------------ params
-    @staticmethod
-    def _parameter_problem(p) -> str:
-        try:
-            if p.name == 'payload_kg':
-                common.validate_payload(p.value)
-            elif p.name == 'pressure_unit':
-                common.check_unit(p.value)
-            elif p.name == 'base_frame' and (not isinstance(p.value, str) or not p.value):
-                return 'base_frame must be a non-empty string'
-        except ValueError as exc:
-            return str(exc)
-        return ''
-
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        for p in params:
-            reason = self._parameter_problem(p)
-            if reason:
-                self.get_logger().warning(f'refused parameter change: {reason}')
-                return SetParametersResult(successful=False, reason=reason)
-        return SetParametersResult(successful=True)
-
     def _min_period(self) -> float:
         return 1.0 / float(self.get_parameter('max_rate_hz').value)
 
@@ -269,14 +243,7 @@ class ForwardKinetostaticNode(Node):
         return super().destroy_node()
 
 
-def main(args=None) -> None:
-    init_rclpy(args)
-    try:
-        node = ForwardKinetostaticNode()
-    except Exception:
-        rclpy.try_shutdown()
-        raise
-    run_node(node)
+main = main_for(ForwardKinetostaticNode)
 
 
 if __name__ == '__main__':

@@ -67,144 +67,37 @@ when the vent command goes out.
 
 from __future__ import annotations
 
-import math
-import signal
 import threading
 import time
 from typing import Any
 
 import numpy as np
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    ParameterDescriptor,
-    ParameterType,
-    SetParametersResult,
-)
+from rcl_interfaces.msg import ParameterType
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
-from ..core.solver import limit_blas_threads
 from . import common
+from .ros_util import (
+    REFUSAL_DIAG_INTERVAL_S,
+    WARN_THROTTLE_S,
+    command_qos,
+    descriptor,
+    diagnostic_status,
+    diagnostics_qos,
+    guard_parameters,
+    main_for,
+    pose_message,
+    pressure_message,
+)
 
-__all__ = [
-    'QOS_DEPTH',
-    'InverseKinetostaticNode',
-    'command_qos',
-    'descriptor',
-    'diagnostic_status',
-    'diagnostics_qos',
-    'main',
-    'pose_message',
-    'pressure_message',
-    'run_node',
-]
+__all__ = ['InverseKinetostaticNode', 'main']
 
-QOS_DEPTH = 5
-WARN_THROTTLE_S = 2.0
-#: Minimum interval between two WARN diagnostics of the same refusal reason [s].
-REFUSAL_DIAG_INTERVAL_S = 0.1
 VENT_ACK_TIMEOUT_S = 1.0
-
-
-# -------------------------------------------------------------- shared helpers
-def command_qos() -> QoSProfile:
-    """Reliable, keep-last, depth :data:`QOS_DEPTH` (targets, pressures, poses)."""
-    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                      depth=QOS_DEPTH)
-
-
-def diagnostics_qos() -> QoSProfile:
-    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                      depth=10)
-
-
-def descriptor(description: str, ptype: int, *, lo: float | None = None,
-               hi: float | None = None, read_only: bool = False,
-               constraints: str = '') -> ParameterDescriptor:
-    """A ParameterDescriptor with description, optional range and constraints text."""
-    d = ParameterDescriptor(description=description, type=ptype, read_only=read_only,
-                            additional_constraints=constraints)
-    if lo is not None and hi is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi),
-                                                     step=0.0)]
-    return d
-
-
-def pose_message(position: Any, quaternion: Any, frame_id: str, stamp) -> PoseStamped:
-    msg = PoseStamped()
-    msg.header.frame_id = frame_id
-    msg.header.stamp = stamp
-    p = np.asarray(position, dtype=float)
-    q = np.asarray(quaternion, dtype=float)
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in p)
-    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
-     msg.pose.orientation.w) = (float(v) for v in q)
-    return msg
-
-
-def pressure_message(pressures_pa: Any, unit: str) -> Float64MultiArray:
-    """Float64MultiArray of pressures (given in Pa) in ``unit`` with a labelled layout."""
-    values = common.to_unit(pressures_pa, unit)
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=common.pressure_label(unit), size=len(values),
-                                          stride=len(values))]
-    msg.layout.data_offset = 0
-    msg.data = [float(v) for v in values]
-    return msg
-
-
-def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
-                      values: dict) -> DiagnosticStatus:
-    st = DiagnosticStatus()
-    st.name = name
-    st.hardware_id = hardware_id
-    st.level = level
-    st.message = message
-    st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
-    return st
-
-
-def _sigterm_to_keyboard_interrupt(signum, frame):  # pragma: no cover - signal path
-    raise KeyboardInterrupt
-
-
-def run_node(node, before_destroy=None) -> None:
-    """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
-
-    ``before_destroy(node)`` runs while the context is still valid (vent).
-    """
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        try:
-            if before_destroy is not None and rclpy.ok():
-                before_destroy(node)
-        finally:
-            executor.remove_node(node)
-            node.destroy_node()
-            rclpy.try_shutdown()
-
-
-def init_rclpy(args=None) -> None:
-    """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt."""
-    limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _sigterm_to_keyboard_interrupt)
 
 
 # ------------------------------------------------------------------- the node
@@ -235,8 +128,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self.declare_parameter('autostart', True, descriptor(
             'Configure and activate at start-up (so that a plain ros2 run works).', B,
             read_only=True))
-        self._check_initial_parameters()
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        guard_parameters(self, ('payload_kg', 'pressure_unit'))
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
         self._active = False
@@ -260,39 +152,6 @@ class InverseKinetostaticNode(LifecycleNode):
                 self.trigger_activate()
 
     # ---------------------------------------------------------- parameters
-    def _check_initial_parameters(self) -> None:
-        for p in (self.get_parameter('payload_kg'), self.get_parameter('pressure_unit')):
-            reason = self._parameter_problem(p)
-            if reason:
-                raise ValueError(f'parameter {p.name}: {reason}')
-
-    @staticmethod
-    def _parameter_problem(p) -> str:
-        try:
-            if p.name == 'payload_kg':
-                common.validate_payload(p.value)
-            elif p.name == 'pressure_unit':
-                common.check_unit(p.value)
-            elif p.name == 'max_rate_hz':
-                if not (isinstance(p.value, float) and math.isfinite(p.value) and p.value > 0):
-                    return f'max_rate_hz must be a positive number, got {p.value}'
-            elif p.name == 'base_frame':
-                if not isinstance(p.value, str) or not p.value:
-                    return 'base_frame must be a non-empty string'
-            elif p.name == 'robot_config':
-                load_robot(p.value)   # takes effect on the next configure
-        except ValueError as exc:     # ConfigError is a ValueError
-            return str(exc)
-        return ''
-
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        for p in params:
-            reason = self._parameter_problem(p)
-            if reason:
-                self.get_logger().warning(f'refused parameter change: {reason}')
-                return SetParametersResult(successful=False, reason=reason)
-        return SetParametersResult(successful=True)
-
     def _min_period(self) -> float:
         return 1.0 / float(self.get_parameter('max_rate_hz').value)
 
@@ -543,14 +402,7 @@ class InverseKinetostaticNode(LifecycleNode):
             pass
 
 
-def main(args=None) -> None:
-    init_rclpy(args)
-    try:
-        node = InverseKinetostaticNode()
-    except Exception:
-        rclpy.try_shutdown()
-        raise
-    run_node(node, before_destroy=lambda n: n.vent_and_shutdown())
+main = main_for(InverseKinetostaticNode, before_destroy=lambda n: n.vent_and_shutdown())
 
 
 if __name__ == '__main__':

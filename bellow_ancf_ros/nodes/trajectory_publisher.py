@@ -24,7 +24,6 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
@@ -32,12 +31,11 @@ from rclpy.node import Node
 from ..core import load_robot
 from ..core.trajectories import TRAJECTORY_NAMES, trajectory, trajectory_parameters
 from . import common
-from .inverse_kinetostatic_node import (
+from .ros_util import (
     command_qos,
     descriptor,
-    init_rclpy,
+    main_for,
     pose_message,
-    run_node,
 )
 
 __all__ = ['TrajectoryPublisher', 'main']
@@ -161,14 +159,7 @@ class TrajectoryPublisher(Node):
         self.published += 1
 
 
-def main(args=None) -> None:
-    init_rclpy(args)
-    try:
-        node = TrajectoryPublisher()
-    except Exception:
-        rclpy.try_shutdown()
-        raise
-    run_node(node)
+main = main_for(TrajectoryPublisher)
 
 
 if __name__ == '__main__':

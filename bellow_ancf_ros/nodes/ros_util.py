@@ -1,0 +1,164 @@
+"""rclpy helpers shared by the nodes: QoS profiles, parameter descriptors,
+message builders, and the start-up / spin / shutdown idiom.
+
+The pure (rclpy-free) helpers live in :mod:`bellow_ancf_ros.nodes.common`.
+"""
+
+from __future__ import annotations
+
+import signal
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from ..core.solver import limit_blas_threads
+from . import common
+
+__all__ = [
+    'QOS_DEPTH', 'REFUSAL_DIAG_INTERVAL_S', 'WARN_THROTTLE_S', 'command_qos', 'descriptor',
+    'diagnostic_status', 'diagnostics_qos', 'guard_parameters', 'init_rclpy', 'main_for', 'pose_message',
+    'pressure_message', 'run_node',
+]
+
+QOS_DEPTH = 5
+WARN_THROTTLE_S = 2.0
+#: Minimum interval between two WARN diagnostics of the same refusal reason [s].
+REFUSAL_DIAG_INTERVAL_S = 0.1
+
+
+def command_qos() -> QoSProfile:
+    """Reliable, keep-last, depth :data:`QOS_DEPTH` (targets, pressures, poses)."""
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=QOS_DEPTH)
+
+
+def diagnostics_qos() -> QoSProfile:
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=10)
+
+
+def descriptor(description: str, ptype: int, *, lo: float | None = None,
+               hi: float | None = None, read_only: bool = False,
+               constraints: str = '') -> ParameterDescriptor:
+    """A ParameterDescriptor with description, optional range and constraints text."""
+    d = ParameterDescriptor(description=description, type=ptype, read_only=read_only,
+                            additional_constraints=constraints)
+    if lo is not None and hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi),
+                                                     step=0.0)]
+    return d
+
+
+def pose_message(position: Any, quaternion: Any, frame_id: str, stamp) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp
+    p = np.asarray(position, dtype=float)
+    q = np.asarray(quaternion, dtype=float)
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in p)
+    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+     msg.pose.orientation.w) = (float(v) for v in q)
+    return msg
+
+
+def pressure_message(pressures_pa: Any, unit: str) -> Float64MultiArray:
+    """Float64MultiArray of pressures (given in Pa) in ``unit`` with a labelled layout."""
+    values = common.to_unit(pressures_pa, unit)
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=common.pressure_label(unit), size=len(values),
+                                          stride=len(values))]
+    msg.layout.data_offset = 0
+    msg.data = [float(v) for v in values]
+    return msg
+
+
+def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
+                      values: dict) -> DiagnosticStatus:
+    st = DiagnosticStatus()
+    st.name = name
+    st.hardware_id = hardware_id
+    st.level = level
+    st.message = message
+    st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    return st
+
+
+def _sigterm_to_keyboard_interrupt(signum, frame):  # pragma: no cover - signal path
+    raise KeyboardInterrupt
+
+
+def run_node(node, before_destroy=None) -> None:
+    """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
+
+    ``before_destroy(node)`` runs while the context is still valid (vent).
+    """
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        try:
+            if before_destroy is not None and rclpy.ok():
+                before_destroy(node)
+        finally:
+            executor.remove_node(node)
+            node.destroy_node()
+            rclpy.try_shutdown()
+
+
+def init_rclpy(args=None) -> None:
+    """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt."""
+    limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _sigterm_to_keyboard_interrupt)
+
+
+def guard_parameters(node, names) -> None:
+    """Check the start-up values of ``names`` and refuse bad run-time changes of any parameter.
+
+    Uses :func:`common.parameter_problem`; a refused ``ros2 param set`` fails with the
+    reason (and a warning in the log) and the old value stays.
+    """
+    for name in names:
+        reason = common.parameter_problem(name, node.get_parameter(name).value)
+        if reason:
+            raise ValueError(f'parameter {name}: {reason}')
+
+    def on_set(params) -> SetParametersResult:
+        for p in params:
+            reason = common.parameter_problem(p.name, p.value)
+            if reason:
+                node.get_logger().warning(f'refused parameter change: {reason}')
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
+
+
+def main_for(node_class, before_destroy=None):
+    """``main(args=None)`` of a node executable: init, construct, spin, clean up."""
+    def main(args=None) -> None:
+        init_rclpy(args)
+        try:
+            node = node_class()
+        except Exception:
+            rclpy.try_shutdown()
+            raise
+        run_node(node, before_destroy=before_destroy)
+    return main
