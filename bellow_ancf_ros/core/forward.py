@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from . import solver
 from .assembly import RobotModel
@@ -40,8 +41,8 @@ class ForwardResult:
     iterations: int
     residual_norm: float
     history: list = field(default_factory=list, repr=False)
-    lu: object = field(default=None, repr=False)
     jacobian: object = field(default=None, repr=False)
+    _lu: object = field(default=None, repr=False)
     _reduced_hessian: object = field(default=None, repr=False)
     _sensitivity: object = field(default=None, repr=False)  # dx/dlam near x (inverse predictor)
 
@@ -49,6 +50,13 @@ class ForwardResult:
     def min_eigenvalue(self) -> float | None:
         """Smallest eigenvalue of the reduced Hessian (scaled coordinates); None before the check."""
         return None if self._reduced_hessian is None else self._reduced_hessian.min_eigenvalue
+
+    @property
+    def lu(self):
+        """Sparse LU factorisation of the Jacobian (eq. 27) at the solution, made on first use."""
+        if self._lu is None and self.jacobian is not None:
+            self._lu = spla.splu(self.jacobian, permc_spec="COLAMD")
+        return self._lu
 
     @property
     def success(self) -> bool:
@@ -174,7 +182,7 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
         model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
         converged=res.converged, stable=None, status=res.status,
         message=res.message, iterations=res.iterations, residual_norm=res.residual_norm,
-        history=res.history, lu=res.lu, jacobian=res.jacobian,
+        history=res.history, jacobian=res.jacobian,
     )
     if res.converged and check_stability:
         assess_stability(out)

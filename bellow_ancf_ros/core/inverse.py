@@ -310,7 +310,7 @@ def _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, h
                 model=model, pressures_pa=np.clip(model.stage1.pressure(lam), model.cfg.p_min, model.cfg.p_max),
                 stretch=lam.copy(), payload_kg=payload, x=x, converged=True, stable=None,
                 status=solver.CONVERGED, message=solver.MESSAGES[solver.CONVERGED], iterations=it,
-                residual_norm=rn, history=hist, lu=None, jacobian=ev.jacobian, _sensitivity=W)
+                residual_norm=rn, history=hist, jacobian=ev.jacobian, _sensitivity=W)
             if done(fw):
                 return fw
         if it == max_iter:

@@ -51,8 +51,7 @@ class NewtonResult:
     iterations: int
     residual_norm: float  # scaled infinity norm
     history: list = field(default_factory=list)
-    lu: object = None  # factorisation of the Jacobian at x (when converged)
-    jacobian: object = None  # Jacobian at x (when converged)
+    jacobian: object = None  # Jacobian at x (when converged; factorised by whoever needs it)
 
 
 def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7):
@@ -71,15 +70,16 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
     norm = np.max(np.abs(r))
     hist = [norm]
     for it in range(max_iter + 1):
+        # converged, or stagnating at the round-off floor of a fine discretisation
+        # (the Jacobian at the solution is returned; it is factorised only if someone needs it)
+        if norm <= tol or (norm <= floor_tol and len(hist) > 1 and norm > 0.25 * hist[-2]):
+            return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist, ev.jacobian)
+        if it == max_iter:
+            break
         try:
             lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
         except RuntimeError:
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
-        # converged, or stagnating at the round-off floor of a fine discretisation
-        if norm <= tol or (norm <= floor_tol and len(hist) > 1 and norm > 0.25 * hist[-2]):
-            return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist, lu, ev.jacobian)
-        if it == max_iter:
-            break
         dx = -lu.solve(ev.residual)
         if not np.all(np.isfinite(dx)):
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
