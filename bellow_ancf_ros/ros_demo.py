@@ -109,7 +109,11 @@ class _Recorder:
         from rclpy.executors import SingleThreadedExecutor
         from std_msgs.msg import Float64MultiArray
 
-        from .nodes.inverse_kinetostatic_node import command_qos
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        # record everything: a deep reliable queue, so that a busy recorder loses nothing
+        record_qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                                depth=1000)
 
         self.rclpy = rclpy
         self.ctx = Context()
@@ -123,7 +127,7 @@ class _Recorder:
         self.subs = {}
         for topic, typ in types.items():
             self.subs[topic] = self.node.create_subscription(
-                typ, topic, lambda m, topic=topic: self._store(topic, m), command_qos())
+                typ, topic, lambda m, topic=topic: self._store(topic, m), record_qos)
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
@@ -174,6 +178,11 @@ def _stamp(msg) -> tuple:
     return (msg.header.stamp.sec, msg.header.stamp.nanosec)
 
 
+#: A prediction belongs to a command when it reproduces the command's pose to this [m]
+#: (the forward model reproduces it to round-off, ~1e-13 m).
+PAIR_TOL_M = 1e-6
+
+
 def analyse(rec: dict, t_start: float, t_end: float) -> dict:
     """Pair predictions with targets (via commanded_pose stamps); errors and timings."""
     targets = {}
@@ -181,6 +190,7 @@ def analyse(rec: dict, t_start: float, t_end: float) -> dict:
         targets[_stamp(m)] = m
     commanded = [(t, _stamp(m), _pose(m)[0]) for t, m in rec['commanded_pose']]
     rows = []   # (time, target pos, target z, predicted pos, predicted z)
+    unmatched = 0
     for t_p, m in rec['predicted_pose']:
         if not (t_start <= t_p <= t_end):
             continue
@@ -191,13 +201,16 @@ def analyse(rec: dict, t_start: float, t_end: float) -> dict:
                  if t_p - 1.0 <= t_c <= t_p + 0.5 and stamp in targets]
         if not cands:
             continue
-        _, stamp = min(cands, key=lambda c: c[0])
+        dist, stamp = min(cands, key=lambda c: c[0])
+        if dist > PAIR_TOL_M:
+            unmatched += 1  # a prediction from a command whose pose or target was not recorded
+            continue
         t_pos, t_z = _pose(targets[stamp])
         rows.append((t_p, t_pos, t_z, p_pos, p_z))
     out = {'n_targets': sum(t_start <= t <= t_end for t, _ in rec['target_pose']),
            'n_commands': sum(t_start <= t <= t_end for t, _ in rec['pressure_command']),
            'n_predictions': sum(t_start <= t <= t_end for t, _ in rec['predicted_pose']),
-           'n_paired': len(rows)}
+           'n_paired': len(rows), 'n_unmatched': unmatched}
     if rows:
         t = np.array([r[0] for r in rows]) - t_start
         tp = np.array([r[1] for r in rows])
@@ -357,7 +370,8 @@ def main(argv=None) -> int:
           + (f', bending angle {args.bending_angle:g} deg' if cfg.n_segments >= 2 else '')
           + f', period {args.period:g} s, {args.rate:g} Hz):')
     print(f'  messages: {res["n_targets"]} targets, {res["n_commands"]} pressure commands, '
-          f'{res["n_predictions"]} predictions, {res["n_paired"]} paired with their targets')
+          f'{res["n_predictions"]} predictions, {res["n_paired"]} paired with their targets'
+          f' ({res["n_unmatched"]} not reproducing any recorded command)')
     if res['n_paired'] == 0:
         print('FAILED: no prediction could be paired with a target')
         return 1
