@@ -50,15 +50,15 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..core import RobotModel, load_robot, solve_forward
 from . import common
 from .ros_util import (
-    REFUSAL_DIAG_INTERVAL_S,
     WARN_THROTTLE_S,
+    Refusals,
     command_qos,
     descriptor,
-    diagnostic_status,
     diagnostics_qos,
     guard_parameters,
     main_for,
     pose_message,
+    publish_diagnostic,
 )
 
 __all__ = ['ForwardKinetostaticNode', 'main', 'shape_markers']
@@ -142,7 +142,7 @@ class ForwardKinetostaticNode(Node):
             self._warm = None
         self.stats = {'received': 0, 'refused': 0, 'solved': 0, 'published': 0, 'failed': 0}
         self.last_refusal_reason = ''
-        self._last_refusal = ('', 0.0)
+        self._refusals = Refusals(self, 'pressures', self._publish_diag)
         self.solve_times_s: list = []
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'predicted_pose', qos)
@@ -177,12 +177,7 @@ class ForwardKinetostaticNode(Node):
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
         self.last_refusal_reason = reason
-        self.get_logger().warning(f'pressures refused: {reason}', throttle_duration_sec=WARN_THROTTLE_S)
-        now = time.monotonic()
-        if reason != self._last_refusal[0] or now - self._last_refusal[1] >= REFUSAL_DIAG_INTERVAL_S:
-            self._last_refusal = (reason, now)
-            self._publish_diag(DiagnosticStatus.WARN, f'pressures refused: {reason}',
-                               {'refused_inputs': self.stats['refused']})
+        self._refusals.report(reason, self.stats['refused'])
 
     # ------------------------------------------------------------ solving
     def _on_worker_error(self, exc: BaseException) -> None:
@@ -229,14 +224,8 @@ class ForwardKinetostaticNode(Node):
         self._publish_diag(DiagnosticStatus.OK, 'prediction published', values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [diagnostic_status(f'{self.get_name()}: forward kinetostatics', self.cfg.name,
-                                        level, message, values)]
-        try:
-            self._pub_diag.publish(arr)
-        except Exception:  # noqa: BLE001 - destroyed meanwhile
-            pass
+        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: forward kinetostatics', self.cfg.name,
+                           level, message, values)
 
     def destroy_node(self):
         self._worker.stop()

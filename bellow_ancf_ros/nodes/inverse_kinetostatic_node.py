@@ -83,16 +83,16 @@ from std_msgs.msg import Float64MultiArray
 from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
 from . import common
 from .ros_util import (
-    REFUSAL_DIAG_INTERVAL_S,
     WARN_THROTTLE_S,
+    Refusals,
     command_qos,
     descriptor,
-    diagnostic_status,
     diagnostics_qos,
     guard_parameters,
     main_for,
     pose_message,
     pressure_message,
+    publish_diagnostic,
 )
 
 __all__ = ['InverseKinetostaticNode', 'main']
@@ -140,7 +140,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._pub_cmd = self._pub_pose = self._pub_diag = None
         self._sub = None
         self._said_orientation_ignored = False
-        self._last_refusal = ('', 0.0)
+        self._refusals = Refusals(self, 'targets', self._publish_diag)
         self.last_command_pa: np.ndarray | None = None
         self.last_refusal_reason = ''
         self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
@@ -296,13 +296,7 @@ class InverseKinetostaticNode(LifecycleNode):
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
         self.last_refusal_reason = reason
-        self.get_logger().warning(f'target refused: {reason}', throttle_duration_sec=WARN_THROTTLE_S)
-        now = time.monotonic()
-        last_reason, last_t = self._last_refusal
-        if reason != last_reason or now - last_t >= REFUSAL_DIAG_INTERVAL_S:
-            self._last_refusal = (reason, now)
-            self._publish_diag(DiagnosticStatus.WARN, f'target refused: {reason}',
-                               {'refused_targets': self.stats['refused']})
+        self._refusals.report(reason, self.stats['refused'])
 
     # ---------------------------------------------------------- solving
     def _on_worker_error(self, exc: BaseException) -> None:
@@ -389,17 +383,9 @@ class InverseKinetostaticNode(LifecycleNode):
                                values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
-        pub, cfg = self._pub_diag, self._cfg
-        if pub is None:
-            return
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [diagnostic_status(f'{self.get_name()}: inverse kinetostatics',
-                                        cfg.name if cfg is not None else '', level, message, values)]
-        try:
-            pub.publish(arr)
-        except Exception:  # noqa: BLE001 - publisher destroyed meanwhile
-            pass
+        cfg = self._cfg
+        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: inverse kinetostatics',
+                           cfg.name if cfg is not None else '', level, message, values)
 
 
 main = main_for(InverseKinetostaticNode, before_destroy=lambda n: n.vent_and_shutdown())

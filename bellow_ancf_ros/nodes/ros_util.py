@@ -7,11 +7,12 @@ The pure (rclpy-free) helpers live in :mod:`bellow_ancf_ros.nodes.common`.
 from __future__ import annotations
 
 import signal
+import time
 from typing import Any
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -27,7 +28,8 @@ from ..core.solver import limit_blas_threads
 from . import common
 
 __all__ = [
-    'QOS_DEPTH', 'REFUSAL_DIAG_INTERVAL_S', 'WARN_THROTTLE_S', 'command_qos', 'descriptor',
+    'QOS_DEPTH', 'REFUSAL_DIAG_INTERVAL_S', 'WARN_THROTTLE_S', 'Refusals', 'command_qos', 'descriptor',
+    'publish_diagnostic',
     'diagnostic_status', 'diagnostics_qos', 'guard_parameters', 'init_rclpy', 'main_for', 'pose_message',
     'pressure_message', 'run_node',
 ]
@@ -162,3 +164,35 @@ def main_for(node_class, before_destroy=None):
             raise
         run_node(node, before_destroy=before_destroy)
     return main
+
+
+def publish_diagnostic(node, pub, name: str, hardware_id: str, level: bytes, message: str,
+                       values: dict) -> None:
+    """Publish one DiagnosticStatus on ``pub`` (no-op without a publisher or once it is destroyed)."""
+    if pub is None:
+        return
+    arr = DiagnosticArray()
+    arr.header.stamp = node.get_clock().now().to_msg()
+    arr.status = [diagnostic_status(name, hardware_id, level, message, values)]
+    try:
+        pub.publish(arr)
+    except Exception:  # noqa: BLE001 - publisher destroyed meanwhile
+        pass
+
+
+class Refusals:
+    """Reporting of refused inputs: a throttled warning always, a WARN diagnostic at most
+    every :data:`REFUSAL_DIAG_INTERVAL_S` per reason (a flood of bad input cannot flood
+    ``/diagnostics``).  ``what`` names the input (``targets``, ``pressures``)."""
+
+    def __init__(self, node, what: str, publish_diag) -> None:
+        self.node, self.what, self.publish_diag = node, what, publish_diag
+        self._last = ('', 0.0)
+
+    def report(self, reason: str, total: int) -> None:
+        self.node.get_logger().warning(f'{self.what} refused: {reason}', throttle_duration_sec=WARN_THROTTLE_S)
+        now = time.monotonic()
+        if reason != self._last[0] or now - self._last[1] >= REFUSAL_DIAG_INTERVAL_S:
+            self._last = (reason, now)
+            self.publish_diag(DiagnosticStatus.WARN, f'{self.what} refused: {reason}',
+                              {f'refused_{self.what}': total})
