@@ -269,6 +269,17 @@ def poly_text(coeffs: Sequence[float], var: str) -> str:
     return out
 
 
+def _paired_data(x, y, x_name: str, y_name: str):
+    """Two measured columns as flat float arrays of equal length, all finite (else ValueError)."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    if x.shape != y.shape:
+        raise ValueError(f'{x_name} and {y_name} must have the same length')
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError('the data must be finite numbers')
+    return x, y
+
+
 def _r2_rms(y, yhat):
     res = y - yhat
     ss_res = float(np.sum(res ** 2))
@@ -291,12 +302,7 @@ def fit_stiffness(dl, force, order: int = 2, l0: float = PAPER_L0, force_per: st
     n_actuators : actuators sharing the machine force (segment mode).
     gravity_share_n : ``F_g`` per actuator [N], subtracted: ``F_e = F_m/n_a - F_g``.
     """
-    dl = np.asarray(dl, dtype=float).ravel()
-    force = np.asarray(force, dtype=float).ravel()
-    if dl.shape != force.shape:
-        raise ValueError('dl and force must have the same length')
-    if not (np.all(np.isfinite(dl)) and np.all(np.isfinite(force))):
-        raise ValueError('the data must be finite numbers')
+    dl, force = _paired_data(dl, force, 'dl', 'force')
     order = int(order)
     if order < 1:
         raise ValueError(f'the polynomial order must be >= 1, got {order}')
@@ -379,12 +385,7 @@ def fit_deff(pressure_pa, force_n, confidence: float = 0.95) -> DeffFit:
     the confidence interval of ``D_eff`` is the image of the slope's Student-t
     interval (``n - 2`` degrees of freedom).
     """
-    p = np.asarray(pressure_pa, dtype=float).ravel()
-    f = np.asarray(force_n, dtype=float).ravel()
-    if p.shape != f.shape:
-        raise ValueError('pressure and force must have the same length')
-    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(f))):
-        raise ValueError('the data must be finite numbers')
+    p, f = _paired_data(pressure_pa, force_n, 'pressure', 'force')
     if p.size < 3 or np.unique(p).size < 2:
         raise ValueError(f'need at least 3 points at 2 or more distinct pressures, got {p.size}')
     if not 0.0 < confidence < 1.0:

@@ -45,14 +45,13 @@ from scipy.optimize import least_squares
 
 from .assembly import RobotModel
 from . import solver
-from .forward import ForwardResult, assess_stability, solve_forward
+from .forward import UNSTABLE, ForwardResult, assess_stability, solve_forward
 
 __all__ = ["InverseResult", "solve_inverse"]
 
 REACHED = 0
 UNREACHABLE = 1
-FAILED = 2
-UNSTABLE = 6
+FAILED = 2  # UNSTABLE (6) is shared with the forward problem
 
 
 @dataclass
@@ -141,14 +140,12 @@ class _Objective:
         self.warm = warm
         self.tol = tol
         self.last = None  # (lam, ForwardResult, O, J)
-        self.n_forward = 0
 
     def _forward(self, lam):
         m = self.model
         p = m.stage1.pressure(lam)
         p = np.clip(p, m.cfg.p_min, m.cfg.p_max)
         fw = solve_forward(m, p, self.payload, warm_start=self.warm, check_stability=False, tol=self.tol)
-        self.n_forward += 1
         fw.stretch = np.array(lam, dtype=float)  # exact stretches (pressure round trip aside)
         return fw
 
