@@ -7,6 +7,7 @@ Then the files must be where ``ros2 run`` and ``ros2 launch`` look for them:
 
 * ``share/ament_index/resource_index/packages/bellow_ancf_ros`` (marker),
 * ``share/bellow_ancf_ros/package.xml``, ``config/*.yaml``, ``launch/*.launch.py``,
+  ``rviz/*.rviz``,
 * executables ``lib/bellow_ancf_ros/<node>`` (console scripts),
 
 and an installed executable must start.
@@ -55,7 +56,8 @@ def test_nodes_params_file_is_a_ros_params_file():
     for node in NODE_EXECUTABLES:
         assert 'ros__parameters' in data[node], node
     assert 'ros__parameters' in data['/**']
-    assert data['inverse_kinetostatic_node']['ros__parameters']['pressure_unit'] in ('Pa', 'kPa')
+    assert list(data)[0] == '/**'     # first: later /** entries (launch arguments) override it
+    assert data['/**']['ros__parameters']['pressure_unit'] in ('Pa', 'kPa')
 
 
 @pytest.fixture(scope='module')
@@ -105,6 +107,8 @@ def test_config_and_launch_files_installed(colcon_install):
         assert (share / 'config' / name).read_text() == (REPO / 'config' / name).read_text()
     launch = share / 'launch' / 'bellow_ancf.launch.py'
     assert launch.read_text() == (REPO / 'launch' / 'bellow_ancf.launch.py').read_text()
+    rviz = share / 'rviz' / 'bellow_ancf.rviz'
+    assert rviz.read_text() == (REPO / 'rviz' / 'bellow_ancf.rviz').read_text()
 
 
 def test_node_executables_installed(colcon_install):
@@ -169,7 +173,8 @@ def test_installed_executable_starts_and_stops_cleanly(colcon_install, tmp_path)
     with open(log_path, 'w') as log:
         proc = subprocess.Popen(
             [str(exe), '--ros-args', '--params-file',
-             str(colcon_install / 'share' / PKG / 'config' / 'nodes.yaml'), '-p', 'trajectory_publisher:rate_hz:=20.0'],
+             str(colcon_install / 'share' / PKG / 'config' / 'nodes.yaml'),
+             '-p', 'trajectory_publisher:rate_hz:=20.0'],
             env=_ros_env(colcon_install, random.randint(0, 101)), cwd=tmp_path, stdout=log,
             stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
     try:
