@@ -378,4 +378,3 @@ def test_rviz_config_shows_the_topics_in_the_base_frame():
         if 'Topic' in d:
             assert d['Topic']['Reliability Policy'] == 'Reliable'   # the nodes publish reliable
             assert d['Enabled'] is True
-

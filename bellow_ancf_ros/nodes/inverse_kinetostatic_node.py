@@ -50,9 +50,12 @@ Lifecycle and safety
 * Pressures are published only while the node is *active*; targets that
   arrive while inactive are ignored.  On deactivate and on shutdown (also on
   Ctrl-C / SIGTERM) the node publishes the vent command, 0 Pa gauge on every
-  actuator, once, and waits (at most ``VENT_ACK_TIMEOUT_S``) until every
-  matched subscriber has acknowledged it; a missing acknowledgement is
-  logged.  ``autostart`` (default true) configures and activates the node at
+  actuator, once.  On shutdown it then waits (at most
+  ``VENT_ACK_TIMEOUT_S``, 4 s) until every matched subscriber has
+  acknowledged the vent, so that it arrives before the process exits; a
+  missing acknowledgement is logged.  (Fast DDS acknowledges on its
+  heartbeat, every 3 s by default: Ctrl-C takes up to about 3 s.)
+  ``autostart`` (default true) configures and activates the node at
   start-up, so a plain ``ros2 run`` works.
 * ``robot_config`` is read on configure: a change is refused while the node
   is configured (inactive or active), with the way out in the reason
@@ -245,7 +248,7 @@ class InverseKinetostaticNode(LifecycleNode):
         return super().on_activate(state)
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
-        self._go_inactive_and_vent('deactivate')
+        self._go_inactive_and_vent('deactivate', wait_acked=False)   # the node lives on
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: State) -> TransitionCallbackReturn:
@@ -254,18 +257,22 @@ class InverseKinetostaticNode(LifecycleNode):
 
     def on_shutdown(self, state: State) -> TransitionCallbackReturn:
         if self._configured:
-            self._go_inactive_and_vent('shutdown')
+            self._go_inactive_and_vent('shutdown', wait_acked=True)
         self._release()
         return super().on_shutdown(state)
 
     def on_error(self, state: State) -> TransitionCallbackReturn:
         if self._configured:
-            self._go_inactive_and_vent('error')
+            self._go_inactive_and_vent('error', wait_acked=True)
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
-    def _go_inactive_and_vent(self, why: str) -> None:
-        """Disable commands, publish the vent command and wait for its acknowledgement."""
+    def _go_inactive_and_vent(self, why: str, wait_acked: bool) -> None:
+        """Disable commands and publish the vent command.
+
+        ``wait_acked``: then wait until every matched subscriber acknowledged
+        it (bounded; before the process may exit).
+        """
         with self._lock:
             self._active = False
             if self._worker is not None:
@@ -276,9 +283,13 @@ class InverseKinetostaticNode(LifecycleNode):
             self.last_command_pa = vent
             self.stats['vents'] += 1
             # under the lock: no solve result can be published after the vent
-            self.last_vent_acked = publish_and_wait_acked(
-                self, self._pub_cmd, msg, f'{why}: vent command (0 Pa gauge)',
-                VENT_ACK_TIMEOUT_S)
+            what = f'{why}: vent command (0 Pa gauge)'
+            if wait_acked:
+                self.last_vent_acked = publish_and_wait_acked(self, self._pub_cmd, msg, what,
+                                                              VENT_ACK_TIMEOUT_S)
+            else:
+                self._pub_cmd.publish(msg)
+                self.get_logger().info(f'{what} published')
         self.get_logger().info(f'{why}: commands disabled')
 
     def _release(self) -> None:

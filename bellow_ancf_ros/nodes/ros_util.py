@@ -54,8 +54,11 @@ WARN_THROTTLE_S = 2.0
 REFUSAL_DIAG_INTERVAL_S = 0.1
 #: Period of the status heartbeat on ``/diagnostics`` [s] (diagnostic_updater's default).
 HEARTBEAT_PERIOD_S = 1.0
-#: Longest wait for the matched subscribers to acknowledge the vent command [s].
-VENT_ACK_TIMEOUT_S = 1.0
+#: Longest wait for the matched subscribers to acknowledge the vent command on shutdown [s].
+#: Fast DDS readers acknowledge on the writer's heartbeat (every 3 s by default), so
+#: an acknowledgement takes up to about 3 s; 4 s stays below ``ros2 launch``'s 5 s
+#: between SIGINT and SIGTERM.
+VENT_ACK_TIMEOUT_S = 4.0
 #: Exit status of a node executable that cannot start with its parameters.
 STARTUP_ERROR_EXIT = 2
 
@@ -242,9 +245,10 @@ def publish_and_wait_acked(node, pub, msg, what: str,
                            timeout_s: float = VENT_ACK_TIMEOUT_S) -> bool:
     """Publish ``msg`` on a reliable publisher and wait until every matched subscriber acked.
 
-    Waits at most ``timeout_s`` (rclpy ``Publisher.wait_for_all_acked``).
-    Logs a warning naming ``what`` when a subscriber did not acknowledge in
-    time; returns whether all did (True without subscribers).
+    Waits at most ``timeout_s`` (rclpy ``Publisher.wait_for_all_acked``), for
+    a message that must arrive before the process exits.  Logs a warning
+    naming ``what`` when a subscriber did not acknowledge in time; returns
+    whether all did (True without subscribers).
     """
     pub.publish(msg)
     n = pub.get_subscription_count()
@@ -374,7 +378,16 @@ class _ShuttingDown:
         self.count += 1
 
 
-def _sigterm_to_keyboard_interrupt(signum, frame):  # pragma: no cover - signal path
+def _ignore_further_signals() -> _ShuttingDown:
+    handler = _ShuttingDown()
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return handler
+
+
+def _first_signal(signum, frame):  # pragma: no cover - signal path
+    """First SIGINT/SIGTERM: stop spinning (KeyboardInterrupt); later ones are only counted."""
+    _ignore_further_signals()
     raise KeyboardInterrupt
 
 
@@ -394,9 +407,7 @@ def run_node(node, before_destroy=None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        handler = _ShuttingDown()
-        signal.signal(signal.SIGINT, handler)
-        signal.signal(signal.SIGTERM, handler)
+        _ignore_further_signals()
         try:
             if before_destroy is not None and rclpy.ok():
                 before_destroy(node)
@@ -407,11 +418,16 @@ def run_node(node, before_destroy=None) -> None:
 
 
 def init_rclpy(args=None) -> None:
-    """Initialise rclpy without its signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt."""
+    """Initialise rclpy without its signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt.
+
+    The first signal raises KeyboardInterrupt and makes every later one a
+    no-op, so that a second Ctrl-C (terminal and ``ros2 launch`` both send
+    one) cannot interrupt the vent on the way out.
+    """
     limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _sigterm_to_keyboard_interrupt)
+    signal.signal(signal.SIGINT, _first_signal)
+    signal.signal(signal.SIGTERM, _first_signal)
 
 
 def main_for(node_class, before_destroy=None, node_name: str | None = None):
