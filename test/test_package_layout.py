@@ -36,8 +36,9 @@ NODE_EXECUTABLES = {
 }
 MESSAGE_DEPENDENCIES = ('rclpy', 'geometry_msgs', 'std_msgs', 'visualization_msgs',
                         'diagnostic_msgs', 'lifecycle_msgs')
-_SKIP = shutil.ignore_patterns('.git', '.venv', 'venv', 'build', 'install', 'log', '__pycache__',
-                               '.pytest_cache', '.hypothesis', '.ruff_cache', '*.egg-info', '*.png')
+_SKIP = shutil.ignore_patterns('.git', '.venv', 'venv', 'build', 'install', 'log',
+                               '__pycache__', '.pytest_cache', '.hypothesis', '.ruff_cache',
+                               '*.egg-info', '*.png')
 
 
 def test_launch_file_compiles(tmp_path):
@@ -114,8 +115,8 @@ def test_config_and_launch_files_installed(colcon_install):
 def test_node_executables_installed(colcon_install):
     lib = colcon_install / 'lib' / PKG
     missing = [exe for exe in NODE_EXECUTABLES if not (lib / exe).is_file()]
-    assert not missing, (f'console scripts missing from lib/{PKG}: {missing} '
-                         f'(have: {sorted(p.name for p in lib.iterdir()) if lib.is_dir() else None})')
+    have = sorted(p.name for p in lib.iterdir()) if lib.is_dir() else None
+    assert not missing, f'console scripts missing from lib/{PKG}: {missing} (have: {have})'
     for exe in NODE_EXECUTABLES:
         mode = (lib / exe).stat().st_mode
         assert mode & stat.S_IXUSR, f'{exe} is not executable'
@@ -153,8 +154,8 @@ import bellow_ancf_ros
 print('MODULE', bellow_ancf_ros.__file__)
 print('ROBOT', load_robot('two_segment').source)
 '''
-    res = subprocess.run([sys.executable, '-c', code], env=_ros_env(colcon_install, 0), cwd=tmp_path,
-                         capture_output=True, text=True, timeout=60)
+    res = subprocess.run([sys.executable, '-c', code], env=_ros_env(colcon_install, 0),
+                         cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
     lines = dict(line.split(' ', 1) for line in res.stdout.splitlines() if ' ' in line)
     assert Path(lines['PREFIX']).resolve() == colcon_install.resolve()

@@ -121,7 +121,8 @@ class Harness:
 
     def publisher(self, msg_type, topic, expect_subscribers=1):
         pub = self.client.create_publisher(msg_type, topic, command_qos())
-        wait_for(lambda: pub.get_subscription_count() >= expect_subscribers, what=f'subscriber on {topic}')
+        wait_for(lambda: pub.get_subscription_count() >= expect_subscribers,
+                 what=f'subscriber on {topic}')
         return pub
 
     def service(self, srv_type, name):
@@ -474,7 +475,8 @@ def test_bad_targets_refused_one_segment(h, one):
     for i, (what, msg) in enumerate(bad_inputs):
         pub.publish(msg)
         wait_for(lambda: node.stats['refused'] == i + 1, what=f'refusal of {what}')
-        wait_for(lambda: sum(s.level == DiagnosticStatus.WARN for s in diag_statuses(h, 'inverse')) >= i + 1,
+        wait_for(lambda: sum(s.level == DiagnosticStatus.WARN
+                             for s in diag_statuses(h, 'inverse')) >= i + 1,
                  what=f'WARN diagnostics for {what}')
     assert 'frame' in node.last_refusal_reason
     # nothing new was published, the node is still active and serves a good target
@@ -568,8 +570,9 @@ def test_solver_failures_publish_nothing_and_report_error(h, one, monkeypatch):
         monkeypatch.setattr(inv_mod, 'solve_inverse', fail)
         n_err = sum(s.level == DiagnosticStatus.ERROR for s in diag_statuses(h, 'inverse'))
         pub.publish(target_msg(good.position + [0.001 * (i + 1), 0, 0]))
-        wait_for(lambda: sum(s.level == DiagnosticStatus.ERROR for s in diag_statuses(h, 'inverse'))
-                 > n_err, what=f'ERROR diagnostics for failure {i}')
+        wait_for(lambda: sum(s.level == DiagnosticStatus.ERROR
+                             for s in diag_statuses(h, 'inverse')) > n_err,
+                 what=f'ERROR diagnostics for failure {i}')
     time.sleep(0.1)
     assert h.count('pressure_command') == 1                  # last good command stands
     assert list(h.last('pressure_command').data) == list(first.data)
@@ -662,11 +665,13 @@ def test_forward_node_prediction_shape_and_bad_input(h, two):
     for i, (what, m) in enumerate(bad):
         pub.publish(m)
         wait_for(lambda: node.stats['refused'] == i + 1, what=f'refusal of {what}')
-    wait_for(lambda: sum(s.level == DiagnosticStatus.WARN for s in diag_statuses(h, 'forward')) >= 3,
+    wait_for(lambda: sum(s.level == DiagnosticStatus.WARN
+                         for s in diag_statuses(h, 'forward')) >= 3,
              what='WARN diagnostics')
     assert h.count('predicted_pose') == 1
     # unlabelled arrays (e.g. a measured-pressure topic) are accepted
-    msg = send_and_wait_command(h, pub, pressure_msg([0.0] * 6, label=None), topic='predicted_pose')
+    msg = send_and_wait_command(h, pub, pressure_msg([0.0] * 6, label=None),
+                                topic='predicted_pose')
     np.testing.assert_allclose(pose_of(msg)[0], solve_forward(two, [0.0] * 6).position, atol=1e-9)
 
 
@@ -674,9 +679,11 @@ def test_forward_node_kpa_unit(h, one):
     h.record(PoseStamped, 'predicted_pose')
     node = h.add(ForwardKinetostaticNode, pressure_unit='kPa')
     pub = h.publisher(Float64MultiArray, 'pressure_command')
-    msg = send_and_wait_command(h, pub, pressure_msg([150.0, -50.0, 0.0], label='actuator_pressure_gauge_kpa'),
-                                topic='predicted_pose')
-    np.testing.assert_allclose(pose_of(msg)[0], solve_forward(one, [150e3, -50e3, 0.0]).position, atol=1e-9)
+    msg = send_and_wait_command(
+        h, pub, pressure_msg([150.0, -50.0, 0.0], label='actuator_pressure_gauge_kpa'),
+        topic='predicted_pose')
+    np.testing.assert_allclose(pose_of(msg)[0],
+                               solve_forward(one, [150e3, -50e3, 0.0]).position, atol=1e-9)
     pub.publish(pressure_msg([150e3, -50e3, 0.0], label='actuator_pressure_gauge_pa'))
     wait_for(lambda: node.stats['refused'] == 1, what='Pa-labelled array refused in kPa mode')
 
