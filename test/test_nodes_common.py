@@ -301,8 +301,9 @@ def test_solve_stats_summary_window_and_age():
 
 def test_recovery_texts_name_the_node_and_every_step():
     text = common.configure_time_refusal('robot_config', '/ns/inv', 'active', 'one_segment')
-    steps = ['deactivate', 'cleanup', 'ros2 param set /ns/inv robot_config', 'configure',
-             'activate']
+    steps = ['ros2 lifecycle set /ns/inv deactivate', 'ros2 lifecycle set /ns/inv cleanup',
+             'ros2 param set /ns/inv robot_config', 'ros2 lifecycle set /ns/inv configure',
+             'ros2 lifecycle set /ns/inv activate']
     positions = [text.index(step) for step in steps]
     assert positions == sorted(positions)           # in the order they must be done
     assert "'one_segment'" in text
