@@ -371,10 +371,10 @@ def test_heartbeat_1hz_in_every_lifecycle_state(h, one):
     assert kv(first)['lifecycle_state'] == 'unconfigured'
     assert kv(first)['last_solve_age_s'] == 'never' and kv(first)['solves'] == '0'
     assert first.level == DiagnosticStatus.WARN
-    # about 1 Hz: 3 more beats take 2..4.5 s (receipt times, loaded machine)
+    # about 1 Hz: 3 more beats take 2-3 s, 1.5-6 s allowed (receipt times, loaded machine)
     n0, t0 = len(beats()), time.monotonic()
     wait_for(lambda: len(beats()) >= n0 + 3, what='three more heartbeats')
-    assert 2.0 < time.monotonic() - t0 < 4.5
+    assert 1.5 < time.monotonic() - t0 < 6.0
     # a part of the node adds its fields (how the feedback state joins)
     node.heartbeat.add_source(lambda: {'feedback_state': 'off'})
     node.heartbeat.add_source(lambda: (DiagnosticStatus.WARN, 'extra says hello', {'x': 1}))
