@@ -139,8 +139,11 @@ def _ros_env(prefix, domain):
 
 
 def test_ros2_run_lookup_and_shipped_robots(colcon_install, tmp_path):
-    """What ``ros2 run`` does: the prefix that holds the marker, then lib/<pkg>/<exe> in it;
-    and the core finds the robot files in the installed share directory."""
+    """Do what ``ros2 run`` does, and find the robot files in the installed share directory.
+
+    ``ros2 run`` takes the prefix that holds the marker, then lib/<pkg>/<exe>
+    in it.
+    """
     code = f'''
 import os, sys
 from ament_index_python.packages import get_package_prefix, get_package_share_directory

@@ -254,10 +254,9 @@ def assert_safe(msg, cfg):
 
 
 def send_until_prediction(client, pos, stamp_sec, timeout=TIMEOUT):
-    """Publish a target, again every 0.5 s (a restarted node may still be discovering),
-    until a pressure command and then a prediction arrive after the call.
+    """Publish a target every 0.5 s until a pressure command and a prediction arrive.
 
-    Targets are sent one at a time, so every command and prediction that arrives
+    Repeated because a restarted node may still be discovering.  Targets are sent one at a time, so every command and prediction that arrives
     after the call belongs to this target.  Returns (latency from the first send
     to the first command [s], the command, the predicted position).
     """
@@ -289,8 +288,10 @@ def test_trajectory_publisher_drives_pipeline(stack):
                          client.count('pressure_command'))
 
         def settled():
-            """Predictions received well after the first target this process recorded: their
-            targets (sent >= 0.1 s before, at 10 Hz) were all recorded here too."""
+            """Predictions received well after the first target this process recorded.
+
+            Their targets (sent >= 0.1 s before, at 10 Hz) were all recorded here too.
+            """
             tgt = client.since('target_pose', n_t)
             if not tgt:
                 return []
