@@ -256,9 +256,10 @@ def assert_safe(msg, cfg):
 def send_until_prediction(client, pos, stamp_sec, timeout=TIMEOUT):
     """Publish a target every 0.5 s until a pressure command and a prediction arrive.
 
-    Repeated because a restarted node may still be discovering.  Targets are sent one at a time, so every command and prediction that arrives
-    after the call belongs to this target.  Returns (latency from the first send
-    to the first command [s], the command, the predicted position).
+    Repeated because a restarted node may still be discovering.  Targets are
+    sent one at a time, so every command and prediction that arrives after the
+    call belongs to this target.  Returns (latency from the first send to the
+    first command [s], the command, the predicted position).
     """
     n_cmd, n_pred = client.count('pressure_command'), client.count('predicted_pose')
     sent = []
