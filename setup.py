@@ -26,6 +26,7 @@ data_files = [
     ('share/' + PACKAGE_NAME, ['package.xml']),
     ('share/' + PACKAGE_NAME + '/config', _files('config/*.yaml')),
     ('share/' + PACKAGE_NAME + '/data', _files('data/*.csv')),
+    ('share/' + PACKAGE_NAME + '/rviz', _files('rviz/*.rviz')),
 ]
 _launch_files = _files('launch/*.launch.py')
 if _launch_files:

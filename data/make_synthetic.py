@@ -34,7 +34,7 @@ import numpy as np
 
 SEED = 20240615
 G = 9.81
-L0 = 0.0963                  # m (model_spec section 5: 576.94/5990.4)
+L0 = 0.0963                  # m (docs/model.md section 5: 576.94/5990.4)
 K_COEFFS = (28.9, 576.94)    # k(lam) ascending [N/m] (paper V.A)
 N_A = 3                      # actuators per segment
 M_TOP = 0.010                # kg, top plate of the shipped one-segment robot

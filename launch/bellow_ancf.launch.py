@@ -2,15 +2,24 @@
 
     ros2 launch bellow_ancf_ros bellow_ancf.launch.py
     ros2 launch bellow_ancf_ros bellow_ancf.launch.py robot_config:=two_segment \
-        trajectory:=bending_circle bending_angle_deg:=10.0
+        trajectory:=bending_circle bending_angle_deg:=10.0 period_s:=20.0 pressure_unit:=kPa
     ros2 launch bellow_ancf_ros bellow_ancf.launch.py with_trajectory:=false \
         pressure_topic:=measured_pressure
+    ros2 launch bellow_ancf_ros bellow_ancf.launch.py rviz:=true
 
 Starts ``inverse_kinetostatic_node`` (managed node, autostarted),
-``forward_kinetostatic_node`` (its input remapped to ``pressure_topic``) and,
-unless ``with_trajectory:=false``, ``trajectory_publisher``.  Node parameters
-come from ``params_file`` (default: the installed ``config/nodes.yaml``);
-the launch arguments below override it.
+``forward_kinetostatic_node`` (its input remapped to ``pressure_topic``),
+unless ``with_trajectory:=false`` ``trajectory_publisher``, and with
+``rviz:=true`` rviz2 with the installed ``rviz/bellow_ancf.rviz`` (where
+rviz2 is installed; otherwise a log line says it is not).
+
+Node parameters come from ``params_file`` (default: the installed
+``config/nodes.yaml``); the launch arguments below override it.  launch_ros
+passes them as ``/**:`` (wildcard) parameter files after ``params_file``; a
+node-specific entry of any params file would win over them, so the shipped
+``config/nodes.yaml`` keeps every parameter that is a launch argument under
+``/**:`` only.  A custom ``params_file`` must do the same for the launch
+arguments to apply.
 
 ``launch`` and ``launch_ros`` are not on PyPI: without a ROS install, start
 the nodes with ``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``
@@ -20,7 +29,7 @@ instead (see the README).
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, LogInfo
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
@@ -29,17 +38,35 @@ from launch_ros.parameter_descriptions import ParameterValue
 from launch import LaunchDescription
 
 PACKAGE = 'bellow_ancf_ros'
+RVIZ_PACKAGE = 'rviz2'
+
+
+def _installed(package):
+    """Whether ``package`` is in the ament index (e.g. rviz2 on a desktop install)."""
+    try:
+        get_package_share_directory(package)
+    except Exception:  # noqa: BLE001 - PackageNotFoundError, or no ament index at all
+        return False
+    return True
+
+
+def _typed(name, value_type):
+    """Launch argument ``name`` as a parameter value of ``value_type``."""
+    return ParameterValue(LaunchConfiguration(name), value_type=value_type)
 
 
 def generate_launch_description():
+    """Declare the launch arguments and the nodes."""
     share = get_package_share_directory(PACKAGE)
     default_params = os.path.join(share, 'config', 'nodes.yaml')
+    default_rviz = os.path.join(share, 'rviz', 'bellow_ancf.rviz')
 
     args = [
         DeclareLaunchArgument('params_file', default_value=default_params,
                               description='ROS parameters file of the nodes'),
         DeclareLaunchArgument('robot_config', default_value='one_segment',
-                              description='robot: shipped name (one_segment, two_segment) or YAML path'),
+                              description='robot: shipped name (one_segment, two_segment) '
+                                          'or YAML path'),
         DeclareLaunchArgument('base_frame', default_value='base',
                               description='frame of targets and outputs'),
         DeclareLaunchArgument('pressure_unit', default_value='Pa',
@@ -50,39 +77,57 @@ def generate_launch_description():
         DeclareLaunchArgument('with_trajectory', default_value='true',
                               description='start the trajectory publisher'),
         DeclareLaunchArgument('trajectory', default_value='planar_circle',
-                              description='space_spiral, space_rose, planar_circle, planar_spiral, '
-                                          'planar_rose, bending_circle (two or more segments)'),
+                              description='space_spiral, space_rose, planar_circle, '
+                                          'planar_spiral, planar_rose, bending_circle '
+                                          '(two or more segments)'),
         DeclareLaunchArgument('bending_angle_deg', default_value='0.0',
                               description='bending angle of bending_circle [deg]'),
         DeclareLaunchArgument('period_s', default_value='0.0',
                               description='trajectory period [s]; 0 = default'),
+        DeclareLaunchArgument('rviz', default_value='false',
+                              description='start rviz2 with the package RViz config'),
+        DeclareLaunchArgument('rviz_config', default_value=default_rviz,
+                              description='RViz config file'),
     ]
 
     params_file = LaunchConfiguration('params_file')
-    common = {
-        'robot_config': LaunchConfiguration('robot_config'),
-        'base_frame': LaunchConfiguration('base_frame'),
+    robot = {
+        'robot_config': _typed('robot_config', str),
+        'base_frame': _typed('base_frame', str),
     }
-    unit = {'pressure_unit': LaunchConfiguration('pressure_unit')}
+    unit = {'pressure_unit': _typed('pressure_unit', str)}
 
     inverse = Node(
-        package=PACKAGE, executable='inverse_kinetostatic_node', name='inverse_kinetostatic_node',
-        output='screen', parameters=[params_file, common, unit],
+        package=PACKAGE, executable='inverse_kinetostatic_node',
+        name='inverse_kinetostatic_node', output='screen',
+        parameters=[params_file, robot, unit],
     )
     forward = Node(
-        package=PACKAGE, executable='forward_kinetostatic_node', name='forward_kinetostatic_node',
-        output='screen', parameters=[params_file, common, unit],
+        package=PACKAGE, executable='forward_kinetostatic_node',
+        name='forward_kinetostatic_node', output='screen',
+        parameters=[params_file, robot, unit],
         remappings=[('pressure_command', LaunchConfiguration('pressure_topic'))],
     )
     trajectory = Node(
         package=PACKAGE, executable='trajectory_publisher', name='trajectory_publisher',
         output='screen',
-        parameters=[params_file, common, {
-            'trajectory': LaunchConfiguration('trajectory'),
-            'bending_angle_deg': ParameterValue(LaunchConfiguration('bending_angle_deg'),
-                                                value_type=float),
-            'period_s': ParameterValue(LaunchConfiguration('period_s'), value_type=float),
+        parameters=[params_file, robot, {
+            'trajectory': _typed('trajectory', str),
+            'bending_angle_deg': _typed('bending_angle_deg', float),
+            'period_s': _typed('period_s', float),
         }],
         condition=IfCondition(LaunchConfiguration('with_trajectory')),
     )
-    return LaunchDescription(args + [inverse, forward, trajectory])
+    if _installed(RVIZ_PACKAGE):
+        rviz = Node(
+            package=RVIZ_PACKAGE, executable='rviz2', name='rviz2', output='screen',
+            arguments=['-d', LaunchConfiguration('rviz_config')],
+            condition=IfCondition(LaunchConfiguration('rviz')),
+        )
+    else:
+        rviz = LogInfo(
+            msg='rviz:=true but rviz2 is not installed (apt install ros-jazzy-rviz2); '
+                'starting without RViz',
+            condition=IfCondition(LaunchConfiguration('rviz')),
+        )
+    return LaunchDescription(args + [inverse, forward, trajectory, rviz])

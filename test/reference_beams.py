@@ -26,7 +26,7 @@ The moment of the loads beyond ``s`` about the section point is
 ``theta(0) = 0``, ``theta'(L) = 0``; ``x' = cos(theta)``, ``z' = sin(theta)``.
 Solved (dimensionless, ``xi = s/L``) with ``scipy.integrate.solve_bvp``.
 
-3. Continuum limit of the model's own energy (model_spec.md, section 3)
+3. Continuum limit of the model's own energy (docs/model.md, section 3)
 -----------------------------------------------------------------------
 Position field ``r(x) in R^2``, ``x in [0, L]`` reference coordinate::
 

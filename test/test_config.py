@@ -41,7 +41,7 @@ def refused(d, *keys):
 
 # -------------------------------------------------------------- shipped files
 def check_default_actuator(cfg):
-    """model_spec.md section 5, in SI."""
+    """docs/model.md section 5, in SI."""
     assert cfg.l0 == pytest.approx(0.0963)
     assert cfg.stiffness_coeffs == (28.9, 576.94)
     assert cfg.d_eff == pytest.approx(8.087e-3, rel=1e-15)

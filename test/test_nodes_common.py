@@ -100,9 +100,11 @@ def test_validate_pressure_input():
     p = common.validate_pressure_input([1.0, 2.0, 3.0], 'Pa', 3, P_MIN, P_MAX, None)
     np.testing.assert_allclose(p, [1.0, 2.0, 3.0])
     with pytest.raises(InputError, match='labelled'):
-        common.validate_pressure_input([150.0, 0, 0], 'Pa', 3, P_MIN, P_MAX, 'actuator_pressure_gauge_kpa')
+        common.validate_pressure_input([150.0, 0, 0], 'Pa', 3, P_MIN, P_MAX,
+                                       'actuator_pressure_gauge_kpa')
     with pytest.raises(InputError, match='labelled'):
-        common.validate_pressure_input([150e3, 0, 0], 'kPa', 3, P_MIN, P_MAX, 'actuator_pressure_gauge_pa')
+        common.validate_pressure_input([150e3, 0, 0], 'kPa', 3, P_MIN, P_MAX,
+                                       'actuator_pressure_gauge_pa')
     with pytest.raises(InputError, match='outside'):
         common.validate_pressure_input([150e3, 0, 0], 'kPa', 3, P_MIN, P_MAX)   # 150 MPa
     with pytest.raises(InputError, match='expected 3'):
@@ -135,7 +137,8 @@ def test_z_axis_from_quaternion_known_values():
     np.testing.assert_allclose(common.z_axis_from_quaternion([s, 0, 0, s]), [0, -1, 0], atol=1e-15)
     np.testing.assert_allclose(common.z_axis_from_quaternion([0, s, 0, s]), [1, 0, 0], atol=1e-15)
     # rotation about z does not move the z-axis; scaling is normalised away
-    np.testing.assert_allclose(common.z_axis_from_quaternion([0, 0, 5 * s, 5 * s]), [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(common.z_axis_from_quaternion([0, 0, 5 * s, 5 * s]), [0, 0, 1],
+                               atol=1e-15)
 
 
 @pytest.mark.parametrize('q,match', [
@@ -163,8 +166,8 @@ def test_quaternion_rotation_round_trip():
     # the near-half-turn branches
     for axis in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0]):
         R = _rot(axis, math.pi)
-        np.testing.assert_allclose(common.quaternion_to_rotation(common.quaternion_from_rotation(R)), R,
-                                   atol=1e-12)
+        back = common.quaternion_to_rotation(common.quaternion_from_rotation(R))
+        np.testing.assert_allclose(back, R, atol=1e-12)
 
 
 def test_quaternion_from_z_axis():
@@ -172,10 +175,12 @@ def test_quaternion_from_z_axis():
     for z in list(rng.normal(size=(100, 3))) + [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 0, 1e-3]]:
         z = np.asarray(z, float)
         q = common.quaternion_from_z_axis(z)
-        np.testing.assert_allclose(common.z_axis_from_quaternion(q), z / np.linalg.norm(z), atol=1e-12)
+        np.testing.assert_allclose(common.z_axis_from_quaternion(q), z / np.linalg.norm(z),
+                                   atol=1e-12)
     # smallest rotation: no twist about z, i.e. the rotation axis is horizontal
     q = common.quaternion_from_z_axis([math.sin(0.3), 0, math.cos(0.3)])
-    assert q[2] == 0.0 and common.angle_between(common.quaternion_to_rotation(q)[:, 1], [0, 1, 0]) < 1e-12
+    assert q[2] == 0.0
+    assert common.angle_between(common.quaternion_to_rotation(q)[:, 1], [0, 1, 0]) < 1e-12
     with pytest.raises(ValueError):
         common.quaternion_from_z_axis([0, 0, 0])
 
@@ -273,3 +278,36 @@ def test_latest_worker_survives_exceptions_and_stops():
     w.submit('after stop')        # harmless, never processed
     time.sleep(0.05)
     assert seen == ['ok']
+
+
+# ------------------------------------------------------------ solve statistics
+def test_solve_stats_summary_window_and_age():
+    now = [100.0]
+    stats = common.SolveStats(window=4, clock=lambda: now[0])
+    s = stats.summary()
+    assert s['count'] == 0 and s['last_solve_age_s'] is None and s['median_s'] is None
+    for dt in (0.001, 0.002, 0.003, 0.004, 0.010):
+        now[0] += 1.0
+        stats.record(dt, ok=dt < 0.01)
+    now[0] += 0.25
+    s = stats.summary()
+    assert s['count'] == 5 and s['failures'] == 1 and s['window'] == 4   # oldest dropped
+    assert s['last_s'] == 0.010 and s['max_s'] == 0.010 and s['last_ok'] is False
+    assert s['median_s'] == pytest.approx(0.0035)
+    assert s['p95_s'] == pytest.approx(np.percentile([0.002, 0.003, 0.004, 0.010], 95))
+    assert s['last_solve_age_s'] == pytest.approx(0.25)
+    assert stats.times() == [0.002, 0.003, 0.004, 0.010]
+
+
+def test_recovery_texts_name_the_node_and_every_step():
+    text = common.configure_time_refusal('robot_config', '/ns/inv', 'active', 'one_segment')
+    steps = ['ros2 lifecycle set /ns/inv deactivate', 'ros2 lifecycle set /ns/inv cleanup',
+             'ros2 param set /ns/inv robot_config', 'ros2 lifecycle set /ns/inv configure',
+             'ros2 lifecycle set /ns/inv activate']
+    positions = [text.index(step) for step in steps]
+    assert positions == sorted(positions)           # in the order they must be done
+    assert "'one_segment'" in text
+    assert 'deactivate' not in common.configure_time_refusal('robot_config', '/inv', 'inactive',
+                                                             'x')
+    hint = common.configure_failed_hint('/inv')
+    assert 'stays unconfigured' in hint and 'ros2 lifecycle set /inv configure' in hint

@@ -7,6 +7,7 @@ Then the files must be where ``ros2 run`` and ``ros2 launch`` look for them:
 
 * ``share/ament_index/resource_index/packages/bellow_ancf_ros`` (marker),
 * ``share/bellow_ancf_ros/package.xml``, ``config/*.yaml``, ``launch/*.launch.py``,
+  ``rviz/*.rviz``,
 * executables ``lib/bellow_ancf_ros/<node>`` (console scripts),
 
 and an installed executable must start.
@@ -35,8 +36,9 @@ NODE_EXECUTABLES = {
 }
 MESSAGE_DEPENDENCIES = ('rclpy', 'geometry_msgs', 'std_msgs', 'visualization_msgs',
                         'diagnostic_msgs', 'lifecycle_msgs')
-_SKIP = shutil.ignore_patterns('.git', '.venv', 'venv', 'build', 'install', 'log', '__pycache__',
-                               '.pytest_cache', '.hypothesis', '.ruff_cache', '*.egg-info', '*.png')
+_SKIP = shutil.ignore_patterns('.git', '.venv', 'venv', 'build', 'install', 'log',
+                               '__pycache__', '.pytest_cache', '.hypothesis', '.ruff_cache',
+                               '*.egg-info', '*.png')
 
 
 def test_launch_file_compiles(tmp_path):
@@ -55,7 +57,8 @@ def test_nodes_params_file_is_a_ros_params_file():
     for node in NODE_EXECUTABLES:
         assert 'ros__parameters' in data[node], node
     assert 'ros__parameters' in data['/**']
-    assert data['inverse_kinetostatic_node']['ros__parameters']['pressure_unit'] in ('Pa', 'kPa')
+    assert list(data)[0] == '/**'     # first: later /** entries (launch arguments) override it
+    assert data['/**']['ros__parameters']['pressure_unit'] in ('Pa', 'kPa')
 
 
 @pytest.fixture(scope='module')
@@ -105,13 +108,15 @@ def test_config_and_launch_files_installed(colcon_install):
         assert (share / 'config' / name).read_text() == (REPO / 'config' / name).read_text()
     launch = share / 'launch' / 'bellow_ancf.launch.py'
     assert launch.read_text() == (REPO / 'launch' / 'bellow_ancf.launch.py').read_text()
+    rviz = share / 'rviz' / 'bellow_ancf.rviz'
+    assert rviz.read_text() == (REPO / 'rviz' / 'bellow_ancf.rviz').read_text()
 
 
 def test_node_executables_installed(colcon_install):
     lib = colcon_install / 'lib' / PKG
     missing = [exe for exe in NODE_EXECUTABLES if not (lib / exe).is_file()]
-    assert not missing, (f'console scripts missing from lib/{PKG}: {missing} '
-                         f'(have: {sorted(p.name for p in lib.iterdir()) if lib.is_dir() else None})')
+    have = sorted(p.name for p in lib.iterdir()) if lib.is_dir() else None
+    assert not missing, f'console scripts missing from lib/{PKG}: {missing} (have: {have})'
     for exe in NODE_EXECUTABLES:
         mode = (lib / exe).stat().st_mode
         assert mode & stat.S_IXUSR, f'{exe} is not executable'
@@ -134,8 +139,11 @@ def _ros_env(prefix, domain):
 
 
 def test_ros2_run_lookup_and_shipped_robots(colcon_install, tmp_path):
-    """What ``ros2 run`` does: the prefix that holds the marker, then lib/<pkg>/<exe> in it;
-    and the core finds the robot files in the installed share directory."""
+    """Do what ``ros2 run`` does, and find the robot files in the installed share directory.
+
+    ``ros2 run`` takes the prefix that holds the marker, then lib/<pkg>/<exe>
+    in it.
+    """
     code = f'''
 import os, sys
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
@@ -149,8 +157,8 @@ import bellow_ancf_ros
 print('MODULE', bellow_ancf_ros.__file__)
 print('ROBOT', load_robot('two_segment').source)
 '''
-    res = subprocess.run([sys.executable, '-c', code], env=_ros_env(colcon_install, 0), cwd=tmp_path,
-                         capture_output=True, text=True, timeout=60)
+    res = subprocess.run([sys.executable, '-c', code], env=_ros_env(colcon_install, 0),
+                         cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
     lines = dict(line.split(' ', 1) for line in res.stdout.splitlines() if ' ' in line)
     assert Path(lines['PREFIX']).resolve() == colcon_install.resolve()
@@ -169,7 +177,8 @@ def test_installed_executable_starts_and_stops_cleanly(colcon_install, tmp_path)
     with open(log_path, 'w') as log:
         proc = subprocess.Popen(
             [str(exe), '--ros-args', '--params-file',
-             str(colcon_install / 'share' / PKG / 'config' / 'nodes.yaml'), '-p', 'trajectory_publisher:rate_hz:=20.0'],
+             str(colcon_install / 'share' / PKG / 'config' / 'nodes.yaml'),
+             '-p', 'trajectory_publisher:rate_hz:=20.0'],
             env=_ros_env(colcon_install, random.randint(0, 101)), cwd=tmp_path, stdout=log,
             stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
     try:

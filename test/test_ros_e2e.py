@@ -133,7 +133,8 @@ class Client:
         self.lock = threading.Lock()
         self.msgs = {}
         self.subs = {}
-        for topic, typ in (('pressure_command', Float64MultiArray), ('commanded_pose', PoseStamped),
+        for topic, typ in (('pressure_command', Float64MultiArray),
+                           ('commanded_pose', PoseStamped),
                            ('predicted_pose', PoseStamped), ('target_pose', PoseStamped)):
             self._record(typ, topic, command_qos())
         self._record(DiagnosticArray, '/diagnostics', command_qos())
@@ -253,12 +254,12 @@ def assert_safe(msg, cfg):
 
 
 def send_until_prediction(client, pos, stamp_sec, timeout=TIMEOUT):
-    """Publish a target, again every 0.5 s (a restarted node may still be discovering),
-    until a pressure command and then a prediction arrive after the call.
+    """Publish a target every 0.5 s until a pressure command and a prediction arrive.
 
-    Targets are sent one at a time, so every command and prediction that arrives
-    after the call belongs to this target.  Returns (latency from the first send
-    to the first command [s], the command, the predicted position).
+    Repeated because a restarted node may still be discovering.  Targets are
+    sent one at a time, so every command and prediction that arrives after the
+    call belongs to this target.  Returns (latency from the first send to the
+    first command [s], the command, the predicted position).
     """
     n_cmd, n_pred = client.count('pressure_command'), client.count('predicted_pose')
     sent = []
@@ -266,7 +267,8 @@ def send_until_prediction(client, pos, stamp_sec, timeout=TIMEOUT):
     def send():
         sent.append(time.monotonic())
         client.target_pub.publish(target_msg(pos, stamp_sec))
-    wait_for(lambda: client.count('pressure_command') > n_cmd and client.count('predicted_pose') > n_pred,
+    wait_for(lambda: (client.count('pressure_command') > n_cmd
+                      and client.count('predicted_pose') > n_pred),
              timeout, 'pressure command and prediction', every=0.5, action=send)
     t_cmd, cmd = client.since('pressure_command', n_cmd)[0]
     _, pred = client.since('predicted_pose', n_pred)[0]
@@ -287,12 +289,15 @@ def test_trajectory_publisher_drives_pipeline(stack):
                          client.count('pressure_command'))
 
         def settled():
-            """Predictions received well after the first target this process recorded: their
-            targets (sent >= 0.1 s before, at 10 Hz) were all recorded here too."""
+            """Predictions received well after the first target this process recorded.
+
+            Their targets (sent >= 0.1 s before, at 10 Hz) were all recorded here too.
+            """
             tgt = client.since('target_pose', n_t)
             if not tgt:
                 return []
-            return [(t, m) for t, m in client.since('predicted_pose', n_p) if t >= tgt[0][0] + 0.25]
+            return [(t, m) for t, m in client.since('predicted_pose', n_p)
+                    if t >= tgt[0][0] + 0.25]
         wait_for(lambda: len(settled()) >= 15, STARTUP_TIMEOUT,
                  '15 predictions driven by the trajectory publisher')
     finally:
@@ -410,7 +415,7 @@ def test_flood_answers_last_target_with_bounded_memory(stack):
 
 
 def test_ros_demo_short_run_two_segments(tmp_path):
-    """The `make demo` pipeline (three processes, two-segment robot), shortened to a few seconds."""
+    """The `make demo` pipeline (three processes, two-segment robot), shortened to seconds."""
     plot = tmp_path / 'tracking.png'
     # a domain of its own: the module's node stack (another random domain) is still running
     busy = int(os.environ.get('ROS_DOMAIN_ID', '-1'))

@@ -121,7 +121,8 @@ class Harness:
 
     def publisher(self, msg_type, topic, expect_subscribers=1):
         pub = self.client.create_publisher(msg_type, topic, command_qos())
-        wait_for(lambda: pub.get_subscription_count() >= expect_subscribers, what=f'subscriber on {topic}')
+        wait_for(lambda: pub.get_subscription_count() >= expect_subscribers,
+                 what=f'subscriber on {topic}')
         return pub
 
     def service(self, srv_type, name):
@@ -316,6 +317,102 @@ def test_configure_fails_on_bad_robot_config(h, tmp_path):
     assert not node2.is_active and node2.model is None
 
 
+def test_robot_config_refused_while_configured_with_the_way_out(h, one):
+    """robot_config is read on configure: a change while configured fails with the way out.
+
+    ``ros2 param set`` while active (or inactive) must fail and say how to
+    change it; following that way (deactivate, cleanup, set, configure,
+    activate) switches the robot.
+    """
+    node, pub, _ = setup_inverse(h)
+    base = f'{h.ns}/inverse_kinetostatic_node'
+    setp = h.service(SetParameters, base + '/set_parameters')
+    getp = h.service(GetParameters, base + '/get_parameters')
+    change = h.service(ChangeState, base + '/change_state')
+
+    def set_robot(name):
+        return h.call(setp, SetParameters.Request(parameters=[
+            Parameter('robot_config', value=name).to_parameter_msg()])).results[0]
+
+    def transition(tid):
+        req = ChangeState.Request()
+        req.transition.id = tid
+        return h.call(change, req).success
+
+    for state_transition in (None, Transition.TRANSITION_DEACTIVATE):
+        if state_transition is not None:
+            assert transition(state_transition)            # now inactive: still refused
+        r = set_robot('two_segment')
+        assert not r.successful
+        assert 'read on configure' in r.reason and "'one_segment'" in r.reason
+        for step in ('cleanup', 'ros2 param set', 'configure', 'activate'):
+            assert step in r.reason, (step, r.reason)
+        assert ('deactivate' in r.reason) == (state_transition is None)
+        assert f'{base} ' in r.reason                     # names this node
+        assert node.model.A == 3                          # unchanged, and says so
+        got = h.call(getp, GetParameters.Request(names=['robot_config'])).values[0]
+        assert got.string_value == 'one_segment'
+    assert transition(Transition.TRANSITION_CLEANUP)
+    assert set_robot('two_segment').successful
+    assert transition(Transition.TRANSITION_CONFIGURE)
+    assert transition(Transition.TRANSITION_ACTIVATE)
+    assert node.is_active and node.model.A == 6
+
+
+def test_heartbeat_1hz_in_every_lifecycle_state(h, one):
+    """diagnostic_updater-like status: state, robot, solve statistics, extensible."""
+    node, pub, _ = setup_inverse(h, autostart=False)
+    name = 'inverse_kinetostatic_node: status'
+
+    def beats():
+        return diag_statuses(h, name)
+    wait_for(lambda: len(beats()) >= 1, what='heartbeat while unconfigured')
+    first = beats()[-1]
+    assert kv(first)['lifecycle_state'] == 'unconfigured'
+    assert kv(first)['last_solve_age_s'] == 'never' and kv(first)['solves'] == '0'
+    assert first.level == DiagnosticStatus.WARN
+    # about 1 Hz: 3 more beats take 2-3 s, 1.5-6 s allowed (receipt times, loaded machine)
+    n0, t0 = len(beats()), time.monotonic()
+    wait_for(lambda: len(beats()) >= n0 + 3, what='three more heartbeats')
+    assert 1.5 < time.monotonic() - t0 < 6.0
+    # a part of the node adds its fields (how the feedback state joins)
+    node.heartbeat.add_source(lambda: {'feedback_state': 'off'})
+    node.heartbeat.add_source(lambda: (DiagnosticStatus.WARN, 'extra says hello', {'x': 1}))
+    node.trigger_configure()
+    node.trigger_activate()
+    wait_for(lambda: node._pub_cmd.get_subscription_count() >= 1, what='pressure_command matched')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='target_pose matched')
+    target = solve_forward(one, [30e3, 60e3, 0.0]).position
+    send_and_wait_command(h, pub, target_msg(target))
+    send_and_wait_command(h, pub, target_msg(target + [0.001, 0.0, 0.0]))
+    wait_for(lambda: kv(beats()[-1]).get('solves') == '2', what='heartbeat after two solves')
+    st = beats()[-1]
+    values = kv(st)
+    assert values['lifecycle_state'] == 'active' and values['robot'] == 'one_segment'
+    assert st.hardware_id == 'one_segment'
+    assert 0.0 <= float(values['last_solve_age_s']) < 3.0
+    assert values['last_solve_ok'] == 'true'
+    times = node.solve_stats.times()
+    assert float(values['solve_ms_max']) == pytest.approx(max(times) * 1e3, abs=1e-3)
+    assert float(values['solve_ms_median']) == pytest.approx(np.median(times) * 1e3, abs=1e-3)
+    assert values['targets_published'] == '2'
+    assert values['feedback_state'] == 'off' and values['x'] == '1'
+    assert st.level == DiagnosticStatus.WARN and 'extra says hello' in st.message
+    assert 'active' in st.message
+
+
+def test_forward_and_trajectory_heartbeats(h, one):
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    h.add(ForwardKinetostaticNode)
+    h.add(TrajectoryPublisher, rate_hz=20.0)
+    wait_for(lambda: diag_statuses(h, 'forward_kinetostatic_node: status')
+             and diag_statuses(h, 'trajectory_publisher: status'), what='both heartbeats')
+    fwd = kv(diag_statuses(h, 'forward_kinetostatic_node: status')[-1])
+    assert fwd['robot'] == 'one_segment' and fwd['last_solve_age_s'] == 'never'
+    tp = diag_statuses(h, 'trajectory_publisher: status')[-1]
+    assert kv(tp)['trajectory'] == 'planar_circle' and tp.level == DiagnosticStatus.OK
+
+
 def test_pressure_unit_kpa_label_and_values(h, one):
     node, pub, _ = setup_inverse(h, pressure_unit='kPa')
     target = solve_forward(one, [100e3, -50e3, 20e3]).position
@@ -378,7 +475,8 @@ def test_bad_targets_refused_one_segment(h, one):
     for i, (what, msg) in enumerate(bad_inputs):
         pub.publish(msg)
         wait_for(lambda: node.stats['refused'] == i + 1, what=f'refusal of {what}')
-        wait_for(lambda: sum(s.level == DiagnosticStatus.WARN for s in diag_statuses(h, 'inverse')) >= i + 1,
+        wait_for(lambda: sum(s.level == DiagnosticStatus.WARN
+                             for s in diag_statuses(h, 'inverse')) >= i + 1,
                  what=f'WARN diagnostics for {what}')
     assert 'frame' in node.last_refusal_reason
     # nothing new was published, the node is still active and serves a good target
@@ -472,8 +570,9 @@ def test_solver_failures_publish_nothing_and_report_error(h, one, monkeypatch):
         monkeypatch.setattr(inv_mod, 'solve_inverse', fail)
         n_err = sum(s.level == DiagnosticStatus.ERROR for s in diag_statuses(h, 'inverse'))
         pub.publish(target_msg(good.position + [0.001 * (i + 1), 0, 0]))
-        wait_for(lambda: sum(s.level == DiagnosticStatus.ERROR for s in diag_statuses(h, 'inverse'))
-                 > n_err, what=f'ERROR diagnostics for failure {i}')
+        wait_for(lambda: sum(s.level == DiagnosticStatus.ERROR
+                             for s in diag_statuses(h, 'inverse')) > n_err,
+                 what=f'ERROR diagnostics for failure {i}')
     time.sleep(0.1)
     assert h.count('pressure_command') == 1                  # last good command stands
     assert list(h.last('pressure_command').data) == list(first.data)
@@ -484,8 +583,11 @@ def test_solver_failures_publish_nothing_and_report_error(h, one, monkeypatch):
 
 
 def test_latest_target_only_in_process(h, one):
-    """Targets arrive at ~500 Hz for 0.2 s (slow enough for the executor to take every one
-    from DDS), the node solves at most 20 per second: it must skip the stale ones."""
+    """Targets arrive at ~500 Hz for 0.2 s; the node solves at most 20 per second.
+
+    Slow enough for the executor to take every one from DDS: the node must skip
+    the stale ones.
+    """
     node, pub, _ = setup_inverse(h, max_rate_hz=20.0)
     centre = solve_forward(one, [50e3, 50e3, 50e3]).position
     targets = [centre + [0.008 * math.cos(a), 0.008 * math.sin(a), 0.0]
@@ -563,11 +665,13 @@ def test_forward_node_prediction_shape_and_bad_input(h, two):
     for i, (what, m) in enumerate(bad):
         pub.publish(m)
         wait_for(lambda: node.stats['refused'] == i + 1, what=f'refusal of {what}')
-    wait_for(lambda: sum(s.level == DiagnosticStatus.WARN for s in diag_statuses(h, 'forward')) >= 3,
+    wait_for(lambda: sum(s.level == DiagnosticStatus.WARN
+                         for s in diag_statuses(h, 'forward')) >= 3,
              what='WARN diagnostics')
     assert h.count('predicted_pose') == 1
     # unlabelled arrays (e.g. a measured-pressure topic) are accepted
-    msg = send_and_wait_command(h, pub, pressure_msg([0.0] * 6, label=None), topic='predicted_pose')
+    msg = send_and_wait_command(h, pub, pressure_msg([0.0] * 6, label=None),
+                                topic='predicted_pose')
     np.testing.assert_allclose(pose_of(msg)[0], solve_forward(two, [0.0] * 6).position, atol=1e-9)
 
 
@@ -575,9 +679,11 @@ def test_forward_node_kpa_unit(h, one):
     h.record(PoseStamped, 'predicted_pose')
     node = h.add(ForwardKinetostaticNode, pressure_unit='kPa')
     pub = h.publisher(Float64MultiArray, 'pressure_command')
-    msg = send_and_wait_command(h, pub, pressure_msg([150.0, -50.0, 0.0], label='actuator_pressure_gauge_kpa'),
-                                topic='predicted_pose')
-    np.testing.assert_allclose(pose_of(msg)[0], solve_forward(one, [150e3, -50e3, 0.0]).position, atol=1e-9)
+    msg = send_and_wait_command(
+        h, pub, pressure_msg([150.0, -50.0, 0.0], label='actuator_pressure_gauge_kpa'),
+        topic='predicted_pose')
+    np.testing.assert_allclose(pose_of(msg)[0],
+                               solve_forward(one, [150e3, -50e3, 0.0]).position, atol=1e-9)
     pub.publish(pressure_msg([150e3, -50e3, 0.0], label='actuator_pressure_gauge_pa'))
     wait_for(lambda: node.stats['refused'] == 1, what='Pa-labelled array refused in kPa mode')
 

@@ -10,7 +10,7 @@ import pytest
 
 from bellow_ancf_ros.core.stage1 import Stage1
 
-# Default robot, model_spec.md section 5.
+# Default robot, docs/model.md section 5.
 C0, C1 = 28.9, 576.94            # k(lam) = C1*lam + C0 [N/m]
 L0 = 0.0963                      # [m]
 D_EFF = 8.087e-3                 # [m]

@@ -18,7 +18,7 @@ segments with ``n_a`` actuators each:
   fraction ``s_k``: its point ``r(s_k l)`` coincides with the plate point
   ``p + c_x d1 + c_y d2`` (3 equations) and its gradient is parallel to the
   plate normal, written as ``d1.r_x = 0`` and ``d2.r_x = 0`` (2 equations)
-  (model_spec section 3).  Unlike the paper's squared parallel condition
+  (docs/model.md section 3).  Unlike the paper's squared parallel condition
   (eq. 22) these rows keep full rank at the solution, so Newton's method
   stays quadratic.
 
@@ -471,7 +471,7 @@ class RobotModel:
         return c[:3].copy(), c[3:].reshape(3, 3).T.copy()
 
     def end_effector(self, q):
-        """End-effector position and rotation (model_spec section 1)."""
+        """End-effector position and rotation (docs/model.md section 1)."""
         p, D = self.plate_frame(q, self.ee_plate)
         return p + self.cfg.tool_length * D[:, 2], D @ rotation_z(self.ee_theta)
 

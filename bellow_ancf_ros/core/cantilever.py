@@ -3,7 +3,7 @@
 The same ANCF elements as the robot (eqs. 5-8, 17, 18), gravity (eqs. 15,
 16) and an end load (eq. 14); the clamp fixes the base point and makes the
 base gradient parallel to the clamp axis ``+x`` with its length free, as at
-every plate (model_spec section 3).  Gravity acts along ``-z``.  Used to
+every plate (docs/model.md section 3).  Gravity acts along ``-z``.  Used to
 identify the cross-sectional diameter ``D_a`` (eq. 31) and to validate the
 element against beam theory.
 """

@@ -1,7 +1,7 @@
 """Robot description: YAML loader, validation and SI dataclasses.
 
 A robot file (``config/one_segment.yaml``, ``config/two_segment.yaml``; schema
-in model_spec.md section 5) carries the unit of every non-SI value in its key
+in docs/model.md section 5) carries the unit of every non-SI value in its key
 name (``pitch_radius_mm``, ``p_max_kpa``).  :func:`load_robot` reads such a
 file, checks it completely and returns a frozen :class:`RobotConfig` whose
 values are all SI (m, kg, Pa, rad, N/m).
@@ -450,7 +450,7 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
 
     payload = chk.number(top, '', 'payload_kg', nonneg=True)
 
-    # Stage 1 must map [p_min, p_max] monotonically (model_spec section 2).
+    # Stage 1 must map [p_min, p_max] monotonically (docs/model.md section 2).
     if None not in (coeffs, l0, d_eff, p_min, p_max):
         try:
             Stage1(coeffs, l0, d_eff * 1e-3, p_min * 1e3, p_max * 1e3)

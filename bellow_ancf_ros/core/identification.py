@@ -32,7 +32,7 @@ which is expanded into ascending powers of ``lam`` (the robot file's
 The force curve alone does not fix ``l0`` (it is the measured unpressurised
 length of the actuator, an input here).  Conversely, the paper's two fits
 together imply it: the slope of ``k`` is ``a2*l0 = 576.94`` N/m, so
-``l0 = 576.94/5990.4 = 0.09631`` m (:func:`l0_from_paper_fits`; model_spec
+``l0 = 576.94/5990.4 = 0.09631`` m (:func:`l0_from_paper_fits`; docs/model.md
 section 5 uses 0.0963 m).  The paper's constant, 28.9 N/m, is
 ``a1 - a2*l0 = 605.9 - 576.94 = 28.96`` N/m written with one decimal
 truncated; the shipped robot keeps the paper's 28.9.
@@ -104,7 +104,7 @@ GRAVITY = 9.81
 PAPER_F_COEFFS = (605.9, 5990.4)
 #: paper V.A: k(lam) = 576.94 lam + 28.9 (ascending) [N/m]
 PAPER_K_COEFFS = (28.9, 576.94)
-#: l0 implied by the two fits (model_spec section 5) [m]
+#: l0 implied by the two fits (docs/model.md section 5) [m]
 PAPER_L0 = 0.0963
 #: paper V.B [m]
 PAPER_D_EFF = 8.087e-3

@@ -24,7 +24,7 @@ the three arc parameters follow in closed form (exact for any ``n_a``; for
 The segment's top plate sits at ``s/beta * ((1 - cos beta) cos phi,
 (1 - cos beta) sin phi, sin beta)`` with rotation
 ``Rz(phi) Ry(beta) Rz(-phi)`` (no twist).  Segments are chained as in the
-ANCF model (model_spec section 1): the next segment's base is the top plate
+ANCF model (docs/model.md section 1): the next segment's base is the top plate
 translated by the connector height ``h_c`` along its normal (actuator angles
 ``theta_0 + 2 pi (i-1)/n_a`` in that frame); the end effector is the last top
 plate plus the tool offset, its x-axis towards actuator 1 of the last segment.

@@ -132,7 +132,7 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
 
 
 class ReducedHessian:
-    """Lagrangian Hessian on the constraint tangent space (stability, model_spec section 3).
+    """Lagrangian Hessian on the constraint tangent space (stability, docs/model.md section 3).
 
     ``jacobian`` is the KKT matrix (eq. 27) ``[[H, C_q^T], [C_q, 0]]``.  A
     basis ``Z`` of the null space of ``C_q`` comes from an LU factorisation

@@ -1,7 +1,7 @@
 """Stage 1 of the kinetostatic model: elongation of each actuator.
 
 Paper equations (10) / (24) with the external axial force ``F_e = 0``
-(model_spec.md section 2: external loads act in stage 2 only)::
+(docs/model.md section 2: external loads act in stage 2 only)::
 
     (pi/4) * P * D_eff**2 - k(lam) * (lam - 1) * l0 = 0            (10), (24)
 

@@ -11,7 +11,7 @@ callback for long runs.
   threshold (default 0.01 mm) *and* that puts a node on every plate
   (``s_k * n`` integer for every plate fraction ``s_k``): a plate inside an
   element makes the cubic element follow a curvature jump it cannot
-  represent (model_spec section 5), so such counts converge erratically.
+  represent (docs/model.md section 6), so such counts converge erratically.
 * :func:`workspace_study` (paper VI.B): the paper's actuation schemes swept
   from ``p_min`` to ``p_max`` with warm-started forward solves, per payload.
   One segment: 18 schemes (each actuator swept with the other two at every

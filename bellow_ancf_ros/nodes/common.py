@@ -15,7 +15,11 @@ tested without ROS:
   :func:`quaternion_from_rotation`, :func:`quaternion_from_z_axis`;
 * :class:`LatestWorker`: a worker thread that always processes the newest
   item only (older ones are overwritten, so memory stays bounded) at a bounded
-  rate.
+  rate;
+* :class:`SolveStats`: solve-time statistics and the age of the last solve
+  for the status heartbeat;
+* the texts that tell a user how to get out of a refused or failed state
+  (:func:`configure_time_refusal`, :func:`configure_failed_hint`).
 
 All pressures are gauge pressures (relative to atmosphere).  Inside the
 package they are in Pa (REP-103 SI units); on a topic the unit is ``Pa`` by
@@ -27,6 +31,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -37,10 +42,14 @@ __all__ = [
     'PRESSURE_UNITS',
     'InputError',
     'LatestWorker',
+    'SolveStats',
     'UnsafePressureError',
     'angle_between',
     'check_unit',
+    'configure_failed_hint',
+    'configure_time_refusal',
     'from_unit',
+    'parameter_problem',
     'pressure_label',
     'quaternion_from_rotation',
     'quaternion_from_z_axis',
@@ -384,7 +393,8 @@ class LatestWorker:
                 # bounded rate: wait until min_period after the last start;
                 # newer items arriving meanwhile replace the pending one
                 while not self._stop:
-                    left = self._last_start + max(0.0, float(self._min_period())) - time.monotonic()
+                    period = max(0.0, float(self._min_period()))
+                    left = self._last_start + period - time.monotonic()
                     if left <= 0:
                         break
                     self._cond.wait(left)
@@ -420,3 +430,87 @@ class LatestWorker:
             self._cond.notify_all()
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout)
+
+
+# ------------------------------------------------------------ statistics
+class SolveStats:
+    """Solve-time statistics over the last ``window`` solves, and the age of the last one.
+
+    ``record(seconds, ok)`` after every solve; :meth:`summary` gives the count,
+    the last/median/95th-percentile/maximum solve time over the window [s],
+    the age of the last solve [s] (None before the first) and whether it
+    succeeded.  Memory is bounded by ``window``.  Thread-safe.
+    """
+
+    def __init__(self, window: int = 1000, clock: Callable[[], float] = time.monotonic) -> None:
+        self._times: deque = deque(maxlen=int(window))
+        self._clock = clock
+        self._lock = threading.Lock()
+        self.count = 0
+        self.failures = 0
+        self._last_end: float | None = None
+        self._last_ok: bool | None = None
+
+    def record(self, seconds: float, ok: bool = True) -> None:
+        """Record one solve that took ``seconds`` and ended now."""
+        with self._lock:
+            self._times.append(float(seconds))
+            self.count += 1
+            self.failures += 0 if ok else 1
+            self._last_end = self._clock()
+            self._last_ok = bool(ok)
+
+    def times(self) -> list:
+        """The solve times in the window [s], oldest first."""
+        with self._lock:
+            return list(self._times)
+
+    def summary(self) -> dict:
+        """Statistics as a dict (None where there is no solve yet).
+
+        Keys: ``count``, ``failures``, ``window``, ``last_s``, ``median_s``,
+        ``p95_s``, ``max_s``, ``last_solve_age_s``, ``last_ok``.
+        """
+        with self._lock:
+            t = np.array(self._times, dtype=float)
+            last_end, last_ok = self._last_end, self._last_ok
+            count, failures = self.count, self.failures
+        empty = t.size == 0
+        return {
+            'count': count,
+            'failures': failures,
+            'window': int(t.size),
+            'last_s': None if empty else float(t[-1]),
+            'median_s': None if empty else float(np.median(t)),
+            'p95_s': None if empty else float(np.percentile(t, 95)),
+            'max_s': None if empty else float(t.max()),
+            'last_solve_age_s': None if last_end is None else self._clock() - last_end,
+            'last_ok': last_ok,
+        }
+
+
+# ------------------------------------------------------- recovery texts
+def configure_time_refusal(name: str, node_path: str, state: str, current: Any) -> str:
+    """Why a parameter read on configure cannot change now, and the way out.
+
+    ``node_path`` is the node's fully qualified name (``/inverse_kinetostatic_node``),
+    ``state`` its lifecycle state (``active``, ``inactive``), ``current`` the
+    value in use.
+    """
+    steps = []
+    if state == 'active':
+        steps.append(f'ros2 lifecycle set {node_path} deactivate')
+    steps += [f'ros2 lifecycle set {node_path} cleanup',
+              f'ros2 param set {node_path} {name} <new value>',
+              f'ros2 lifecycle set {node_path} configure',
+              f'ros2 lifecycle set {node_path} activate']
+    return (f'{name} is read on configure and the node is {state} with {name} {current!r}; '
+            f'to change it: ' + '; '.join(steps))
+
+
+def configure_failed_hint(node_path: str, parameter: str = 'robot_config') -> str:
+    """What to do after a failed configure: the node stays unconfigured until then."""
+    return (f'the node stays unconfigured (no pressure commands); to recover: '
+            f'ros2 param set {node_path} {parameter} <shipped robot name or robot YAML path>, '
+            f'then ros2 lifecycle set {node_path} configure and '
+            f'ros2 lifecycle set {node_path} activate')

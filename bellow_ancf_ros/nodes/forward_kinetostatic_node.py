@@ -20,7 +20,9 @@ publishes
     actuator diameter D_a); namespace ``plates``, one CYLINDER per plate (base,
     constraint and top plates of every segment).
     ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): one status per solve
-    (solve time, iterations, residual) and per refused input (WARN).
+    (solve time, iterations, residual), per refused input (WARN), and a 1 Hz
+    heartbeat ``'<node>: status'`` (robot, age of the last solve, solve-time
+    statistics, counters).
 
 QoS: reliable, keep-last, depth 5 for the pressures and the outputs;
 ``/diagnostics`` keep-last 10.  Like the inverse node it works on the latest
@@ -30,7 +32,10 @@ second), warm-started from the previous solution.
 Bad input (wrong length, NaN/inf, outside the robot's pressure limits, wrong
 unit label): refused with a throttled warning and a WARN diagnostic; the
 node keeps running and the last prediction stands.  A solve that does not
-converge to a stable equilibrium publishes nothing and reports ERROR.
+converge to a stable equilibrium publishes nothing and reports ERROR.  A bad
+start-up parameter (a robot file that does not load, a value outside its
+range) ends the process with one line naming it and what is allowed (exit
+status 2).
 """
 
 from __future__ import annotations
@@ -42,23 +47,27 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Point, PoseStamped
-from rcl_interfaces.msg import IntegerRange, ParameterType
+from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..core import RobotModel, load_robot, solve_forward
+from ..core import ConfigError, RobotModel, load_robot, solve_forward
 from . import common
 from .ros_util import (
     WARN_THROTTLE_S,
+    Heartbeat,
     Refusals,
+    StartupParameterError,
     command_qos,
+    declare,
     descriptor,
     diagnostics_qos,
     guard_parameters,
     main_for,
     pose_message,
     publish_diagnostic,
+    solve_values,
 )
 
 __all__ = ['ForwardKinetostaticNode', 'main', 'shape_markers']
@@ -67,7 +76,7 @@ PLATE_THICKNESS_M = 0.002
 
 
 def shape_markers(fw, frame_id: str, stamp, n_points: int = 20) -> MarkerArray:
-    """MarkerArray of a forward result: backbones (LINE_STRIP) and plates (CYLINDER)."""
+    """Build the MarkerArray of a forward result: backbones (LINE_STRIP), plates (CYLINDER)."""
     cfg = fw.model.cfg
     arr = MarkerArray()
     backbones = fw.backbones(n_points)
@@ -108,32 +117,38 @@ def shape_markers(fw, frame_id: str, stamp, n_points: int = 20) -> MarkerArray:
 class ForwardKinetostaticNode(Node):
     """Predicts the robot's pose and shape from pressures."""
 
-    def __init__(self, node_name: str = 'forward_kinetostatic_node', **kwargs: Any) -> None:
+    NODE_NAME = 'forward_kinetostatic_node'
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        D, S, I = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_INTEGER)
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
+        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                     ParameterType.PARAMETER_INTEGER)
+        robot = declare(self, 'robot_config', 'one_segment', descriptor(
             'Robot description: a shipped robot name (one_segment, two_segment; the files in '
             'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read at start-up.', S,
-            read_only=True))
-        self.declare_parameter('payload_kg', 0.0, descriptor(
+            read_only=True, constraints='a shipped robot name or a robot YAML path'))
+        declare(self, 'payload_kg', 0.0, descriptor(
             'Payload mass at the end effector [kg]; may be changed at run time.', D,
             lo=0.0, hi=common.PAYLOAD_MAX_KG))
-        self.declare_parameter('base_frame', 'base', descriptor(
-            'Frame of predicted_pose and predicted_shape (robot base).', S))
-        self.declare_parameter('pressure_unit', 'Pa', descriptor(
+        declare(self, 'base_frame', 'base', descriptor(
+            'Frame of predicted_pose and predicted_shape (robot base).', S,
+            constraints='a non-empty frame name'))
+        declare(self, 'pressure_unit', 'Pa', descriptor(
             'Unit of the incoming gauge pressures: Pa (default, REP-103) or kPa.', S,
             constraints="one of: 'Pa', 'kPa'"))
-        self.declare_parameter('max_rate_hz', 100.0, descriptor(
+        declare(self, 'max_rate_hz', 100.0, descriptor(
             'Maximum prediction rate [Hz]; only the newest pressure array is solved.', D,
             lo=0.1, hi=1000.0))
-        d = descriptor('Points per actuator backbone in predicted_shape.', I)
-        d.integer_range = [IntegerRange(from_value=2, to_value=200, step=1)]
-        self.declare_parameter('backbone_points', 20, d)
-        guard_parameters(self, ('payload_kg', 'pressure_unit'))
+        declare(self, 'backbone_points', 20, descriptor(
+            'Points per actuator backbone in predicted_shape.', INT, lo=2, hi=200))
+        guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'))
 
-        robot = self.get_parameter('robot_config').value
-        self.cfg = load_robot(robot)   # ConfigError: the node does not start
+        try:
+            self.cfg = load_robot(robot)   # read at start-up: a bad one stops the node
+        except ConfigError as exc:
+            raise StartupParameterError(
+                'robot_config', robot, 'a shipped robot name or a robot YAML path',
+                str(exc)) from None
         self.model = RobotModel(self.cfg)
         self._lock = threading.Lock()
         self._warm = solve_forward(self.model, common.vent_pressures(
@@ -143,11 +158,13 @@ class ForwardKinetostaticNode(Node):
         self.stats = {'received': 0, 'refused': 0, 'solved': 0, 'published': 0, 'failed': 0}
         self.last_refusal_reason = ''
         self._refusals = Refusals(self, 'pressures', self._publish_diag)
-        self.solve_times_s: list = []
+        self.solve_stats = common.SolveStats()
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'predicted_pose', qos)
         self._pub_shape = self.create_publisher(MarkerArray, 'predicted_shape', qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
+                                   lambda: self.cfg.name)
         self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='forward-solver')
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
@@ -156,6 +173,17 @@ class ForwardKinetostaticNode(Node):
             f'robot {self.cfg.name!r}: {self.model.A} actuators, limits '
             f'[{self.cfg.p_min / 1e3:g}, {self.cfg.p_max / 1e3:g}] kPa gauge; listening on '
             f'{self._sub.topic_name!r} in {self.get_parameter("pressure_unit").value}')
+
+    def _heartbeat_status(self) -> tuple:
+        """Heartbeat: robot, input topic, solve statistics, counters."""
+        values = {'robot': self.cfg.name, 'input_topic': self._sub.topic_name,
+                  'pressure_unit': self.get_parameter('pressure_unit').value,
+                  'payload_kg': self.get_parameter('payload_kg').value}
+        values.update(solve_values(self.solve_stats))
+        values.update({f'pressures_{k}': v for k, v in self.stats.items()})
+        if self.solve_stats.summary()['last_ok'] is False:
+            return DiagnosticStatus.WARN, 'running; the last prediction failed', values
+        return DiagnosticStatus.OK, 'running', values
 
     # ------------------------------------------------------------ params
     def _min_period(self) -> float:
@@ -184,7 +212,8 @@ class ForwardKinetostaticNode(Node):
         self.stats['failed'] += 1
         self.get_logger().error(f'forward solve raised {type(exc).__name__}: {exc}',
                                 throttle_duration_sec=WARN_THROTTLE_S)
-        self._publish_diag(DiagnosticStatus.ERROR, f'solver exception: {type(exc).__name__}: {exc}', {})
+        self._publish_diag(DiagnosticStatus.ERROR,
+                           f'solver exception: {type(exc).__name__}: {exc}', {})
 
     def _solve(self, pressures_pa: np.ndarray) -> None:
         payload = float(self.get_parameter('payload_kg').value)
@@ -192,9 +221,7 @@ class ForwardKinetostaticNode(Node):
         fw = solve_forward(self.model, pressures_pa, payload_kg=payload, warm_start=self._warm)
         dt = time.perf_counter() - t0
         self.stats['solved'] += 1
-        self.solve_times_s.append(dt)
-        if len(self.solve_times_s) > 10000:
-            del self.solve_times_s[:5000]
+        self.solve_stats.record(dt, ok=bool(fw.success))
         values = {
             'solve_time_ms': f'{dt * 1e3:.3f}',
             'iterations': fw.iterations,
@@ -224,10 +251,11 @@ class ForwardKinetostaticNode(Node):
         self._publish_diag(DiagnosticStatus.OK, 'prediction published', values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
-        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: forward kinetostatics', self.cfg.name,
-                           level, message, values)
+        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: forward kinetostatics',
+                           self.cfg.name, level, message, values)
 
     def destroy_node(self):
+        """Stop the worker, then destroy the node."""
         self._worker.stop()
         return super().destroy_node()
 

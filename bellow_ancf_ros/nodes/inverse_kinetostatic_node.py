@@ -22,8 +22,12 @@ publishes
     model predicts for the command (stamp = the target's stamp, or the solve
     time if the target had none).
     ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): one status per solve
-    (solve time, iterations, residual, reachable, active pressure limits) and
-    per refused target (WARN, throttled).
+    (solve time, iterations, residual, reachable, active pressure limits), per
+    refused target (WARN, throttled), and a 1 Hz heartbeat
+    ``'<node>: status'`` in every lifecycle state (lifecycle state, robot, age
+    of the last solve, solve-time statistics, counters;
+    :class:`~bellow_ancf_ros.nodes.ros_util.Heartbeat`: other parts of the
+    node add their fields with ``self.heartbeat.add_source(fn)``).
 
 QoS
 ---
@@ -46,8 +50,21 @@ Lifecycle and safety
 * Pressures are published only while the node is *active*; targets that
   arrive while inactive are ignored.  On deactivate and on shutdown (also on
   Ctrl-C / SIGTERM) the node publishes the vent command, 0 Pa gauge on every
-  actuator, once.  ``autostart`` (default true) configures and activates the
-  node at start-up, so a plain ``ros2 run`` works.
+  actuator, once.  On shutdown it then waits (at most
+  ``VENT_ACK_TIMEOUT_S``, 4 s) until every matched subscriber has
+  acknowledged the vent, so that it arrives before the process exits; a
+  missing acknowledgement is logged.  (Fast DDS acknowledges on its
+  heartbeat, every 3 s by default: Ctrl-C takes up to about 3 s.)
+  ``autostart`` (default true) configures and activates the node at
+  start-up, so a plain ``ros2 run`` works.
+* ``robot_config`` is read on configure: a change is refused while the node
+  is configured (inactive or active), with the way out in the reason
+  (deactivate, cleanup, set, configure, activate).  A configure that fails
+  (e.g. a robot file that does not load) leaves the node unconfigured and
+  says so, with the recovery commands, in the log and in the heartbeat.
+* A bad start-up parameter (outside its range, wrong type, unknown unit) ends
+  the process with one line naming the parameter, the value and what is
+  allowed (exit status 2).
 * Every published pressure passes :func:`~bellow_ancf_ros.nodes.common.safe_pressures`:
   never NaN, inf or outside ``[p_min, p_max]`` of the robot file.
 * Refused targets (wrong frame, NaN/inf position, zero or non-finite
@@ -75,7 +92,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
-from rclpy.duration import Duration
 from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 from std_msgs.msg import Float64MultiArray
@@ -83,69 +99,86 @@ from std_msgs.msg import Float64MultiArray
 from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
 from . import common
 from .ros_util import (
+    VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
+    Heartbeat,
     Refusals,
     command_qos,
+    declare,
     descriptor,
     diagnostics_qos,
     guard_parameters,
     main_for,
     pose_message,
     pressure_message,
+    publish_and_wait_acked,
     publish_diagnostic,
+    solve_values,
 )
 
-__all__ = ['InverseKinetostaticNode', 'main']
+__all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_S', 'main']
 
-VENT_ACK_TIMEOUT_S = 1.0
+#: Parameters read on configure (a change needs cleanup + configure).
+CONFIGURE_PARAMETERS = ('robot_config',)
 
 
 # ------------------------------------------------------------------- the node
 class InverseKinetostaticNode(LifecycleNode):
     """Managed feedforward controller: target poses -> actuator pressures."""
 
-    def __init__(self, node_name: str = 'inverse_kinetostatic_node', **kwargs: Any) -> None:
+    NODE_NAME = 'inverse_kinetostatic_node'
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
                    ParameterType.PARAMETER_BOOL)
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
+        declare(self, 'robot_config', 'one_segment', descriptor(
             'Robot description: a shipped robot name (one_segment, two_segment; the files in '
-            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure.', S))
-        self.declare_parameter('payload_kg', 0.0, descriptor(
+            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
+            'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
+            constraints='a shipped robot name or a robot YAML path'))
+        declare(self, 'payload_kg', 0.0, descriptor(
             'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
             'on the next solve. Negative or larger values than the range are refused.', D,
             lo=0.0, hi=common.PAYLOAD_MAX_KG))
-        self.declare_parameter('base_frame', 'base', descriptor(
+        declare(self, 'base_frame', 'base', descriptor(
             'Frame of targets and outputs (robot base). Targets in any other frame are refused '
-            '(no tf2 transform).', S))
-        self.declare_parameter('pressure_unit', 'Pa', descriptor(
+            '(no tf2 transform).', S, constraints='a non-empty frame name'))
+        declare(self, 'pressure_unit', 'Pa', descriptor(
             'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
             '(relative to atmosphere); the layout label says the unit.', S,
             constraints="one of: 'Pa', 'kPa'"))
-        self.declare_parameter('max_rate_hz', 100.0, descriptor(
+        declare(self, 'max_rate_hz', 100.0, descriptor(
             'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
             lo=0.1, hi=1000.0))
-        self.declare_parameter('autostart', True, descriptor(
+        declare(self, 'autostart', True, descriptor(
             'Configure and activate at start-up (so that a plain ros2 run works).', B,
             read_only=True))
-        guard_parameters(self, ('payload_kg', 'pressure_unit'))
+        guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
+                         extra_check=self._configure_time_check)
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
         self._active = False
         self._configured = False
+        self._configure_error = ''
         self._model: RobotModel | None = None
         self._cfg = None
         self._warm = None
         self._worker: common.LatestWorker | None = None
-        self._pub_cmd = self._pub_pose = self._pub_diag = None
+        self._pub_cmd = self._pub_pose = None
         self._sub = None
         self._said_orientation_ignored = False
         self._refusals = Refusals(self, 'targets', self._publish_diag)
         self.last_command_pa: np.ndarray | None = None
         self.last_refusal_reason = ''
+        self.last_vent_acked: bool | None = None
         self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
                       'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0}
-        self.solve_times_s: list = []
+        self.solve_stats = common.SolveStats()
+        # diagnostics in every lifecycle state: per-solve statuses and the 1 Hz heartbeat
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
+                                   lambda: self._cfg.name if self._cfg is not None else '')
 
         if self.get_parameter('autostart').value:
             if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
@@ -154,6 +187,27 @@ class InverseKinetostaticNode(LifecycleNode):
     # ---------------------------------------------------------- parameters
     def _min_period(self) -> float:
         return 1.0 / float(self.get_parameter('max_rate_hz').value)
+
+    def _node_path(self) -> str:
+        return self.get_fully_qualified_name()
+
+    def lifecycle_state(self) -> str:
+        """Label of the current lifecycle state (``unconfigured``, ``inactive``, ``active``...)."""
+        sm = getattr(self, '_state_machine', None)
+        if sm is not None:
+            try:
+                return str(sm.current_state[1])
+            except Exception:  # noqa: BLE001 - fall back on the node's own flags
+                pass
+        return 'active' if self._active else 'inactive' if self._configured else 'unconfigured'
+
+    def _configure_time_check(self, param) -> str:
+        """Refuse a change of a parameter read on configure unless unconfigured."""
+        if param.name not in CONFIGURE_PARAMETERS or not self._configured:
+            return ''
+        state = 'active' if self._active else 'inactive'
+        return common.configure_time_refusal(param.name, self._node_path(), state,
+                                             self.get_parameter(param.name).value)
 
     # ---------------------------------------------------------- lifecycle
     def on_configure(self, state: State) -> TransitionCallbackReturn:
@@ -164,15 +218,18 @@ class InverseKinetostaticNode(LifecycleNode):
             # straight robot at vent pressure: first warm start (also warms caches)
             fw0 = solve_forward(model, common.vent_pressures(model.A, cfg.p_min, cfg.p_max))
         except (ConfigError, ValueError, OSError) as exc:
-            self.get_logger().error(f'configure failed: robot_config {name!r}: {exc}')
+            self._configure_error = f'robot_config {name!r}: {exc}'
+            self.get_logger().error(f'configure failed: {self._configure_error}')
+            self.get_logger().error(common.configure_failed_hint(self._node_path()))
+            self.heartbeat.publish()
             return TransitionCallbackReturn.FAILURE
+        self._configure_error = ''
         with self._lock:
             self._cfg, self._model = cfg, model
             self._warm = fw0 if fw0.success else None
         qos = command_qos()
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
-        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
         self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='inverse-solver')
@@ -191,7 +248,7 @@ class InverseKinetostaticNode(LifecycleNode):
         return super().on_activate(state)
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
-        self._go_inactive_and_vent('deactivate')
+        self._go_inactive_and_vent('deactivate', wait_acked=False)   # the node lives on
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: State) -> TransitionCallbackReturn:
@@ -200,35 +257,40 @@ class InverseKinetostaticNode(LifecycleNode):
 
     def on_shutdown(self, state: State) -> TransitionCallbackReturn:
         if self._configured:
-            self._go_inactive_and_vent('shutdown')
-            self._wait_vent_acked()
+            self._go_inactive_and_vent('shutdown', wait_acked=True)
         self._release()
         return super().on_shutdown(state)
 
     def on_error(self, state: State) -> TransitionCallbackReturn:
         if self._configured:
-            self._go_inactive_and_vent('error')
+            self._go_inactive_and_vent('error', wait_acked=True)
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
-    def _go_inactive_and_vent(self, why: str) -> None:
+    def _go_inactive_and_vent(self, why: str, wait_acked: bool) -> None:
+        """Disable commands and publish the vent command.
+
+        ``wait_acked``: then wait until every matched subscriber acknowledged
+        it (bounded; before the process may exit).
+        """
         with self._lock:
             self._active = False
             if self._worker is not None:
                 self._worker.clear()
             cfg = self._cfg
             vent = common.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
-            self._pub_cmd.publish(pressure_message(vent, self._unit()))
+            msg = pressure_message(vent, self._unit())
             self.last_command_pa = vent
             self.stats['vents'] += 1
-        self.get_logger().info(f'{why}: vent command (0 Pa gauge) published, commands disabled')
-
-    def _wait_vent_acked(self) -> None:
-        try:
-            if self._pub_cmd is not None and self._pub_cmd.get_subscription_count() > 0:
-                self._pub_cmd.wait_for_all_acked(Duration(seconds=VENT_ACK_TIMEOUT_S))
-        except Exception:  # noqa: BLE001 - best effort on the way out
-            pass
+            # under the lock: no solve result can be published after the vent
+            what = f'{why}: vent command (0 Pa gauge)'
+            if wait_acked:
+                self.last_vent_acked = publish_and_wait_acked(self, self._pub_cmd, msg, what,
+                                                              VENT_ACK_TIMEOUT_S)
+            else:
+                self._pub_cmd.publish(msg)
+                self.get_logger().info(f'{what} published')
+        self.get_logger().info(f'{why}: commands disabled')
 
     def _release(self) -> None:
         with self._lock:
@@ -237,9 +299,9 @@ class InverseKinetostaticNode(LifecycleNode):
         if self._worker is not None:
             self._worker.stop()
             self._worker = None
-        for attr, destroy in (('_sub', self.destroy_subscription), ('_pub_cmd', self.destroy_publisher),
-                              ('_pub_pose', self.destroy_publisher),
-                              ('_pub_diag', self.destroy_publisher)):
+        for attr, destroy in (('_sub', self.destroy_subscription),
+                              ('_pub_cmd', self.destroy_publisher),
+                              ('_pub_pose', self.destroy_publisher)):
             ent = getattr(self, attr)
             if ent is not None:
                 destroy(ent)
@@ -253,6 +315,43 @@ class InverseKinetostaticNode(LifecycleNode):
             self.trigger_shutdown()
         except Exception as exc:  # noqa: BLE001 - already finalized etc.
             self.get_logger().debug(f'shutdown transition: {exc}')
+
+    def destroy_node(self):
+        """Stop the worker, then destroy the node."""
+        if self._worker is not None:
+            self._worker.stop()
+        return super().destroy_node()
+
+    # ---------------------------------------------------------- heartbeat
+    def _heartbeat_status(self) -> tuple:
+        """Base heartbeat: lifecycle state, robot, solve statistics, counters."""
+        state = self.lifecycle_state()
+        cfg = self._cfg
+        values = {
+            'lifecycle_state': state,
+            'robot': cfg.name if cfg is not None else '',
+            'robot_config': self.get_parameter('robot_config').value,
+            'pressure_unit': self._unit(),
+            'payload_kg': self.get_parameter('payload_kg').value,
+        }
+        values.update(solve_values(self.solve_stats))
+        values.update({f'targets_{k}': v for k, v in self.stats.items()})
+        if self.last_vent_acked is not None:
+            values['last_vent_acked'] = str(self.last_vent_acked).lower()
+        if state == 'active':
+            level, message = DiagnosticStatus.OK, 'active: pressure commands enabled'
+            last_ok = self.solve_stats.summary()['last_ok']
+            if last_ok is False:
+                level, message = DiagnosticStatus.WARN, 'active; the last solve failed'
+        elif state == 'inactive':
+            level, message = DiagnosticStatus.OK, 'inactive: pressure commands disabled'
+        elif self._configure_error:
+            level = DiagnosticStatus.ERROR
+            message = (f'unconfigured: configure failed ({self._configure_error}); '
+                       + common.configure_failed_hint(self._node_path()))
+        else:
+            level, message = DiagnosticStatus.WARN, f'{state}: no pressure commands'
+        return level, message, values
 
     @property
     def is_active(self) -> bool:
@@ -303,8 +402,8 @@ class InverseKinetostaticNode(LifecycleNode):
         self.stats['failed'] += 1
         self.get_logger().error(f'inverse solve raised {type(exc).__name__}: {exc}',
                                 throttle_duration_sec=WARN_THROTTLE_S)
-        self._publish_diag(DiagnosticStatus.ERROR, f'solver exception: {type(exc).__name__}: {exc}',
-                           {})
+        self._publish_diag(DiagnosticStatus.ERROR,
+                           f'solver exception: {type(exc).__name__}: {exc}', {})
 
     def _solve(self, item) -> None:
         pos, z, stamp, _t_recv = item
@@ -318,6 +417,7 @@ class InverseKinetostaticNode(LifecycleNode):
             inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm)
         except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
             dt = time.perf_counter() - t0
+            self.solve_stats.record(dt, ok=False)
             self.stats['failed'] += 1
             self.get_logger().error(f'inverse solve raised {type(exc).__name__}: {exc}',
                                     throttle_duration_sec=WARN_THROTTLE_S)
@@ -327,17 +427,16 @@ class InverseKinetostaticNode(LifecycleNode):
             return
         dt = time.perf_counter() - t0
         self.stats['solved'] += 1
-        self.solve_times_s.append(dt)
-        if len(self.solve_times_s) > 10000:
-            del self.solve_times_s[:5000]
         fw = inv.forward
         usable = fw is not None and fw.converged and fw.stable is not False
+        self.solve_stats.record(dt, ok=usable)
         values = {
             'solve_time_ms': f'{dt * 1e3:.3f}',
             'iterations': inv.iterations,
             'residual_norm': 'nan' if fw is None else f'{fw.residual_norm:.3e}',
             'position_error_m': f'{inv.position_error_m:.3e}',
-            'angle_error_rad': 'n/a' if inv.angle_error_rad is None else f'{inv.angle_error_rad:.3e}',
+            'angle_error_rad': ('n/a' if inv.angle_error_rad is None
+                                else f'{inv.angle_error_rad:.3e}'),
             'reachable': str(bool(inv.reachable)).lower(),
             'active_limits': ' '.join(str(int(v)) for v in inv.active_limits),
             'status': inv.status,

@@ -1,13 +1,18 @@
-"""rclpy helpers shared by the nodes: QoS profiles, parameter descriptors,
-message builders, and the start-up / spin / shutdown idiom.
+"""rclpy helpers shared by the nodes.
 
-The pure (rclpy-free) helpers live in :mod:`bellow_ancf_ros.nodes.common`.
+QoS profiles, checked parameter declaration, message builders, the 1 Hz
+status heartbeat, the vent-acknowledgement wait, and the start-up / spin /
+shutdown idiom of every node executable.  The pure (rclpy-free) helpers live
+in :mod:`bellow_ancf_ros.nodes.common`.
 """
 
 from __future__ import annotations
 
+import math
 import signal
+import sys
 import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -16,30 +21,56 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (
     FloatingPointRange,
+    IntegerRange,
     ParameterDescriptor,
+    ParameterType,
     SetParametersResult,
+)
+from rclpy.duration import Duration
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
 )
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from ..core import ConfigError
 from ..core.solver import limit_blas_threads
 from . import common
 
 __all__ = [
-    'QOS_DEPTH', 'REFUSAL_DIAG_INTERVAL_S', 'WARN_THROTTLE_S', 'Refusals', 'command_qos', 'descriptor',
-    'publish_diagnostic',
-    'diagnostic_status', 'diagnostics_qos', 'guard_parameters', 'init_rclpy', 'main_for', 'pose_message',
-    'pressure_message', 'run_node',
+    'HEARTBEAT_PERIOD_S', 'QOS_DEPTH', 'REFUSAL_DIAG_INTERVAL_S', 'STARTUP_ERROR_EXIT',
+    'VENT_ACK_TIMEOUT_S', 'WARN_THROTTLE_S', 'Heartbeat', 'Refusals', 'StartupParameterError',
+    'allowed_values', 'command_qos', 'declare', 'descriptor', 'diagnostic_status',
+    'diagnostics_qos', 'guard_parameters', 'init_rclpy', 'main_for', 'pose_message',
+    'pressure_message', 'publish_and_wait_acked', 'publish_diagnostic', 'run_node',
 ]
 
 QOS_DEPTH = 5
 WARN_THROTTLE_S = 2.0
 #: Minimum interval between two WARN diagnostics of the same refusal reason [s].
 REFUSAL_DIAG_INTERVAL_S = 0.1
+#: Period of the status heartbeat on ``/diagnostics`` [s] (diagnostic_updater's default).
+HEARTBEAT_PERIOD_S = 1.0
+#: Longest wait for the matched subscribers to acknowledge the vent command on shutdown [s].
+#: Fast DDS readers acknowledge on the writer's heartbeat (every 3 s by default), so
+#: an acknowledgement takes up to about 3 s; 4 s stays below ``ros2 launch``'s 5 s
+#: between SIGINT and SIGTERM.
+VENT_ACK_TIMEOUT_S = 4.0
+#: Exit status of a node executable that cannot start with its parameters.
+STARTUP_ERROR_EXIT = 2
+
+_TYPE_NAMES = {
+    ParameterType.PARAMETER_BOOL: 'true or false',
+    ParameterType.PARAMETER_INTEGER: 'an integer',
+    ParameterType.PARAMETER_DOUBLE: 'a floating-point number (write 1.0, not 1)',
+    ParameterType.PARAMETER_STRING: 'a string',
+}
 
 
+# ------------------------------------------------------------------ QoS
 def command_qos() -> QoSProfile:
     """Reliable, keep-last, depth :data:`QOS_DEPTH` (targets, pressures, poses)."""
     return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
@@ -47,23 +78,121 @@ def command_qos() -> QoSProfile:
 
 
 def diagnostics_qos() -> QoSProfile:
+    """Reliable, keep-last 10 (``/diagnostics``)."""
     return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                       depth=10)
+
+
+# ------------------------------------------------------------ parameters
+class StartupParameterError(ValueError):
+    """A parameter value given at start-up that the node cannot run with.
+
+    ``str()`` is one line naming the parameter, the value and what is allowed.
+    """
+
+    def __init__(self, name: str, value: Any, allowed: str, reason: str = '') -> None:
+        self.name, self.value, self.allowed, self.reason = name, value, allowed, reason
+        text = f'parameter {name} = {value!r} is not allowed'
+        if reason:
+            text += f' ({reason})'
+        super().__init__(f'{text}; allowed: {allowed}')
 
 
 def descriptor(description: str, ptype: int, *, lo: float | None = None,
                hi: float | None = None, read_only: bool = False,
                constraints: str = '') -> ParameterDescriptor:
-    """A ParameterDescriptor with description, optional range and constraints text."""
+    """Build a ParameterDescriptor with description, optional range and constraints text.
+
+    ``lo``/``hi`` give a floating-point range for doubles and an integer range
+    for integers.
+    """
     d = ParameterDescriptor(description=description, type=ptype, read_only=read_only,
                             additional_constraints=constraints)
     if lo is not None and hi is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi),
-                                                     step=0.0)]
+        if ptype == ParameterType.PARAMETER_INTEGER:
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+        else:
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo),
+                                                         to_value=float(hi), step=0.0)]
     return d
 
 
+def allowed_values(d: ParameterDescriptor) -> str:
+    """What a descriptor allows, in words: type, range and constraints."""
+    parts = [_TYPE_NAMES.get(d.type, 'a value')]
+    if d.floating_point_range:
+        r = d.floating_point_range[0]
+        parts.append(f'from {r.from_value:g} to {r.to_value:g}')
+    if d.integer_range:
+        r = d.integer_range[0]
+        parts.append(f'from {r.from_value} to {r.to_value}')
+    if d.additional_constraints:
+        parts.append(d.additional_constraints)
+    return ', '.join(parts)
+
+
+def _override_value(node, name: str) -> Any:
+    """The start-up value given for ``name`` (params file or ``-p``), or None."""
+    p = getattr(node, '_parameter_overrides', {}).get(name)
+    return None if p is None else p.value
+
+
+def declare(node, name: str, default: Any, d: ParameterDescriptor) -> Any:
+    """Declare a parameter; a bad start-up value raises :class:`StartupParameterError`.
+
+    rclpy raises its own exceptions for a value outside the descriptor's range
+    or of the wrong type; this turns them into one line with the allowed values.
+    Returns the parameter's value.
+    """
+    try:
+        return node.declare_parameter(name, default, d).value
+    except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+        value = _override_value(node, name)
+        reason = 'wrong type' if isinstance(exc, InvalidParameterTypeException) else ''
+        raise StartupParameterError(name, value, allowed_values(d), reason) from None
+
+
+def _descriptor_of(node, name: str) -> ParameterDescriptor | None:
+    try:
+        return node.describe_parameter(name)
+    except Exception:  # noqa: BLE001 - not declared
+        return None
+
+
+def guard_parameters(node, names: Sequence[str],
+                     extra_check: Callable[[Any], str] | None = None) -> None:
+    """Check the start-up values of ``names``; refuse bad run-time changes of any parameter.
+
+    Uses :func:`common.parameter_problem`.  A bad start-up value raises
+    :class:`StartupParameterError`; a refused ``ros2 param set`` fails with
+    the reason (and a warning in the log) and the old value stays.
+    ``extra_check(parameter)`` may refuse further changes (returns the reason,
+    or '' to accept), e.g. parameters that cannot change in the current
+    lifecycle state.
+    """
+    for name in names:
+        value = node.get_parameter(name).value
+        reason = common.parameter_problem(name, value)
+        if reason:
+            d = _descriptor_of(node, name)
+            raise StartupParameterError(name, value, allowed_values(d) if d else '', reason)
+
+    def on_set(params) -> SetParametersResult:
+        for p in params:
+            reason = common.parameter_problem(p.name, p.value)
+            if not reason and extra_check is not None:
+                reason = extra_check(p)
+            if reason:
+                node.get_logger().warning(f'refused parameter change: {reason}')
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
+
+
+# ------------------------------------------------------------- messages
 def pose_message(position: Any, quaternion: Any, frame_id: str, stamp) -> PoseStamped:
+    """Build a PoseStamped from a position (3,) and a quaternion ``(x, y, z, w)``."""
     msg = PoseStamped()
     msg.header.frame_id = frame_id
     msg.header.stamp = stamp
@@ -88,6 +217,7 @@ def pressure_message(pressures_pa: Any, unit: str) -> Float64MultiArray:
 
 def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
                       values: dict) -> DiagnosticStatus:
+    """Build a DiagnosticStatus with the key/values of ``values`` (as strings)."""
     st = DiagnosticStatus()
     st.name = name
     st.hardware_id = hardware_id
@@ -97,78 +227,9 @@ def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
     return st
 
 
-def _sigterm_to_keyboard_interrupt(signum, frame):  # pragma: no cover - signal path
-    raise KeyboardInterrupt
-
-
-def run_node(node, before_destroy=None) -> None:
-    """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
-
-    ``before_destroy(node)`` runs while the context is still valid (vent).
-    """
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        try:
-            if before_destroy is not None and rclpy.ok():
-                before_destroy(node)
-        finally:
-            executor.remove_node(node)
-            node.destroy_node()
-            rclpy.try_shutdown()
-
-
-def init_rclpy(args=None) -> None:
-    """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt."""
-    limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _sigterm_to_keyboard_interrupt)
-
-
-def guard_parameters(node, names) -> None:
-    """Check the start-up values of ``names`` and refuse bad run-time changes of any parameter.
-
-    Uses :func:`common.parameter_problem`; a refused ``ros2 param set`` fails with the
-    reason (and a warning in the log) and the old value stays.
-    """
-    for name in names:
-        reason = common.parameter_problem(name, node.get_parameter(name).value)
-        if reason:
-            raise ValueError(f'parameter {name}: {reason}')
-
-    def on_set(params) -> SetParametersResult:
-        for p in params:
-            reason = common.parameter_problem(p.name, p.value)
-            if reason:
-                node.get_logger().warning(f'refused parameter change: {reason}')
-                return SetParametersResult(successful=False, reason=reason)
-        return SetParametersResult(successful=True)
-
-    node.add_on_set_parameters_callback(on_set)
-
-
-def main_for(node_class, before_destroy=None):
-    """``main(args=None)`` of a node executable: init, construct, spin, clean up."""
-    def main(args=None) -> None:
-        init_rclpy(args)
-        try:
-            node = node_class()
-        except Exception:
-            rclpy.try_shutdown()
-            raise
-        run_node(node, before_destroy=before_destroy)
-    return main
-
-
 def publish_diagnostic(node, pub, name: str, hardware_id: str, level: bytes, message: str,
                        values: dict) -> None:
-    """Publish one DiagnosticStatus on ``pub`` (no-op without a publisher or once it is destroyed)."""
+    """Publish one DiagnosticStatus on ``pub`` (no-op without a publisher or once destroyed)."""
     if pub is None:
         return
     arr = DiagnosticArray()
@@ -180,19 +241,217 @@ def publish_diagnostic(node, pub, name: str, hardware_id: str, level: bytes, mes
         pass
 
 
+def publish_and_wait_acked(node, pub, msg, what: str,
+                           timeout_s: float = VENT_ACK_TIMEOUT_S) -> bool:
+    """Publish ``msg`` on a reliable publisher and wait until every matched subscriber acked.
+
+    Waits at most ``timeout_s`` (rclpy ``Publisher.wait_for_all_acked``), for
+    a message that must arrive before the process exits.  Logs a warning
+    naming ``what`` when a subscriber did not acknowledge in time; returns
+    whether all did (True without subscribers).
+    """
+    pub.publish(msg)
+    n = pub.get_subscription_count()
+    if n == 0:
+        node.get_logger().info(f'{what} published (no subscriber matched)')
+        return True
+    t0 = time.monotonic()
+    try:
+        ok = bool(pub.wait_for_all_acked(Duration(seconds=timeout_s)))
+    except Exception as exc:  # noqa: BLE001 - e.g. the context is going down
+        node.get_logger().warning(f'{what}: could not wait for acknowledgement: {exc}')
+        return False
+    dt = time.monotonic() - t0
+    if ok:
+        node.get_logger().info(f'{what} acknowledged by all {n} matched subscriber(s) '
+                               f'in {dt * 1e3:.1f} ms')
+    else:
+        node.get_logger().warning(f'{what} NOT acknowledged by all {n} matched subscriber(s) '
+                                  f'within {timeout_s:g} s: a subscriber may have missed it')
+    return ok
+
+
+# ------------------------------------------------------------ heartbeat
+class Heartbeat:
+    """Periodic node status on ``/diagnostics`` (1 Hz), like diagnostic_updater.
+
+    Every period one DiagnosticStatus named ``'<node>: status'`` is published
+    with the level, message and key/values of ``status()`` (a callable
+    returning ``(level, message, values)``) merged with those of every
+    source added by :meth:`add_source`.  A source is a callable returning
+    either a dict of key/values, or ``(level, message, values)``: its level
+    raises the status level (OK < WARN < ERROR), its message is appended.
+    This is how a node part adds its own fields (e.g. a feedback state)
+    without touching the node's base status.
+    """
+
+    def __init__(self, node, pub, status: Callable[[], tuple],
+                 hardware_id: Callable[[], str], period_s: float = HEARTBEAT_PERIOD_S) -> None:
+        self.node, self.pub = node, pub
+        self._status, self._hardware_id = status, hardware_id
+        self._sources: list = []
+        self.published = 0
+        self.name = f'{node.get_name()}: status'
+        self._timer = node.create_timer(period_s, self.publish)
+
+    def add_source(self, source: Callable[[], Any]) -> None:
+        """Add a callable contributing key/values (and optionally a level) to every beat."""
+        self._sources.append(source)
+
+    def compose(self) -> tuple:
+        """The current ``(level, message, values)`` with every source merged in."""
+        level, message, values = self._status()
+        values = dict(values)
+        for source in self._sources:
+            try:
+                extra = source()
+            except Exception as exc:  # noqa: BLE001 - one bad source must not stop the beat
+                level = max(level, DiagnosticStatus.WARN)
+                values[f'source_error_{len(values)}'] = f'{type(exc).__name__}: {exc}'
+                continue
+            if isinstance(extra, tuple):
+                lvl, msg, extra = extra
+                level = max(level, lvl)
+                if msg:
+                    message = f'{message}; {msg}' if message else msg
+            values.update(extra or {})
+        return level, message, values
+
+    def publish(self) -> None:
+        """Publish one status now (the timer calls this every period)."""
+        level, message, values = self.compose()
+        publish_diagnostic(self.node, self.pub, self.name, self._hardware_id(), level, message,
+                           values)
+        self.published += 1
+
+
+def solve_values(stats: common.SolveStats) -> dict:
+    """Heartbeat key/values of a :class:`common.SolveStats` (times in ms, age in s)."""
+    s = stats.summary()
+
+    def ms(v):
+        return 'n/a' if v is None or not math.isfinite(v) else f'{v * 1e3:.3f}'
+    age = s['last_solve_age_s']
+    return {
+        'solves': s['count'],
+        'last_solve_age_s': 'never' if age is None else f'{age:.3f}',
+        'last_solve_ok': 'n/a' if s['last_ok'] is None else str(s['last_ok']).lower(),
+        'solve_ms_last': ms(s['last_s']),
+        'solve_ms_median': ms(s['median_s']),
+        'solve_ms_p95': ms(s['p95_s']),
+        'solve_ms_max': ms(s['max_s']),
+        'solve_stats_window': s['window'],
+    }
+
+
 class Refusals:
-    """Reporting of refused inputs: a throttled warning always, a WARN diagnostic at most
-    every :data:`REFUSAL_DIAG_INTERVAL_S` per reason (a flood of bad input cannot flood
-    ``/diagnostics``).  ``what`` names the input (``targets``, ``pressures``)."""
+    """Reporting of refused inputs: a throttled warning always, a WARN diagnostic rate-limited.
+
+    At most one WARN diagnostic every :data:`REFUSAL_DIAG_INTERVAL_S` per
+    reason (a flood of bad input cannot flood ``/diagnostics``).  ``what``
+    names the input (``targets``, ``pressures``).
+    """
 
     def __init__(self, node, what: str, publish_diag) -> None:
         self.node, self.what, self.publish_diag = node, what, publish_diag
         self._last = ('', 0.0)
 
     def report(self, reason: str, total: int) -> None:
-        self.node.get_logger().warning(f'{self.what} refused: {reason}', throttle_duration_sec=WARN_THROTTLE_S)
+        """Log and report one refusal (``total``: refusals so far)."""
+        self.node.get_logger().warning(f'{self.what} refused: {reason}',
+                                       throttle_duration_sec=WARN_THROTTLE_S)
         now = time.monotonic()
         if reason != self._last[0] or now - self._last[1] >= REFUSAL_DIAG_INTERVAL_S:
             self._last = (reason, now)
             self.publish_diag(DiagnosticStatus.WARN, f'{self.what} refused: {reason}',
                               {f'refused_{self.what}': total})
+
+
+# --------------------------------------------------------- run / signals
+class _ShuttingDown:
+    """SIGINT/SIGTERM handler during shutdown: a repeated signal must not cut the vent short."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def __call__(self, signum, frame) -> None:  # pragma: no cover - signal path
+        self.count += 1
+
+
+def _ignore_further_signals() -> _ShuttingDown:
+    handler = _ShuttingDown()
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return handler
+
+
+def _first_signal(signum, frame):  # pragma: no cover - signal path
+    """First SIGINT/SIGTERM: stop spinning (KeyboardInterrupt); later ones are only counted."""
+    _ignore_further_signals()
+    raise KeyboardInterrupt
+
+
+def run_node(node, before_destroy=None) -> None:
+    """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
+
+    ``before_destroy(node)`` runs while the context is still valid (vent).
+    From the first signal on, further SIGINT/SIGTERM are counted, not raised:
+    ``ros2 launch`` and a terminal may both deliver SIGINT, and a second one
+    must not interrupt the vent or its acknowledgement wait (which is bounded).
+    """
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        _ignore_further_signals()
+        try:
+            if before_destroy is not None and rclpy.ok():
+                before_destroy(node)
+        finally:
+            executor.remove_node(node)
+            node.destroy_node()
+            rclpy.try_shutdown()
+
+
+def init_rclpy(args=None) -> None:
+    """Initialise rclpy without its signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt.
+
+    The first signal raises KeyboardInterrupt and makes every later one a
+    no-op, so that a second Ctrl-C (terminal and ``ros2 launch`` both send
+    one) cannot interrupt the vent on the way out.
+    """
+    limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _first_signal)
+    signal.signal(signal.SIGTERM, _first_signal)
+
+
+def main_for(node_class, before_destroy=None, node_name: str | None = None):
+    """Build ``main(args=None)`` of a node executable: init, construct, spin, clean up.
+
+    A start-up parameter the node cannot run with (:class:`StartupParameterError`,
+    or a robot file that does not load) ends the process with one line on
+    stderr and exit status :data:`STARTUP_ERROR_EXIT`, no traceback.
+    """
+    name = node_name or getattr(node_class, 'NODE_NAME', node_class.__name__)
+
+    def main(args=None) -> None:
+        init_rclpy(args)
+        try:
+            node = node_class()
+        except (StartupParameterError, ConfigError) as exc:
+            rclpy.try_shutdown()
+            print(f'[{name}] cannot start: {exc}', file=sys.stderr, flush=True)
+            sys.exit(STARTUP_ERROR_EXIT)
+        except KeyboardInterrupt:
+            rclpy.try_shutdown()
+            return
+        except Exception:
+            rclpy.try_shutdown()
+            raise
+        run_node(node, before_destroy=before_destroy)
+    return main

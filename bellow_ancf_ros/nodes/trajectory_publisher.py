@@ -16,6 +16,9 @@ Parameters (all with descriptors): ``trajectory``, ``rate_hz``, ``period_s``
 one period), ``start_delay_s`` (time to wait before the first target, e.g. for
 the controller to come up).  Trajectory parameters may be changed at run
 time; an invalid combination is refused with the reason and the old one stays.
+A bad start-up value ends the process with one line naming the parameter, the
+value and what is allowed (exit status 2).  ``/diagnostics`` carries a 1 Hz
+heartbeat ``'<node>: status'`` (trajectory, targets published, finished).
 """
 
 from __future__ import annotations
@@ -24,16 +27,21 @@ import time
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
 
-from ..core import load_robot
+from ..core import ConfigError, load_robot
 from ..core.trajectories import TRAJECTORY_NAMES, trajectory, trajectory_parameters
 from . import common
 from .ros_util import (
+    Heartbeat,
+    StartupParameterError,
     command_qos,
+    declare,
     descriptor,
+    diagnostics_qos,
     main_for,
     pose_message,
 )
@@ -46,41 +54,58 @@ _TRAJ_PARAMS = ('trajectory', 'period_s', 'radius_m', 'height_m', 'bending_angle
 class TrajectoryPublisher(Node):
     """Publishes target poses along a reference trajectory."""
 
-    def __init__(self, node_name: str = 'trajectory_publisher', **kwargs: Any) -> None:
+    NODE_NAME = 'trajectory_publisher'
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
                    ParameterType.PARAMETER_BOOL)
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
+        declare(self, 'robot_config', 'one_segment', descriptor(
             'Robot description (shipped name or YAML path); sets the default trajectory size. '
             'Read at start-up.', S, read_only=True))
-        self.declare_parameter('trajectory', 'planar_circle', descriptor(
+        declare(self, 'trajectory', 'planar_circle', descriptor(
             'Trajectory name: ' + ', '.join(TRAJECTORY_NAMES) + ' (bending_circle: two or more '
             'segments only).', S, constraints='one of: ' + ', '.join(TRAJECTORY_NAMES)))
-        self.declare_parameter('rate_hz', 10.0, descriptor(
+        declare(self, 'rate_hz', 10.0, descriptor(
             'Publishing rate [Hz] (read at start-up).', D, lo=0.1, hi=1000.0, read_only=True))
-        self.declare_parameter('period_s', 0.0, descriptor(
+        declare(self, 'period_s', 0.0, descriptor(
             'Trajectory period [s]; 0 = the default (quasi-static speed, about 2 mm/s).', D,
             lo=0.0, hi=3600.0))
-        self.declare_parameter('radius_m', 0.0, descriptor(
+        declare(self, 'radius_m', 0.0, descriptor(
             'Trajectory radius [m]; 0 = the default for the robot.', D, lo=0.0, hi=1.0))
-        self.declare_parameter('height_m', 0.0, descriptor(
+        declare(self, 'height_m', 0.0, descriptor(
             'Height of the trajectory centre above the base [m]; 0 = the default.', D,
             lo=0.0, hi=10.0))
-        self.declare_parameter('bending_angle_deg', 0.0, descriptor(
+        declare(self, 'bending_angle_deg', 0.0, descriptor(
             'Bending angle of bending_circle [deg]: angle between the end-effector z-axis and '
             'the base z-axis, tilted radially outward (paper: 0, 10, 20). Two or more segments.',
             D, lo=0.0, hi=60.0))
-        self.declare_parameter('base_frame', 'base', descriptor(
+        declare(self, 'base_frame', 'base', descriptor(
             'frame_id of the published targets (robot base).', S))
-        self.declare_parameter('loop', True, descriptor(
+        declare(self, 'loop', True, descriptor(
             'Repeat the trajectory; false: stop publishing after one period.', B))
-        self.declare_parameter('start_delay_s', 0.0, descriptor(
+        declare(self, 'start_delay_s', 0.0, descriptor(
             'Wait this long after start-up before publishing [s].', D, lo=0.0, hi=3600.0))
 
-        self.cfg = load_robot(self.get_parameter('robot_config').value)
-        self._kwargs = self._trajectory_kwargs({})   # raises ValueError on a bad start-up set
+        robot = self.get_parameter('robot_config').value
+        try:
+            self.cfg = load_robot(robot)
+        except ConfigError as exc:
+            raise StartupParameterError(
+                'robot_config', robot, 'a shipped robot name or a robot YAML path',
+                str(exc)) from None
+        try:
+            self._kwargs = self._trajectory_kwargs({})
+        except (ValueError, TypeError) as exc:
+            name = self.get_parameter('trajectory').value
+            raise StartupParameterError(
+                'trajectory', name, 'one of ' + ', '.join(TRAJECTORY_NAMES)
+                + ' with valid trajectory parameters', str(exc)) from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._pub = self.create_publisher(PoseStamped, 'target_pose', command_qos())
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
+                                   lambda: self.cfg.name)
         self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
         self.published = 0
         self.finished = False
@@ -90,6 +115,14 @@ class TrajectoryPublisher(Node):
             f"publishing {self.get_parameter('trajectory').value!r} for robot {self.cfg.name!r} "
             f'at {rate:g} Hz: {self._describe()}')
 
+    def _heartbeat_status(self) -> tuple:
+        """Heartbeat: trajectory, its parameters, targets published, finished."""
+        values = {'robot': self.cfg.name, 'trajectory': self._kwargs['name'],
+                  'targets_published': self.published, 'finished': str(self.finished).lower(),
+                  'parameters': self._describe()}
+        message = 'finished (loop is false)' if self.finished else 'publishing'
+        return DiagnosticStatus.OK, message, values
+
     def _effective(self) -> dict:
         """The trajectory parameters in use (defaults with the overrides applied)."""
         kw = dict(self._kwargs)
@@ -98,9 +131,11 @@ class TrajectoryPublisher(Node):
 
     def _describe(self) -> str:
         p = self._effective()
-        return (f"period {p['period']:g} s, radius {p['radius'] * 1e3:.2f} mm, centre height "
-                f"{p['center'][2] * 1e3:.2f} mm"
-                + (f", bending angle {p['bending_angle_deg']:g} deg" if 'bending_angle_deg' in p else ''))
+        text = (f"period {p['period']:g} s, radius {p['radius'] * 1e3:.2f} mm, centre height "
+                f"{p['center'][2] * 1e3:.2f} mm")
+        if 'bending_angle_deg' in p:
+            text += f", bending angle {p['bending_angle_deg']:g} deg"
+        return text
 
     def _trajectory_kwargs(self, override: dict) -> dict:
         """Trajectory keyword arguments from the parameters (``override``: name -> new value)."""
