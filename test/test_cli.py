@@ -485,7 +485,7 @@ def test_negative_target_and_axis_components_parse(capsys, two):
     assert code == 0, err
     d = one_json(out)
     assert d['reachable'] and d['target_position_m'] == [-1e-3, 0.0, 0.095]
-    fw = solve_forward(two, [40e3, 60e3, 0.0, 0.0, 20e3, 20e3])
+    fw = solve_forward(two, [100e3, 0.0, 0.0, 60e3, 0.0, 0.0])  # bends towards -x
     z = fw.z_axis * 100  # any length is a direction
     code, out, err = run(capsys, 'inverse', '--config', 'two_segment', '--position', *nums(fw.position),
                          '--z-axis', *[f'{v:.17e}' for v in z], '--json')

@@ -201,3 +201,17 @@ def test_bad_pressures_are_refused(one, bad, match):
 def test_bad_payload_is_refused(one):
     with pytest.raises(ValueError, match="payload"):
         solve_forward(one, np.zeros(3), payload_kg=-0.1)
+
+
+def test_iteration_and_time_budgets_are_reported(two):
+    from bellow_ancf_ros.core import solver
+    p = _extreme(two)
+    fw = solve_forward(two, p, payload_kg=0.1, max_iter=2, iteration_budget=5)
+    assert not fw.converged and fw.status == solver.ITERATION_BUDGET and fw.iterations <= 5
+    assert "iteration budget" in fw.message
+    fw = solve_forward(two, p, payload_kg=0.1, time_budget_s=1e-6)
+    assert not fw.converged and fw.status == solver.TIME_BUDGET and "wall-clock" in fw.message
+    full = solve_forward(two, p, payload_kg=0.1, time_budget_s=60.0)
+    assert full.success and full.iterations < 500  # the default budget leaves room
+    with pytest.raises(ValueError, match="time_budget_s"):
+        solve_forward(two, p, time_budget_s=-1.0)
