@@ -510,3 +510,11 @@ def test_closed_pipe_ends_quietly(tmp_path):
     assert proc.returncode == 0
     assert len(json_lines(proc.stdout)) == 1
     assert proc.stderr == ''
+
+
+def test_element_count_that_cannot_carry_the_plates_is_refused(capsys):
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', '0', '0', '0', '--elements', '2')
+    assert code == 2 and out == ''
+    assert_one_line_error(err, '--elements', 'model.n_elements', 'smallest count that works is 3')
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', '0', '0', '0', '--elements', '3', '--json')
+    assert code == 0, err
