@@ -94,22 +94,21 @@ def main(argv=None):
     )
     args = ap.parse_args(argv)
     limit_blas_threads()
-    print(
-        f"inverse fuzz run, seed {args.seed}, {args.targets} targets per robot, each cold and warm-started"
-    )
+    print(f"inverse fuzz run, seed {args.seed}, {args.targets} targets per robot, "
+          "each cold and warm-started")
     print(
         f"{'robot':<12} {'solves':>6} {'median':>9} {'p99':>9} {'worst':>9}  worst case; statuses"
     )
     for name in ("one_segment", "two_segment"):
         r = run(name, args.targets, args.seed)
         print(
-            f"{r['robot']:<12} {r['solves']:>6} {r['median_s'] * 1e3:7.1f}ms {r['p99_s'] * 1e3:7.1f}ms "
-            f"{r['worst_s'] * 1e3:7.1f}ms  {r['worst_case']}; {r['statuses']}",
+            f"{r['robot']:<12} {r['solves']:>6} {r['median_s'] * 1e3:7.1f}ms "
+            f"{r['p99_s'] * 1e3:7.1f}ms {r['worst_s'] * 1e3:7.1f}ms  "
+            f"{r['worst_case']}; {r['statuses']}",
             flush=True,
         )
-    print(
-        "statuses: 0 reached, 1 unreachable (best in-limit answer), 6 unstable, 7/8 budget exhausted"
-    )
+    print("statuses: 0 reached, 1 unreachable (best in-limit answer), 6 unstable, "
+          "7/8 budget exhausted")
     return 0
 
 

@@ -447,7 +447,7 @@ def test_plates_too_close_for_any_count_name_the_fractions(one):
     ([], [1, 2, 3]),
 ])
 def test_every_accepted_count_matches_a_fine_reference(one_cfg, fractions, accepted):
-    """Accepted counts are accurate (< 0.5 mm at the extremes); the refused ones below them are not."""
+    """Accepted counts are accurate (< 0.5 mm at the extremes); the smaller ones are refused."""
     from bellow_ancf_ros.core import RobotModel, solve_forward
     seg = dataclasses.replace(one_cfg.segments[0], plate_fractions=tuple(fractions))
     cfg = one_cfg.replace(segments=(seg,))

@@ -127,13 +127,14 @@ def _objective(model, fw, position, z_axis):
 
 
 def test_orientation_rows_tell_z_from_minus_z(two):
-    """An axis outside the reachable cone gets the best answer by eq. 28, not a point pointing away."""
+    """An axis outside the reachable cone gets the best answer by eq. 28, not one pointing away."""
     fw = solve_forward(two, [100e3, -50e3, -50e3, 100e3, -50e3, -50e3])
     down = np.array([0.0, 0.0, -1.0])
     inv = solve_inverse(two, fw.position, z_axis=down)
     assert not inv.reachable and inv.status == 1
     # the pressures that made fw (0 mm, 133.7 deg) are a better answer than 32.6 mm and 174 deg
-    assert _objective(two, inv.forward, fw.position, down) <= _objective(two, fw, fw.position, down)
+    best = _objective(two, inv.forward, fw.position, down)
+    assert best <= _objective(two, fw, fw.position, down)
     assert np.degrees(inv.angle_error_rad) < 134.0
 
 
@@ -164,10 +165,12 @@ def test_redundant_answer_does_not_depend_on_the_start(two):
 
 def test_huge_targets_are_refused_with_the_reason(one):
     with pytest.raises(ValueError, match="robot lengths"):
-        solve_inverse(one, [2.9986933304112912e+221, -2.918861344136323e+220, -4.013089389107437e+221])
+        solve_inverse(one, [2.9986933304112912e+221, -2.918861344136323e+220,
+                            -4.013089389107437e+221])
     inv = solve_inverse(one, [50.0, 0.0, 0.0])  # far, but not absurd: a finite, true error
     assert not inv.reachable and np.isfinite(inv.position_error_m)
-    assert inv.position_error_m == pytest.approx(np.linalg.norm(inv.forward.position - [50.0, 0, 0]), rel=1e-12)
+    true_error = np.linalg.norm(inv.forward.position - [50.0, 0, 0])
+    assert inv.position_error_m == pytest.approx(true_error, rel=1e-12)
 
 
 @pytest.mark.parametrize("scale", [1e-13, 1e-300, 1e200])
@@ -189,7 +192,8 @@ def test_budgets_end_the_solve_with_a_clear_status(two):
         p = inv.pressures_pa
         assert np.all(np.isfinite(p)) and np.all(p >= two.cfg.p_min) and np.all(p <= two.cfg.p_max)
     inv = solve_inverse(two, *target, max_forward_solves=20)
-    assert inv.forward is not None and inv.forward.converged  # the best answer seen so far, honestly
-    assert inv.position_error_m == pytest.approx(np.linalg.norm(inv.forward.position - fw.position))
+    assert inv.forward is not None and inv.forward.converged  # the best answer so far, honestly
+    true_error = np.linalg.norm(inv.forward.position - fw.position)
+    assert inv.position_error_m == pytest.approx(true_error)
     with pytest.raises(ValueError, match="time_budget_s"):
         solve_inverse(two, *target, time_budget_s=0.0)

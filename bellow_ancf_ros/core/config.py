@@ -434,8 +434,8 @@ def plate_support_problem(fractions: Sequence[float], n: int, tol: float = 1e-9)
         changed = False
         for e in range(n):
             if len(per_element[e]) >= 3:
-                return (f'element {e + 1} of {n} (actuator fractions {e / n:.4g} to {(e + 1) / n:.4g}) '
-                        f'would be tied at {len(per_element[e])} points')
+                return (f'element {e + 1} of {n} (actuator fractions {e / n:.4g} to '
+                        f'{(e + 1) / n:.4g}) would be tied at {len(per_element[e])} points')
             if len(per_element[e]) != 2:
                 continue
             for k, nb in ((e, e - 1), (e + 1, e + 1)):
@@ -468,8 +468,8 @@ def _element_count_issue(segments: Sequence[SegmentConfig], n: int) -> tuple[str
                     f'plates at {fractions} are too close together for up to '
                     f'{_MAX_ELEMENTS_SEARCHED} elements per actuator')
         return ('model.n_elements',
-                f'{n} elements per actuator cannot carry the plates of segment {j + 1} at fractions '
-                f'{fractions}: {why}; the smallest count that works is {best}')
+                f'{n} elements per actuator cannot carry the plates of segment {j + 1} at '
+                f'fractions {fractions}: {why}; the smallest count that works is {best}')
     return None
 
 

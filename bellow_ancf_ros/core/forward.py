@@ -135,11 +135,12 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
     if warm is None:
         # cold start: straight guess at the target stretches, then continuation
         # from the exactly solved unloaded straight robot at lam = 1
-        res = solver.newton(make(lam, 1.0, payload), model.straight_state(lam), scale, tol, first_max,
-                            deadline=deadline)
+        res = solver.newton(make(lam, 1.0, payload), model.straight_state(lam), scale, tol,
+                            first_max, deadline=deadline)
         start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
     else:
-        res = solver.newton(make(lam, 1.0, payload), warm[0], scale, tol, first_max, deadline=deadline)
+        res = solver.newton(make(lam, 1.0, payload), warm[0], scale, tol, first_max,
+                            deadline=deadline)
         start = warm
     if res.converged or res.status == solver.TIME_BUDGET:
         return res
@@ -150,7 +151,8 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
         return make(lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0 + t * (payload - m0))
 
     left = None if iteration_budget is None else iteration_budget - first_iters
-    res = solver.continuation(make_t, x0, scale, tol, max_iter, iteration_budget=left, deadline=deadline)
+    res = solver.continuation(make_t, x0, scale, tol, max_iter, iteration_budget=left,
+                              deadline=deadline)
     res.iterations += first_iters
     return res
 

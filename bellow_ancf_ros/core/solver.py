@@ -55,7 +55,8 @@ def deadline_after(time_budget_s):
         return None
     budget = float(time_budget_s)
     if not budget > 0:  # also NaN
-        raise ValueError(f"time_budget_s must be a positive number of seconds or None, got {time_budget_s!r}")
+        raise ValueError("time_budget_s must be a positive number of seconds or None, "
+                         f"got {time_budget_s!r}")
     return time.perf_counter() + budget
 
 
@@ -76,7 +77,8 @@ class NewtonResult:
     jacobian: object = None  # Jacobian at x (when converged; factorised by whoever needs it)
 
 
-def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7, deadline=None):
+def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7,
+           deadline=None):
     """Damped Newton on ``fun(x, jacobian=True) -> Evaluation``.
 
     ``scale`` multiplies the residual component-wise; convergence when the
@@ -146,8 +148,8 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
             return NewtonResult(x, False, code, f"{MESSAGES[code]} at load fraction {t:.4g} "
                                 f"({total} Newton iterations)", total, np.inf, hist)
         tn = min(1.0, t + dt)
-        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=max_iter if left is None else min(max_iter, left),
-                     deadline=deadline)
+        its = max_iter if left is None else min(max_iter, left)
+        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=its, deadline=deadline)
         total += res.iterations
         if res.converged:
             t, x = tn, res.x
@@ -159,7 +161,8 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
             dt = min(2.0 * dt, 1.0 - t)
         elif res.status == TIME_BUDGET:
             res.iterations = total
-            res.message = f"{MESSAGES[TIME_BUDGET]} at load fraction {t:.4g} ({total} Newton iterations)"
+            res.message = (f"{MESSAGES[TIME_BUDGET]} at load fraction {t:.4g} "
+                           f"({total} Newton iterations)")
             return res
         else:
             dt *= 0.5
