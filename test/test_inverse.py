@@ -197,3 +197,12 @@ def test_budgets_end_the_solve_with_a_clear_status(two):
     assert inv.position_error_m == pytest.approx(true_error)
     with pytest.raises(ValueError, match="time_budget_s"):
         solve_inverse(two, *target, time_budget_s=0.0)
+
+
+def test_corners_are_computed_once_and_progress_survives_a_budget(one):
+    from bellow_ancf_ros.core.inverse import precompute_corners
+    payload = 0.0123
+    assert not precompute_corners(one, payload, time_budget_s=1e-9)  # nothing done yet
+    assert precompute_corners(one, payload)
+    inv = solve_inverse(one, [0.0, 0.0, -0.3], payload_kg=payload, max_forward_solves=60)
+    assert inv.status == 1 and inv.forward.converged  # the corners cost no forward solve now

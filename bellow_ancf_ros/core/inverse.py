@@ -44,6 +44,7 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,6 +74,7 @@ __all__ = [
     "TIME_BUDGET",
     "ITERATION_BUDGET",
     "MAX_TARGET_LENGTHS",
+    "precompute_corners",
 ]
 
 REACHED = 0
@@ -171,6 +173,21 @@ def _check_target(model, position, z_axis):
         raise ValueError("target z-axis must be a finite non-zero vector")
     z_axis = z_axis / m  # any finite non-zero vector is a direction, whatever its length
     return position, z_axis / np.linalg.norm(z_axis)
+
+
+def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None) -> bool:
+    """Solve the corners of the pressure box now (cached per model and payload); True when done.
+
+    The first unreachable target of a payload needs them (2**A forward solves:
+    8 for one segment, 64 for two).  A controller with a tight time budget
+    calls this once at start-up for its payload; otherwise the work is spread
+    over its first calls (progress is kept when a budget runs out).
+    """
+    try:
+        corner_solutions(model, float(payload_kg), Budget(time_budget_s, 2**model.A))
+    except OutOfBudget:
+        return False
+    return True
 
 
 def solve_inverse(
@@ -300,10 +317,11 @@ def solve_inverse(
 
 
 def _result(model, lam, fw, reached, iters, position, z_axis, status=None, note=""):
+    """Result for the stretches ``lam`` with their forward solution ``fw`` (stability assessed)."""
     cfg, st = model.cfg, model.stage1
     lo, hi = st.lam_min, st.lam_max
     pressures = np.clip(st.pressure(lam), cfg.p_min, cfg.p_max)
-    fw.pressures_pa = pressures
+    fw = dataclasses.replace(fw, pressures_pa=pressures)  # a copy: a warm start or cached corner
     assess_stability(fw)
     pe, ae = pose_errors(fw, position, z_axis)
     near = 1e-9 * (hi - lo)  # least squares keeps its iterates 1e-12 inside the box
