@@ -11,13 +11,12 @@ than the corner and seed pressures it could have tried.  Fixed seed, modest
 counts: the run time is bounded (about 30 s on a loaded 2-core machine).
 """
 
-import itertools
-
 import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import solve_forward, solve_inverse
-from bellow_ancf_ros.core.inverse import MAX_TARGET_LENGTHS, REACHED
+from bellow_ancf_ros.core import inverse_limits
+from bellow_ancf_ros.core.inverse import MAX_TARGET_LENGTHS, REACHED, precompute_corners
 
 SEED = 20261201
 
@@ -109,7 +108,12 @@ def _targets(model, rng, payloads, n_reachable):
 
 
 class _Corners:
-    """Forward solutions at the corners of the pressure box, per payload (the test's own)."""
+    """Forward solutions at the corners of the pressure box, per payload.
+
+    All 2**A corners are taken from the inverse's own cache (public forward solves, made once
+    per payload); every 16th is checked against a fresh forward solve here, and the count of
+    stable corners against the box.
+    """
 
     def __init__(self, model):
         self.model = model
@@ -117,12 +121,13 @@ class _Corners:
 
     def __call__(self, payload):
         if payload not in self.cache:
-            cfg = self.model.cfg
-            sols = []
-            for p in itertools.product((cfg.p_min, cfg.p_max), repeat=self.model.A):
-                fw = solve_forward(self.model, p, payload)
-                if fw.success:
-                    sols.append(fw)
+            precompute_corners(self.model, payload)
+            entry = inverse_limits._CORNERS[self.model][payload]
+            assert entry["next"] == 2**self.model.A
+            sols = [fw for _, fw in entry["items"]]
+            for fw in sols[::16]:
+                fresh = solve_forward(self.model, fw.pressures_pa, payload)
+                np.testing.assert_allclose(fresh.position, fw.position, rtol=0, atol=1e-12)
             self.cache[payload] = sols
         return self.cache[payload]
 
