@@ -84,6 +84,7 @@ TIME_BUDGET = solver.TIME_BUDGET  # 7 (UNSTABLE, 6, is shared with the forward p
 ITERATION_BUDGET = solver.ITERATION_BUDGET  # 8
 MAX_TARGET_LENGTHS = 1e3  # targets farther from the base than this many robot lengths are refused
 _RETRY_BELOW = 1e-4  # |O|^2/2 below which a stalled warm start is retried from the cold start
+_SURELY_OUT = 2.0  # targets this many times the largest reach away skip the exact iterations
 
 
 @dataclass
@@ -268,6 +269,11 @@ def solve_inverse(
             )
         if fw is not None:
             lam, reached, iters = fw.stretch, True, fw.iterations
+        elif norm(position) > _SURELY_OUT * _reach(model):
+            # far out of reach: straight to the best answer inside the limits (which would still
+            # find and polish an exact solution, were there one)
+            lam, fw, reached, iters = _best_answer(obj, [], warm_fw, lo, hi, lam_ref, multi, done,
+                                                   max_iter)
         else:
             # 1) reduced iteration from the warm start (or the canonical cold start)
             cold = np.clip(lam_ref if multi else np.ones(model.A), lo, hi)
@@ -286,21 +292,10 @@ def solve_inverse(
                     lam, fw, O = lam_c, fw_c, O_c  # noqa: E741
             if not reached:
                 # 2) best answer inside the limits from a fixed set of starts
-                candidates = [] if O is None else [(lam, fw)]
-                if warm_fw is not None:
-                    candidates.append((warm_fw.stretch, warm_fw))
-                for seed in (np.ones(model.A), lam_ref):
-                    _, fw_s, O_s, _ = obj.evaluate(np.clip(seed, lo, hi))
-                    if O_s is not None:
-                        candidates.append((np.clip(seed, lo, hi), fw_s))
-                candidates += corner_solutions(model, payload, budget)
-                if candidates:
-                    lam, fw, reached, it2 = best_in_limits(
-                        obj, candidates, lo, hi, lam_ref, multi, done, max_iter
-                    )
-                    iters += it2
-                else:
-                    fw = None
+                local = [] if O is None else [(lam, fw)]
+                lam, fw, reached, it2 = _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi,
+                                                     done, max_iter)
+                iters += it2
     except OutOfBudget as exc:
         return _budget_result(model, obj, exc.code, budget, iters, position, z_axis, warm_fw, done)
 
@@ -314,6 +309,33 @@ def solve_inverse(
             "forward solve failed during the inverse iteration",
         )
     return _result(model, lam, fw, reached, iters, position, z_axis)
+
+
+def _reach(model):
+    """Upper bound of the distance between the base centre and the end effector [m]."""
+    cfg = model.cfg
+    return (sum(model.stage1.lam_max * cfg.l0 + seg.connector_height + seg.pitch_radius
+                for seg in cfg.segments) + cfg.tool_length)
+
+
+def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter):
+    """Best answer inside the limits from the local answer, the warm start, seeds and corners.
+
+    Returns ``(lam, fw, reached, iterations)``; ``fw`` None when no forward solve converged.
+    """
+    model = obj.model
+    candidates = list(local)
+    if warm_fw is not None:
+        candidates.append((warm_fw.stretch, warm_fw))
+    for seed in (np.ones(model.A), lam_ref):  # vent and mid-range pressures
+        seed = np.clip(seed, lo, hi)
+        _, fw_s, O_s, _ = obj.evaluate(seed)
+        if O_s is not None:
+            candidates.append((seed, fw_s))
+    candidates += corner_solutions(model, obj.payload, obj.budget)
+    if not candidates:
+        return None, None, False, 0
+    return best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter)
 
 
 def _result(model, lam, fw, reached, iters, position, z_axis, status=None, note=""):
