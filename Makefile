@@ -31,6 +31,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/run_bench.py
+	$(VENV)/bin/python bench/fuzz_bench.py
 
 clean:
 	rm -rf $(VENV)

@@ -38,6 +38,7 @@ import csv
 import importlib
 import json
 import math
+import os
 import sys
 import time
 
@@ -86,6 +87,7 @@ def _warn(message: str) -> None:
 
 # ------------------------------------------------------- argument types
 def _finite_float(text: str) -> float:
+    text = text.strip()  # see _protect_negative_numbers
     try:
         value = float(text)
     except ValueError:
@@ -93,6 +95,27 @@ def _finite_float(text: str) -> float:
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f'not a finite number: {text!r}')
     return value
+
+
+def _is_negative_number(token: str) -> bool:
+    """Whether ``token`` is a negative number in any notation Python reads (``-1e1``, ``-.5``)."""
+    if not token.startswith('-') or token.startswith('--'):
+        return False
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _protect_negative_numbers(argv):
+    """Mark negative numbers as values, not options.
+
+    argparse takes only ``-1`` and ``-1.5`` for negative numbers and reads
+    ``-1e1`` or ``-1e-3`` as an unknown option.  A leading space makes
+    argparse treat a token as a value; ``float()`` and ``int()`` ignore it.
+    """
+    return [' ' + a if _is_negative_number(a) else a for a in argv]
 
 
 def _payload(text: str) -> float:
@@ -103,6 +126,7 @@ def _payload(text: str) -> float:
 
 
 def _elements(text: str) -> int:
+    text = text.strip()
     try:
         value = int(text)
     except ValueError:
@@ -547,7 +571,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Run ``bellow-ancf`` with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # the reader went away (e.g. `| head -1`): stop quietly
+        _discard_stdout()
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        return 130
+
+
+def _main(argv) -> int:
     parser = build_parser()
+    argv = _protect_negative_numbers(sys.argv[1:] if argv is None else list(argv))
     try:
         args = parser.parse_args(argv)
     except UsageError as exc:
@@ -563,15 +599,16 @@ def main(argv=None) -> int:
     except SolverError as exc:
         _error(str(exc))
         return EXIT_FAILED
-    except BrokenPipeError:
-        # the reader went away (e.g. `| head`): stop quietly, keep Python from complaining
-        try:
-            sys.stdout = open(sys.devnull, 'w')  # noqa: SIM115
-        except OSError:
-            pass
-        return EXIT_FAILED
-    except KeyboardInterrupt:
-        return 130
+
+
+def _discard_stdout() -> None:
+    """Point stdout at the null device, so that the flush at exit cannot fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # no real file descriptor (captured stdout)
+        pass
 
 
 if __name__ == '__main__':

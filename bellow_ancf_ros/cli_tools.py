@@ -402,9 +402,13 @@ def _cmd_convergence(args):
     if args.json:
         _emit_json(res.to_dict())
         return EXIT_OK
-    rows = [[r.n, 'yes' if r.nodes_on_plates else 'no',
-             'failed' if r.error_m is None else f'{r.error_m * 1e3:.3e}',
-             f'{r.time_s * 1e3:.1f}', '<-' if r.n == res.recommended else '']
+    def error_text(r):
+        if r.error_m is None:
+            return 'refused' if r.refused else 'failed'
+        return f'{r.error_m * 1e3:.3e}'
+
+    rows = [[r.n, 'yes' if r.nodes_on_plates else 'no', error_text(r),
+             '-' if r.refused else f'{r.time_s * 1e3:.1f}', '<-' if r.n == res.recommended else '']
             for r in res.rows]
     lines = [f'robot         {cfg.name}: reference n = {res.reference_n} ({res.reference_time_s * 1e3:.0f} ms), '
              f'payload {res.payload_kg:g} kg, actuations: {", ".join(res.actuations_pa)}',

@@ -470,3 +470,53 @@ def test_demo_runs(capsys):
     assert 'ms' in out and 'demo finished' in out
     seconds = float(out.rsplit('demo finished in ', 1)[1].split(' s')[0])
     assert math.isfinite(seconds) and seconds < 60
+
+
+# ------------------------------------------- negative numbers, closed pipes
+@pytest.mark.parametrize('text', ['-1e1', '-10', '-10.0', '-1E+1', '-.1e2', '-1_0'])
+def test_negative_pressures_parse_in_any_notation(capsys, text):
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', text, '0', '0', '--json')
+    assert code == 0, err
+    assert one_json(out)['pressures_pa'] == pytest.approx([-10e3, 0.0, 0.0])
+
+
+def test_negative_target_and_axis_components_parse(capsys, two):
+    code, out, err = run(capsys, 'inverse', '--position', '-1e-3', '0', '0.095', '--json')
+    assert code == 0, err
+    d = one_json(out)
+    assert d['reachable'] and d['target_position_m'] == [-1e-3, 0.0, 0.095]
+    fw = solve_forward(two, [100e3, 0.0, 0.0, 60e3, 0.0, 0.0])  # bends towards -x
+    z = fw.z_axis * 100  # any length is a direction
+    code, out, err = run(capsys, 'inverse', '--config', 'two_segment',
+                         '--position', *nums(fw.position),
+                         '--z-axis', *[f'{v:.17e}' for v in z], '--json')
+    assert code == 0, err
+    d = one_json(out)
+    assert d['reachable'] and d['target_z_axis'][0] < 0 and d['position_error_m'] < 1e-6
+
+
+def test_negative_infinity_is_reported_as_not_finite(capsys):
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', '-inf', '0', '0')
+    assert code == 2 and out == ''
+    assert_one_line_error(err, '--pressures-kpa', "not a finite number: '-inf'")
+
+
+def test_closed_pipe_ends_quietly(tmp_path):
+    rows = '\n'.join(f'{3 * k},0,-10' for k in range(40))
+    path = write(tmp_path, 'rows.csv', 'p1,p2,p3\n' + rows + '\n')
+    command = (f'"{sys.executable}" -m bellow_ancf_ros.cli forward '
+               f'--pressures-csv "{path}" --json | head -1')
+    proc = subprocess.run(command, shell=True, cwd=REPO, env=subprocess_env(), capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0
+    assert len(json_lines(proc.stdout)) == 1
+    assert proc.stderr == ''
+
+
+def test_element_count_that_cannot_carry_the_plates_is_refused(capsys):
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', '0', '0', '0', '--elements', '2')
+    assert code == 2 and out == ''
+    assert_one_line_error(err, '--elements', 'model.n_elements', 'smallest count that works is 3')
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', '0', '0', '0', '--elements', '3',
+                         '--json')
+    assert code == 0, err

@@ -402,3 +402,75 @@ def test_file_errors_name_the_key_and_file(tmp_path, one):
     assert str(path) in str(info.value)
     assert 'segments[0].pitch_radius_mm' in str(info.value)
     assert info.value.source == str(path)
+
+
+# ------------------------------------------------ element counts and plates
+TENTHS = [round(0.1 * k, 10) for k in range(1, 10)]
+
+
+def test_element_counts_that_cannot_carry_the_plates_are_refused(one):
+    one['model']['n_elements'] = 2
+    err = refused(one, 'model.n_elements', 'smallest count that works is 3')
+    assert err.key == 'model.n_elements'
+    one['model']['n_elements'] = 1
+    refused(one, 'model.n_elements', 'smallest count that works is 3')
+    one['model']['n_elements'] = 6
+    one['segments'][0]['constraint_plate_fractions'] = TENTHS
+    refused(one, 'model.n_elements', 'smallest count that works is 10')
+    one['model']['n_elements'] = 10
+    assert robot_from_dict(one).n_elements == 10
+
+
+def test_robot_model_refuses_the_same_counts(one_cfg, two_cfg):
+    from bellow_ancf_ros.core import RobotModel
+    for cfg in (one_cfg, two_cfg):
+        for n in (1, 2):
+            with pytest.raises(ConfigError, match='smallest count that works is 3') as info:
+                RobotModel(cfg, n)
+            assert info.value.key == 'model.n_elements'
+        assert RobotModel(cfg, 3).n == 3
+
+
+def test_plates_too_close_for_any_count_name_the_fractions(one):
+    one['segments'][0]['constraint_plate_fractions'] = [0.5, 0.5 + 1e-6, 0.5 + 2e-6]
+    refused(one, 'segments[0].constraint_plate_fractions', 'too close')
+
+
+@pytest.mark.parametrize('fractions, accepted', [
+    ([1 / 3, 2 / 3], [3, 4, 5, 6, 7, 8]),
+    (TENTHS, [10, 11, 12]),
+    ([0.5], [2, 3, 4, 5, 6]),
+    ([0.25, 0.5, 0.75], [4, 5, 6, 7, 8]),
+    ([0.3, 0.7], [3, 4, 5, 6]),
+    ([0.45, 0.55], [3, 4, 5, 6]),
+    ([0.2], [2, 3, 4, 5, 6]),
+    ([], [1, 2, 3]),
+])
+def test_every_accepted_count_matches_a_fine_reference(one_cfg, fractions, accepted):
+    """Accepted counts are accurate (< 0.5 mm at the extremes); the smaller ones are refused."""
+    from bellow_ancf_ros.core import RobotModel, solve_forward
+    seg = dataclasses.replace(one_cfg.segments[0], plate_fractions=tuple(fractions))
+    cfg = one_cfg.replace(segments=(seg,))
+    for n in range(1, accepted[0]):
+        assert config_mod.plate_support_problem(fractions, n) is not None, n
+    assert [n for n in range(1, accepted[-1] + 1)
+            if config_mod.plate_support_problem(fractions, n) is None] == accepted
+    cases = [([150e3, -50e3, -50e3], 0.1), ([-50e3, 150e3, 40e3], 0.0)]
+    fine = RobotModel(cfg, 60)
+    refs = [solve_forward(fine, p, m).position for p, m in cases]
+    for n in accepted:
+        model = RobotModel(cfg, n)
+        for (p, m), ref in zip(cases, refs):
+            fw = solve_forward(model, p, m)
+            assert fw.converged and fw.stable, (n, fw.message)
+            assert np.linalg.norm(fw.position - ref) < 0.5e-3, (n, p, fw.position - ref)
+
+
+def test_every_accepted_count_matches_a_fine_reference_two_segments(two_cfg):
+    from bellow_ancf_ros.core import RobotModel, solve_forward
+    p = [120e3, -50e3, -50e3, 120e3, -50e3, -50e3]
+    ref = solve_forward(RobotModel(two_cfg, 36), p).position
+    for n in range(3, 9):
+        fw = solve_forward(RobotModel(two_cfg, n), p)
+        assert fw.converged and fw.stable, (n, fw.message)
+        assert np.linalg.norm(fw.position - ref) < 0.01 * 0.2076, n  # 1 % of the robot length

@@ -42,7 +42,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import ancf
-from .config import RobotConfig
+from .config import RobotConfig, check_element_count
 from .stage1 import Stage1
 
 __all__ = ["RobotModel", "Evaluation", "rotation_z"]
@@ -72,13 +72,17 @@ class RobotModel:
     ----------
     cfg : RobotConfig
     n_elements : int, optional
-        ANCF elements per actuator (default: ``cfg.n_elements``).
+        ANCF elements per actuator (default: ``cfg.n_elements``).  A count
+        that cannot carry the plates is refused with a
+        :class:`~bellow_ancf_ros.core.config.ConfigError` naming the smallest
+        count that works (:func:`~bellow_ancf_ros.core.config.plate_support_problem`).
     """
 
     def __init__(self, cfg: RobotConfig, n_elements: int | None = None):
         n = int(cfg.n_elements if n_elements is None else n_elements)
         if n < 1:
             raise ValueError(f"n_elements must be >= 1, got {n}")
+        check_element_count(cfg, n)  # ConfigError (a ValueError) naming model.n_elements
         self.cfg = cfg
         self.n = n
         self.stage1 = Stage1.from_config(cfg)

@@ -47,6 +47,9 @@ __all__ = [
     'config_dirs',
     'find_shipped',
     'shipped_robot_names',
+    'plate_support_problem',
+    'smallest_element_count',
+    'check_element_count',
 ]
 
 PACKAGE_NAME = 'bellow_ancf_ros'
@@ -396,6 +399,87 @@ def _segment(chk: _Checker, value: Any, j: int) -> SegmentConfig | None:
     )
 
 
+# ------------------------------------------------------- element count
+_MAX_ELEMENTS_SEARCHED = 1000
+
+
+def plate_support_problem(fractions: Sequence[float], n: int, tol: float = 1e-9) -> str | None:
+    """Why ``n`` uniform cubic elements cannot carry plates at ``fractions`` (None: they can).
+
+    Every attachment (base 0, the plates, top 1) fixes an actuator's position
+    and direction at its material point.  One cubic element (eq. 6) can meet
+    such conditions at two points at most; an element tied at two points has
+    its nodal values fixed by them, which ties its neighbour at the shared
+    node too.  Propagating that along the actuator, a count is refused when
+    an element ends up tied at three or more points: the plates then lock the
+    actuator (a converged, stable and wrong shape) or make the equations
+    singular.  Measured against a fine reference, every count this accepts
+    is accurate (test/test_config.py).
+    """
+    n = int(n)
+    points = (0.0, *[float(f) for f in fractions], 1.0)
+
+    def key(s):
+        k = round(s * n)
+        return ('node', k) if abs(s * n - k) < tol else ('point', s)
+
+    per_element = [set() for _ in range(n)]
+    received = [set() for _ in range(n)]  # node keys an element was tied at by a neighbour
+    for s in points:
+        for e in range(n):
+            if e / n - tol <= s <= (e + 1) / n + tol:
+                per_element[e].add(key(s))
+    changed = True
+    while changed:
+        changed = False
+        for e in range(n):
+            if len(per_element[e]) >= 3:
+                return (f'element {e + 1} of {n} (actuator fractions {e / n:.4g} to '
+                        f'{(e + 1) / n:.4g}) would be tied at {len(per_element[e])} points')
+            if len(per_element[e]) != 2:
+                continue
+            for k, nb in ((e, e - 1), (e + 1, e + 1)):
+                node = ('node', k)
+                if 0 <= nb < n and node not in received[e] and node not in per_element[nb]:
+                    per_element[nb].add(node)
+                    received[nb].add(node)
+                    changed = True
+    return None
+
+
+def smallest_element_count(segments: Sequence[SegmentConfig]) -> int | None:
+    """Smallest element count that carries the plates of every segment (None: none up to 1000)."""
+    for n in range(1, _MAX_ELEMENTS_SEARCHED + 1):
+        if all(plate_support_problem(seg.plate_fractions, n) is None for seg in segments):
+            return n
+    return None
+
+
+def _element_count_issue(segments: Sequence[SegmentConfig], n: int) -> tuple[str, str] | None:
+    """``(key, reason)`` when ``n`` elements cannot carry the plates, else None."""
+    for j, seg in enumerate(segments):
+        why = plate_support_problem(seg.plate_fractions, n)
+        if why is None:
+            continue
+        best = smallest_element_count(segments)
+        fractions = '[' + ', '.join(f'{f:.6g}' for f in seg.plate_fractions) + ']'
+        if best is None:
+            return (f'segments[{j}].constraint_plate_fractions',
+                    f'plates at {fractions} are too close together for up to '
+                    f'{_MAX_ELEMENTS_SEARCHED} elements per actuator')
+        return ('model.n_elements',
+                f'{n} elements per actuator cannot carry the plates of segment {j + 1} at '
+                f'fractions {fractions}: {why}; the smallest count that works is {best}')
+    return None
+
+
+def check_element_count(cfg: 'RobotConfig', n: int) -> None:
+    """Raise :class:`ConfigError` (key ``model.n_elements``) when ``n`` cannot carry the plates."""
+    issue = _element_count_issue(cfg.segments, n)
+    if issue is not None:
+        raise ConfigError([issue], cfg.source)
+
+
 def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
     """Validate a description in the YAML schema and convert it to SI.
 
@@ -456,6 +540,11 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
             Stage1(coeffs, l0, d_eff * 1e-3, p_min * 1e3, p_max * 1e3)
         except ValueError as exc:
             chk.err('actuator.stiffness_coeffs_n_per_m', str(exc))
+
+    if n_elements is not None and segments is not None and None not in segments:
+        issue = _element_count_issue(segments, n_elements)
+        if issue is not None:
+            chk.err(*issue)
 
     if chk.issues:
         raise ConfigError(chk.issues, source)

@@ -124,22 +124,25 @@ def check_pressures(model: RobotModel, pressures, limit_tol=1e-9):
     return np.clip(p, cfg.p_min, cfg.p_max)
 
 
-def _stage2(model, lam, payload, warm, tol, max_iter):
+def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, deadline=None):
     """Solve eq. (25) for given stretches; ``warm = (x, lam, load_scale, payload)`` is an equilibrium."""
     scale = model.residual_scale
 
     def make(lam_t, load_t, pay_t):
         return lambda x, jacobian=True: model.evaluate(x, lam_t, load_t, pay_t, jacobian=jacobian)
 
+    first_max = max_iter if iteration_budget is None else min(max_iter, iteration_budget)
     if warm is None:
         # cold start: straight guess at the target stretches, then continuation
         # from the exactly solved unloaded straight robot at lam = 1
-        res = solver.newton(make(lam, 1.0, payload), model.straight_state(lam), scale, tol, max_iter)
+        res = solver.newton(make(lam, 1.0, payload), model.straight_state(lam), scale, tol,
+                            first_max, deadline=deadline)
         start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
     else:
-        res = solver.newton(make(lam, 1.0, payload), warm[0], scale, tol, max_iter)
+        res = solver.newton(make(lam, 1.0, payload), warm[0], scale, tol, first_max,
+                            deadline=deadline)
         start = warm
-    if res.converged:
+    if res.converged or res.status == solver.TIME_BUDGET:
         return res
     first_iters = res.iterations
     x0, lam0, s0, m0 = start
@@ -147,13 +150,16 @@ def _stage2(model, lam, payload, warm, tol, max_iter):
     def make_t(t):
         return make(lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0 + t * (payload - m0))
 
-    res = solver.continuation(make_t, x0, scale, tol, max_iter)
+    left = None if iteration_budget is None else iteration_budget - first_iters
+    res = solver.continuation(make_t, x0, scale, tol, max_iter, iteration_budget=left,
+                              deadline=deadline)
     res.iterations += first_iters
     return res
 
 
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
-                  check_stability=True, tol=1e-10, max_iter=25) -> ForwardResult:
+                  check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
+                  iteration_budget=500) -> ForwardResult:
     """Forward kinetostatic problem.
 
     Parameters
@@ -168,7 +174,15 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     check_stability : compute the reduced-Hessian stability test.
     tol : tolerance on the scaled residual (forces relative to the robot's
         bending/weight force scale, constraints relative to its length).
+    max_iter : Newton iterations per Newton run (the direct attempt and each
+        continuation step).
+    iteration_budget : Newton iterations in all, continuation included; when
+        they run out the result says so (``status`` ``solver.ITERATION_BUDGET``).
+    time_budget_s : optional wall-clock budget in seconds; when it runs out the
+        solve stops with ``converged`` false and ``status`` ``solver.TIME_BUDGET``
+        (the stability check, about a millisecond, is not cut short).
     """
+    deadline = solver.deadline_after(time_budget_s)
     p = check_pressures(model, pressures)
     payload = float(payload_kg)
     if not np.isfinite(payload) or payload < 0:
@@ -177,7 +191,7 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     warm = None
     if warm_start is not None and warm_start.converged:
         warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.payload_kg)
-    res = _stage2(model, lam, payload, warm, tol, max_iter)
+    res = _stage2(model, lam, payload, warm, tol, max_iter, int(iteration_budget), deadline)
     out = ForwardResult(
         model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
         converged=res.converged, stable=None, status=res.status,

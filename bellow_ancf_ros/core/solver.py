@@ -16,13 +16,15 @@ space of the constraints, ``Z^T H Z > 0`` with ``C_q Z = 0``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import time
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads"]
+__all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads",
+           "deadline_after", "expired"]
 
 # status codes (like scipy.optimize)
 CONVERGED = 0
@@ -31,6 +33,9 @@ LINE_SEARCH = 2
 SINGULAR = 3
 NONFINITE = 4
 STEP_TOO_SMALL = 5
+# 6 is UNSTABLE (forward.py)
+TIME_BUDGET = 7
+ITERATION_BUDGET = 8
 
 MESSAGES = {
     CONVERGED: "converged",
@@ -39,7 +44,25 @@ MESSAGES = {
     SINGULAR: "singular Jacobian",
     NONFINITE: "non-finite residual",
     STEP_TOO_SMALL: "continuation step became too small",
+    TIME_BUDGET: "wall-clock budget exhausted",
+    ITERATION_BUDGET: "iteration budget exhausted",
 }
+
+
+def deadline_after(time_budget_s):
+    """Absolute ``time.perf_counter()`` deadline for a budget in seconds (None: no deadline)."""
+    if time_budget_s is None:
+        return None
+    budget = float(time_budget_s)
+    if not budget > 0:  # also NaN
+        raise ValueError("time_budget_s must be a positive number of seconds or None, "
+                         f"got {time_budget_s!r}")
+    return time.perf_counter() + budget
+
+
+def expired(deadline):
+    """Whether the ``deadline`` (from :func:`deadline_after`) has passed."""
+    return deadline is not None and time.perf_counter() > deadline
 
 
 @dataclass
@@ -54,13 +77,16 @@ class NewtonResult:
     jacobian: object = None  # Jacobian at x (when converged; factorised by whoever needs it)
 
 
-def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7):
+def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7,
+           deadline=None):
     """Damped Newton on ``fun(x, jacobian=True) -> Evaluation``.
 
     ``scale`` multiplies the residual component-wise; convergence when the
     scaled infinity norm drops below ``tol``, or when it stops decreasing
     below ``floor_tol`` (round-off floor: fine meshes cannot reach ``tol``).  ``history`` holds the scaled
     residual norm of every iterate (for the quadratic-convergence test).
+    At most ``max_iter`` iterations; past ``deadline`` (``time.perf_counter()``)
+    it stops with status ``TIME_BUDGET``.
     """
     x = np.array(x0, dtype=float)
     ev = fun(x, jacobian=True)
@@ -76,6 +102,8 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
             return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist, ev.jacobian)
         if it == max_iter:
             break
+        if expired(deadline):
+            return NewtonResult(x, False, TIME_BUDGET, MESSAGES[TIME_BUDGET], it, norm, hist)
         try:
             lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
         except RuntimeError:
@@ -100,19 +128,28 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
     return NewtonResult(x, False, MAX_ITER, MESSAGES[MAX_ITER], max_iter, norm, hist)
 
 
-def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 / 1024):
+def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 / 1024,
+                 iteration_budget=None, deadline=None):
     """Follow ``make_fun(t)`` from ``t = 0`` (solved by ``x_start``) to ``t = 1``.
 
     First tries the full step; on failure halves the increment, and doubles it
     again after successes.  Returns the :class:`NewtonResult` at ``t = 1``
-    (``iterations`` counts all Newton iterations), or the failure.
+    (``iterations`` counts all Newton iterations), or the failure.  At most
+    ``iteration_budget`` Newton iterations in all (status ``ITERATION_BUDGET``)
+    and nothing past ``deadline`` (status ``TIME_BUDGET``).
     """
     t, dt, x = 0.0, 1.0, np.array(x_start, dtype=float)
     total = 0
     hist = []
     while True:
+        left = None if iteration_budget is None else iteration_budget - total
+        if (left is not None and left <= 0) or expired(deadline):
+            code = TIME_BUDGET if expired(deadline) else ITERATION_BUDGET
+            return NewtonResult(x, False, code, f"{MESSAGES[code]} at load fraction {t:.4g} "
+                                f"({total} Newton iterations)", total, np.inf, hist)
         tn = min(1.0, t + dt)
-        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=max_iter)
+        its = max_iter if left is None else min(max_iter, left)
+        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=its, deadline=deadline)
         total += res.iterations
         if res.converged:
             t, x = tn, res.x
@@ -122,6 +159,11 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
                 res.history = hist
                 return res
             dt = min(2.0 * dt, 1.0 - t)
+        elif res.status == TIME_BUDGET:
+            res.iterations = total
+            res.message = (f"{MESSAGES[TIME_BUDGET]} at load fraction {t:.4g} "
+                           f"({total} Newton iterations)")
+            return res
         else:
             dt *= 0.5
             if dt < min_step:

@@ -38,7 +38,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .assembly import RobotModel
-from .config import RobotConfig
+from .config import ConfigError, RobotConfig
 from .forward import solve_forward
 from .inverse import solve_inverse
 from .pcc import PccModel
@@ -97,6 +97,7 @@ class ConvergenceRow:
     errors_m: dict                 # per actuation
     time_s: float                  # median solve time per forward solve
     converged: bool
+    refused: str = ''              # why the count cannot carry the plates (RobotModel refuses it)
 
 
 @dataclass
@@ -122,7 +123,8 @@ class ConvergenceResult:
             'reference_positions_m': {k: v.tolist() for k, v in self.reference_positions_m.items()},
             'reference_time_s': self.reference_time_s,
             'rows': [dict(n=r.n, nodes_on_plates=r.nodes_on_plates, error_m=r.error_m,
-                          errors_m=r.errors_m, time_s=r.time_s, converged=r.converged)
+                          errors_m=r.errors_m, time_s=r.time_s, converged=r.converged,
+                          refused=r.refused)
                      for r in self.rows],
             'recommended_n': self.recommended,
             'reason': self.reason,
@@ -152,8 +154,9 @@ def convergence_study(cfg: RobotConfig, counts: Sequence[int] = tuple(range(1, 1
     For each count the error is the largest end-effector position error over
     the ``actuations`` (default :func:`extreme_actuations`); the time is the
     median of ``repeats`` cold forward solves per actuation.  A count whose
-    solve fails (e.g. ``n = 1`` with two intermediate plates: more plate
-    constraints than the single element can meet) gets ``error_m = None``.
+    solve fails gets ``error_m = None``; so does a count that cannot carry
+    the plates (``n = 1, 2`` with plates at 1/3 and 2/3), with the reason in
+    ``refused``.
     """
     progress = progress or _noop
     counts = sorted({int(n) for n in counts})
@@ -175,7 +178,12 @@ def convergence_study(cfg: RobotConfig, counts: Sequence[int] = tuple(range(1, 1
     rows = []
     for i, n in enumerate(counts, start=1):
         progress(i, total, f'n = {n}')
-        model = RobotModel(cfg, n)
+        try:
+            model = RobotModel(cfg, n)
+        except ConfigError as exc:  # cannot carry the plates: no answer, not a wrong one
+            rows.append(ConvergenceRow(n, nodes_on_plates(cfg, n), None, {k: None for k in acts},
+                                       float('nan'), False, exc.issues[0][1]))
+            continue
         errs, times, ok = {}, [], True
         for key, p in acts.items():
             fw, t = _timed_forward(model, p, payload_kg, repeats)

@@ -1,0 +1,385 @@
+"""Exact solutions of the inverse problem (eqs. 28-30): objective, Newton iterations, budget.
+
+Used by :func:`bellow_ancf_ros.core.inverse.solve_inverse` (see its module
+docstring for the method): the objective ``O`` of eq. (28) as a function of
+the stretches with exact sensitivities (implicit function theorem), the
+reduced Newton / minimum-norm Gauss-Newton iteration with its active set on
+the pressure limits, the full-space Newton method on ``[lam, q, alpha]``
+(eqs. 29, 30) and the solve's budget.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from . import solver
+from .forward import ForwardResult, solve_forward
+
+__all__ = [
+    "Budget",
+    "OutOfBudget",
+    "Target",
+    "Objective",
+    "cost",
+    "norm",
+    "pose_errors",
+    "iterate",
+    "full_space_newton",
+]
+
+TIME_BUDGET = solver.TIME_BUDGET
+ITERATION_BUDGET = solver.ITERATION_BUDGET
+_RCOND = 1e-8  # z_ee - z_target has rank 2 in 3 rows: cut the round-off direction
+
+
+class OutOfBudget(Exception):
+    """The solve ran out of its wall-clock or forward-solve budget."""
+
+    def __init__(self, code):
+        """Set up; see the class docstring."""
+        super().__init__(solver.MESSAGES[code])
+        self.code = code
+
+
+class Budget:
+    """Wall-clock deadline and number of forward solves left."""
+
+    def __init__(self, time_budget_s, max_forward_solves):
+        """Set up; see the class docstring."""
+        self.deadline = solver.deadline_after(time_budget_s)
+        self.time_budget_s = time_budget_s
+        self.max_forward_solves = int(max_forward_solves)
+        self.used = 0
+
+    def take(self):
+        """Account for one forward solve; raise :class:`OutOfBudget` when none is left."""
+        if solver.expired(self.deadline):
+            raise OutOfBudget(TIME_BUDGET)
+        if self.used >= self.max_forward_solves:
+            raise OutOfBudget(ITERATION_BUDGET)
+        self.used += 1
+
+    def remaining_s(self):
+        """Seconds left (None: no wall-clock budget)."""
+        if self.deadline is None:
+            return None
+        return max(self.deadline - time.perf_counter(), 1e-9)
+
+
+def norm(v):
+    """Euclidean norm that cannot overflow."""
+    v = np.asarray(v, dtype=float)
+    m = float(np.max(np.abs(v))) if v.size else 0.0
+    if m == 0.0 or not np.isfinite(m):
+        return m
+    return m * float(np.sqrt(np.sum((v / m) ** 2)))
+
+
+class Target:
+    """Objective equations (eq. 28), linear in the end-plate coordinates.
+
+    ``O = [(p_ee - p_target)/L, z_ee - z_target]`` (axis rows only with a
+    target z-axis).  ``linear(v)`` applies the linear map to a state vector or
+    to the columns of a matrix.
+    """
+
+    def __init__(self, model, position, z_axis):
+        """Set up; see the class docstring."""
+        self.L = model.length_scale
+        self.pd = model.plate_dofs[model.ee_plate]
+        self.tool = model.cfg.tool_length
+        self.axis = z_axis is not None
+        self.offset = np.concatenate([position / self.L] + ([z_axis] if self.axis else []))
+
+    def linear(self, v):
+        """The linear part of ``O`` applied to ``v`` (a state or the columns of a matrix)."""
+        pd = self.pd
+        o = [(v[pd[0:3]] + self.tool * v[pd[9:12]]) / self.L]
+        if self.axis:
+            o.append(v[pd[9:12]])
+        return np.concatenate(o)
+
+    def __call__(self, x):
+        """Objective ``O`` at the state ``x``."""
+        return self.linear(x) - self.offset
+
+
+def cost(O):  # noqa: E741 - the paper's name
+    """Least-squares cost ``|O|^2 / 2``."""
+    return 0.5 * float(np.dot(O, O))
+
+
+class Objective:
+    """Objective (eq. 28) as a function of the stretches, with warm-started forward solves.
+
+    Remembers the best converged evaluation (lowest ``|O|``) for a solve
+    that runs out of budget.
+    """
+
+    def __init__(self, model, position, z_axis, payload, warm, tol, budget):
+        """Set up; see the class docstring."""
+        self.model = model
+        self.target = Target(model, position, z_axis)
+        self.payload = payload
+        self.warm = warm
+        self.tol = tol
+        self.budget = budget
+        self.last = None  # (lam, ForwardResult, O, J)
+        self.best = None  # (cost, lam, ForwardResult)
+
+    def offer(self, lam, fw):
+        """Record a converged forward result as a candidate answer; return its objective."""
+        O = self.target(fw.x)  # noqa: E741
+        c = cost(O)
+        if self.best is None or c < self.best[0]:
+            self.best = (c, np.array(lam, dtype=float), fw)
+        return O
+
+    def _forward(self, lam):
+        m = self.model
+        p = np.clip(m.stage1.pressure(lam), m.cfg.p_min, m.cfg.p_max)
+        self.budget.take()
+        fw = solve_forward(
+            m,
+            p,
+            self.payload,
+            warm_start=self.warm,
+            check_stability=False,
+            tol=self.tol,
+            time_budget_s=self.budget.remaining_s(),
+        )
+        if fw.status == TIME_BUDGET:
+            raise OutOfBudget(TIME_BUDGET)
+        fw.stretch = np.array(lam, dtype=float)  # exact stretches (pressure round trip aside)
+        return fw
+
+    def evaluate(self, lam):
+        """``(lam, ForwardResult, O, dO/dlam)`` at ``lam`` (``O`` None: no convergence)."""
+        lam = np.asarray(lam, dtype=float)
+        if self.last is not None and np.array_equal(self.last[0], lam):
+            return self.last
+        m = self.model
+        fw = self._forward(lam)
+        if not fw.converged:
+            self.last = (lam.copy(), fw, None, None)
+            return self.last
+        self.warm = fw
+        ev = m.evaluate(fw.x, lam, 1.0, self.payload, jacobian=False, lam_derivative=True)
+        dx = -fw.lu.solve(ev.dres_dlam)  # (N, A) implicit function theorem
+        self.last = (lam.copy(), fw, self.offer(lam, fw), self.target.linear(dx))
+        return self.last
+
+
+def pose_errors(fw, position, z_axis):
+    """Position error [m] and angle error [rad] (None without a target axis) of ``fw``."""
+    pos_err = norm(fw.position - position)
+    ang = None
+    if z_axis is not None:
+        ang = float(np.arctan2(norm(np.cross(fw.z_axis, z_axis)), np.dot(fw.z_axis, z_axis)))
+    return pos_err, ang
+
+
+def _max_step_into_box(lam, d, lo, hi):
+    """Largest ``t <= 1`` with ``lo <= lam + t d <= hi``."""
+    t = 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = np.where(d > 0, (hi - lam) / d, np.inf)
+        dn = np.where(d < 0, (lo - lam) / d, np.inf)
+    return float(min(t, np.min(up), np.min(dn)))
+
+
+def _to_release(lam, free, J, lo, hi, lam_ref):
+    """Index of a held stretch whose release brings ``lam`` closer to ``lam_ref`` (or None).
+
+    KKT conditions of ``min |lam - lam_ref|^2/2  s.t.  O(lam) = 0`` with the
+    held stretches as bound constraints: with ``mu`` from the free rows,
+    ``g = (lam - lam_ref) + J^T mu`` is the bound multiplier; it must be
+    ``>= 0`` at ``lam_min`` and ``<= 0`` at ``lam_max``.
+    """
+    held = ~free
+    if not held.any():
+        return None
+    r = lam - lam_ref
+    mu = -np.linalg.pinv(J[:, free].T, rcond=_RCOND) @ r[free]
+    g = r + J.T @ mu
+    at_lo = held & (lam <= lo + 1e-12)
+    at_hi = held & (lam >= hi - 1e-12)
+    violation = np.where(at_lo, -g, np.where(at_hi, g, 0.0))
+    k = int(np.argmax(violation))
+    return k if violation[k] > 1e-9 else None
+
+
+def iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
+    """Newton / minimum-norm Gauss-Newton on the free stretches (the others stay fixed).
+
+    Minimises the residual of the optimality conditions: the target
+    equations ``O`` and, when there are more free stretches than equations,
+    the null-space condition ``(I - J^+ J)(lam - lam_ref) = 0``.  A stretch
+    that blocks the step at a limit is held there; for redundant robots a
+    held stretch is released when the KKT conditions ask for it.  Returns
+    ``(lam, fw, O, J, reached, iterations)``; ``reached`` is false when the
+    iteration stalls (a bound, an unreachable target, a failed forward solve).
+    """
+    free = free.copy()
+    span = hi - lo
+
+    def merit_of(lam_v, O_v, J_v):
+        Jf = J_v[:, free]
+        Jp = np.linalg.pinv(Jf, rcond=_RCOND)
+        null = None
+        val = float(np.dot(O_v, O_v))
+        if multi and free.any():
+            null = (np.eye(int(free.sum())) - Jp @ Jf) @ (lam_ref - lam_v)[free]
+            val += float(np.dot(null, null))
+        return val, Jp, null
+
+    _, fw, O, J = obj.evaluate(lam)
+    if O is None:
+        return lam, fw, O, J, False, 0
+    if not free.any():
+        return lam, fw, O, J, done(fw), 0
+    merit, Jp, null = merit_of(lam, O, J)
+    releases = 0
+    for it in range(max_iter):
+        if done(fw) and (null is None or np.max(np.abs(null)) <= 1e-9):
+            k = (
+                _to_release(lam, free, J, lo, hi, lam_ref)
+                if multi and releases < obj.model.A
+                else None
+            )
+            if k is None:
+                return lam, fw, O, J, True, it
+            free[k] = True
+            releases += 1
+            merit, Jp, null = merit_of(lam, O, J)
+            continue
+        d = np.zeros_like(lam)
+        d[free] = -Jp @ O + (0.0 if null is None else null)
+        d *= min(1.0, 0.05 / max(np.max(np.abs(d)), 1e-300))  # trust limit on the stretch change
+        t = _max_step_into_box(lam, d, lo, hi)
+        if t < 1e-12:
+            # blocked by a bound: those stretches become active (held at the limit)
+            block = ((lam <= lo + 1e-10 * span) & (d < 0)) | ((lam >= hi - 1e-10 * span) & (d > 0))
+            block &= free
+            if not block.any() or not (free & ~block).any():
+                return lam, fw, O, J, False, it
+            lam = np.where(block & (d < 0), lo, np.where(block & (d > 0), hi, lam))
+            free = free & ~block
+            _, fw, O, J = obj.evaluate(lam)
+            if O is None:
+                return lam, fw, O, J, False, it
+            merit, Jp, null = merit_of(lam, O, J)
+            continue
+        if np.max(np.abs(d)) < 1e-15:
+            return lam, fw, O, J, False, it
+        step = t
+        while step > t / 64:
+            lam_try = np.clip(lam + step * d, lo, hi)
+            _, fw_t, O_t, J_t = obj.evaluate(lam_try)
+            if O_t is not None:
+                merit_t, Jp_t, null_t = merit_of(lam_try, O_t, J_t)
+                if merit_t < merit:
+                    break
+            step *= 0.5
+        else:
+            return lam, fw, O, J, False, it + 1
+        lam, fw, O, J, merit, Jp, null = lam_try, fw_t, O_t, J_t, merit_t, Jp_t, null_t
+    return lam, fw, O, J, False, max_iter
+
+
+def full_space_newton(
+    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8
+):
+    """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30).
+
+    The bordered Jacobian is eliminated by its Schur complement: with
+    ``J_x`` factorised once per iteration, ``J_x^{-1}[R, dR/dlam]`` gives the
+    reduced objective Jacobian ``J_O`` and the equilibrium correction, the
+    stretch step solves ``J_O dlam = -(O - O_x J_x^{-1} R)`` (minimum-norm
+    plus null-space term for redundant robots, as in the reduced iteration)
+    and ``dx = -J_x^{-1}(R + dR/dlam dlam)``.  One factorisation per
+    iteration and quadratic convergence: the fast path for warm-started
+    targets along a trajectory.  Returns a converged ForwardResult or None
+    (then the robust reduced iteration takes over): it never leaves the
+    interior of the pressure box and gives up on any sign of trouble.
+    """
+    x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
+    null_norm = [np.inf]
+
+    def stretch_step(w0, W):
+        """Stretch increment of the Schur-complement Newton step (None: leave the fast path)."""
+        JO = -target.linear(W)
+        Ot = target(x) - target.linear(w0)
+        if multi:
+            Jp = np.linalg.pinv(JO, rcond=_RCOND)
+            null = (np.eye(model.A) - Jp @ JO) @ (lam_ref - lam)
+            d = -Jp @ Ot + null
+            null_norm[0] = float(np.max(np.abs(null)))
+        else:
+            null_norm[0] = 0.0
+            try:
+                d = -np.linalg.solve(JO, Ot)
+            except np.linalg.LinAlgError:
+                return None
+        if (
+            not np.all(np.isfinite(d))
+            or np.max(np.abs(d)) > 0.05
+            or np.any(lam + d <= lo)
+            or np.any(lam + d >= hi)
+        ):
+            return None
+        return d
+
+    hist, W = [], None
+    pred = warm_fw._sensitivity
+    if pred is not None:
+        # predictor: the warm start is an equilibrium (R ~ 0) and its sensitivities are known
+        W = pred
+        dlam = stretch_step(np.zeros(model.N), W)
+        if dlam is None:
+            return None
+        x = x - W @ dlam
+        lam = lam + dlam
+    for it in range(max_iter + 1):
+        ev = model.evaluate(x, lam, 1.0, payload, jacobian=True, lam_derivative=True)
+        R = ev.residual
+        rn = float(np.max(np.abs(R * model.residual_scale)))
+        hist.append(rn)
+        if not np.isfinite(rn) or (it >= 2 and rn > 1e-2):
+            return None
+        if rn <= tol and null_norm[0] <= 1e-9:
+            fw = ForwardResult(
+                model=model,
+                pressures_pa=np.clip(model.stage1.pressure(lam), model.cfg.p_min, model.cfg.p_max),
+                stretch=lam.copy(),
+                payload_kg=payload,
+                x=x,
+                converged=True,
+                stable=None,
+                status=solver.CONVERGED,
+                message=solver.MESSAGES[solver.CONVERGED],
+                iterations=it,
+                residual_norm=rn,
+                history=hist,
+                jacobian=ev.jacobian,
+                _sensitivity=W,
+            )
+            if done(fw):
+                return fw
+        if it == max_iter:
+            break
+        try:
+            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
+        except RuntimeError:
+            return None
+        sol = lu.solve(np.column_stack([R, ev.dres_dlam]))
+        w0, W = sol[:, 0], sol[:, 1:]
+        dlam = stretch_step(w0, W)
+        if dlam is None:
+            return None
+        x = x - (w0 + W @ dlam)
+        lam = lam + dlam
+    return None
