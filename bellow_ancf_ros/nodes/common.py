@@ -354,6 +354,16 @@ class LatestWorker:
             self.submitted += 1
             self._cond.notify_all()
 
+    def resubmit(self, item: Any) -> bool:
+        """Queue ``item`` again unless a newer item is pending; return whether queued."""
+        with self._cond:
+            if self._has_item or self._stop:
+                return False
+            self._item = item
+            self._has_item = True
+            self._cond.notify_all()
+            return True
+
     def clear(self) -> None:
         """Drop a pending item (not yet started)."""
         with self._cond:

@@ -45,6 +45,14 @@ solution, with solve starts at least ``1/max_rate_hz`` apart.  Targets that
 arrive while a solve runs overwrite each other: stale ones are dropped,
 memory is bounded, and the output rate is at most ``max_rate_hz``.
 
+Every solve has a wall-clock budget of ``BUDGET_PERIODS / max_rate_hz``
+(50 ms at the default 100 Hz), so the node never freezes on a hard target:
+when it runs out, the best in-limit equilibrium found so far is sent with a
+WARN diagnostic ("solve budget used up"), and the solve continues from it in
+the next slice unless a newer target has arrived (at most
+``MAX_CONTINUATIONS`` slices per target; then the best answer stands).  The corners of the pressure box, which the first unreachable target
+needs, are solved at configure for the configured payload.
+
 Lifecycle and safety
 --------------------
 * Pressures are published only while the node is *active*; targets that
@@ -97,6 +105,7 @@ from rclpy.lifecycle import State, TransitionCallbackReturn
 from std_msgs.msg import Float64MultiArray
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
+from ..core.inverse import ITERATION_BUDGET, TIME_BUDGET, precompute_corners
 from . import common
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
@@ -120,6 +129,8 @@ __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_
 
 #: Parameters read on configure (a change needs cleanup + configure).
 CONFIGURE_PARAMETERS = ('robot_config',)
+BUDGET_PERIODS = 5.0   # wall-clock budget of one solve, in periods of max_rate_hz
+MAX_CONTINUATIONS = 40  # budget slices one target may take before the node gives up on it
 
 
 # ------------------------------------------------------------------- the node
@@ -173,8 +184,10 @@ class InverseKinetostaticNode(LifecycleNode):
         self.last_refusal_reason = ''
         self.last_vent_acked: bool | None = None
         self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
-                      'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0}
+                      'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0,
+                      'over_budget': 0}
         self.solve_stats = common.SolveStats()
+        self._last_item, self._continuations = None, 0   # budget slices of one target
         # diagnostics in every lifecycle state: per-solve statuses and the 1 Hz heartbeat
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
@@ -187,6 +200,10 @@ class InverseKinetostaticNode(LifecycleNode):
     # ---------------------------------------------------------- parameters
     def _min_period(self) -> float:
         return 1.0 / float(self.get_parameter('max_rate_hz').value)
+
+    def _time_budget(self) -> float:
+        """Wall-clock budget of one inverse solve: ``BUDGET_PERIODS / max_rate_hz``."""
+        return BUDGET_PERIODS * self._min_period()
 
     def _node_path(self) -> str:
         return self.get_fully_qualified_name()
@@ -217,6 +234,8 @@ class InverseKinetostaticNode(LifecycleNode):
             model = RobotModel(cfg)
             # straight robot at vent pressure: first warm start (also warms caches)
             fw0 = solve_forward(model, common.vent_pressures(model.A, cfg.p_min, cfg.p_max))
+            # the corners of the pressure box, needed by the first unreachable target
+            precompute_corners(model, float(self.get_parameter('payload_kg').value))
         except (ConfigError, ValueError, OSError) as exc:
             self._configure_error = f'robot_config {name!r}: {exc}'
             self.get_logger().error(f'configure failed: {self._configure_error}')
@@ -414,7 +433,8 @@ class InverseKinetostaticNode(LifecycleNode):
         payload = float(self.get_parameter('payload_kg').value)
         t0 = time.perf_counter()
         try:
-            inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm)
+            inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
+                                time_budget_s=self._time_budget())
         except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
             dt = time.perf_counter() - t0
             self.solve_stats.record(dt, ok=False)
@@ -471,7 +491,17 @@ class InverseKinetostaticNode(LifecycleNode):
             self.last_command_pa = p
             self.stats['published'] += 1
         values['pressures'] = ' '.join(f'{v:.6g}' for v in common.to_unit(p, unit))
-        if inv.reachable:
+        if inv.status in (TIME_BUDGET, ITERATION_BUDGET):
+            self.stats['over_budget'] += 1
+            self._continuations = self._continuations + 1 if item is self._last_item else 1
+            self._last_item = item
+            more = (self._continuations < MAX_CONTINUATIONS and self._worker is not None
+                    and self._worker.resubmit(item))
+            msg = (f'solve budget used up, best in-limit pressures so far sent'
+                   f'{", continuing" if more else ""}: {inv.message}')
+            self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.WARN, msg, values)
+        elif inv.reachable:
             self._publish_diag(DiagnosticStatus.OK, 'target reached', values)
         else:
             self.stats['unreachable'] += 1
