@@ -69,7 +69,7 @@ def test_implicit_function_sensitivities_match_whole_solve_differences(name, key
     dpos, dz = rm.sensitivities(values, fws)
     fpos, fz = rm.sensitivities_fd(values)
     scale_p = np.abs(fpos).max(axis=(0, 1))
-    scale_z = np.abs(fz).max(axis=(0, 1))
+    scale_z = np.maximum(np.abs(fz).max(axis=(0, 1)), 1e-12)   # tool length: no z change
     np.testing.assert_allclose(dpos / scale_p, fpos / scale_p, atol=2e-5)
     np.testing.assert_allclose(dz / scale_z, fz / scale_z, atol=2e-5)
     assert np.all(scale_p > 0)
@@ -149,7 +149,8 @@ def test_calibration_recovers_a_mismatched_one_segment_robot_from_csv(tmp_path, 
 def test_calibration_recovers_a_mismatched_two_segment_robot_from_an_mcap_bag(tmp_path, two_cfg):
     true_cfg, true = cd.mismatch(two_cfg)
     P = excitation_sequence(two_cfg, 3, 24, seed=6)
-    rec, _, _ = cd.recording(true_cfg, P)
+    # a 95 % interval misses the truth in one recording of twenty: the noise seed is fixed
+    rec, _, _ = cd.recording(true_cfg, P, seed=4)
     # a bag as the nodes would record it: 1 s steps, the robot still moving for 0.2 s
     commands, poses = [], []
     for k, (p, x, q) in enumerate(zip(P, rec.positions_m, rec.quaternions_xyzw)):
@@ -175,12 +176,12 @@ def _write(tmp_path, res):
 # ------------------------------------------------------------------ bad data
 def test_too_few_samples_are_refused(one_cfg):
     rec, _, _ = cd.recording(one_cfg, random_pressures(one_cfg, 2))
-    with pytest.raises(cal.CalibrationError, match='2 sample'):
+    with pytest.raises(cal.CalibrationError, match="2 sample.*need at least 10"):
         cal.calibrate(one_cfg, rec)
 
 
 def test_pressures_outside_the_limits_are_refused(one_cfg):
-    rec, _, _ = cd.recording(one_cfg, random_pressures(one_cfg, 6))
+    rec, _, _ = cd.recording(one_cfg, random_pressures(one_cfg, 12))
     rec.pressures_pa[3, 1] = 200e3
     with pytest.raises(cal.CalibrationError, match='sample 4 .* outside the limits'):
         cal.calibrate(one_cfg, rec)

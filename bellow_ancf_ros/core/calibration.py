@@ -365,10 +365,10 @@ def _check_data(cfg: RobotConfig, rec: Recording, k: int) -> None:
     if rec.n_actuators != A:
         raise CalibrationError(f'{rec.source}: {rec.n_actuators} pressures per sample, the robot '
                                f'{cfg.name} has {A} actuators')
-    needed = math.ceil((k + 6) / 6) + 1
+    needed = k + 6
     if len(rec) < needed:
-        raise CalibrationError(f'{rec.source}: {len(rec)} sample(s) for {k} robot + 6 frame parameters; '
-                               f'need at least {needed} (6 residuals per sample, and some to spare)')
+        raise CalibrationError(f'{rec.source}: {len(rec)} sample(s) for {needed} parameters ({k} of '
+                               f'the robot, 6 of the mocap frame); need at least {needed} samples')
     bad = np.flatnonzero(np.any((rec.pressures_pa < cfg.p_min - 1e-6) | (rec.pressures_pa > cfg.p_max + 1e-6),
                                 axis=1))
     if bad.size:
