@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # Keep ROS 2 discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 
-.PHONY: all venv demo demo-offline test bench clean
+.PHONY: all venv demo demo-offline demo-calibrate test bench bench-calibrate clean
 
 all: test
 
@@ -31,6 +31,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/run_bench.py
+
+# calibration of ~200 samples, one and two segments (target: under a minute)
+bench-calibrate: $(STAMP)
+	$(VENV)/bin/python bench/calibration_bench.py
 
 clean:
 	rm -rf $(VENV)

@@ -41,6 +41,7 @@ setup(
         'scipy',
         'PyYAML',
         'matplotlib',
+        'rosbags',
     ],
     extras_require={'test': ['pytest', 'hypothesis']},
     python_requires='>=3.10',
