@@ -38,8 +38,10 @@ Safeguards
   inverse and the integrator is frozen (kept, not integrated).  When fresh,
   plausible measurements return, the held correction is applied again and
   integration resumes.
-* Integration steps are capped at ``max_dt_s`` (a late control step does not
-  make a large jump).
+* Each measurement is integrated once, over the time since the previous
+  integration, capped at ``max_dt_s`` (a late control step does not make a
+  large jump; control faster than the measurements does not integrate an
+  old error twice).
 
 Times are plain floats in seconds from one monotonic clock, supplied by the
 caller (the ROS node uses ``time.monotonic()``; tests use simulated time).
@@ -134,6 +136,7 @@ class IntegralFeedback:
         self.correction_m = np.zeros(3)
         self.correction_rad = np.zeros(3)
         self._last_t: float | None = None
+        self._used_meas_t: float | None = None
         self._target_p = self._target_z = None
         self._saturated = False
         self.state = WAITING
@@ -198,8 +201,6 @@ class IntegralFeedback:
             self.reset()
             self.resets += 1
         self._target_p, self._target_z = p_t, z_t
-        dt = 0.0 if self._last_t is None else min(max(float(t) - self._last_t, 0.0), s.max_dt_s)
-        self._last_t = float(t)
         age = self.measurement_age(t)
         if age is None:
             self.state = WAITING
@@ -207,8 +208,14 @@ class IntegralFeedback:
             self.state = JUMP
         elif age > s.measured_pose_timeout_s:
             self.state = STALE
-        else:
+        elif self._meas_t != self._used_meas_t:
+            # each measurement is integrated once, over the time since the last integration
+            dt = 0.0 if self._last_t is None else min(max(float(t) - self._last_t, 0.0),
+                                                      s.max_dt_s)
+            self._last_t, self._used_meas_t = float(t), self._meas_t
             self._integrate(dt, p_t, z_t)
+        if self.state in (STALE, JUMP):
+            self._last_t = None   # integration restarts with dt = 0 on recovery
         if self.fallback:
             return p_t.copy(), None if z_t is None else z_t.copy()
         return self._apply(p_t, z_t)
