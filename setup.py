@@ -56,6 +56,7 @@ setup(
             'inverse_kinetostatic_node = bellow_ancf_ros.nodes.inverse_kinetostatic_node:main',
             'forward_kinetostatic_node = bellow_ancf_ros.nodes.forward_kinetostatic_node:main',
             'trajectory_publisher = bellow_ancf_ros.nodes.trajectory_publisher:main',
+            'simulated_robot_node = bellow_ancf_ros.nodes.simulated_robot_node:main',
         ],
     },
 )
