@@ -58,6 +58,7 @@ setup(
             'forward_kinetostatic_node = bellow_ancf_ros.nodes.forward_kinetostatic_node:main',
             'trajectory_publisher = bellow_ancf_ros.nodes.trajectory_publisher:main',
             'excitation_publisher = bellow_ancf_ros.nodes.excitation_publisher:main',
+            'simulated_robot_node = bellow_ancf_ros.nodes.simulated_robot_node:main',
         ],
     },
 )
