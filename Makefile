@@ -22,6 +22,11 @@ $(STAMP): requirements.txt setup.py
 demo: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.ros_demo
 
+# calibration end to end: excitation -> simulated mismatched robot seen by an offset mocap ->
+# rosbag2 -> bellow-ancf calibrate -> feedforward tracking with the nominal and calibrated files
+demo-calibrate: $(STAMP)
+	$(VENV)/bin/python -m bellow_ancf_ros.calibration_demo
+
 # the core alone: forward and inverse problems printed (no ROS)
 demo-offline: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demo

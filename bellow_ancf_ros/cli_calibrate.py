@@ -108,7 +108,8 @@ def plot_residuals(result: CalibrationResult, path: str) -> None:
 
 
 def _table(result: CalibrationResult) -> list[str]:
-    head = f'{"parameter":<36} {"nominal":>11} {"calibrated":>11} {"std. error":>10}  95 % interval'
+    head = (f'{"parameter":<36} {"nominal":>11} {"calibrated":>11} {"std. error":>10}'
+            '  95 % interval')
     lines = [head, '-' * len(head)]
     for key, v, s, (lo, hi), n in zip(result.keys, result.values, result.std_errors, result.ci95,
                                       result.nominal):
@@ -119,8 +120,9 @@ def _table(result: CalibrationResult) -> list[str]:
     lines += [
         '',
         f'base frame in the mocap frame: translation {np.round(t * 1e3, 3).tolist()} mm '
-        f'(+- {np.round(se[:3] * 1e3, 3).tolist()}), rotation vector {np.round(rv, 3).tolist()} deg '
-        f'(+- {np.round(np.degrees(se[3:]), 3).tolist()}), quaternion xyzw {np.round(q, 6).tolist()}',
+        f'(+- {np.round(se[:3] * 1e3, 3).tolist()}), rotation vector '
+        f'{np.round(rv, 3).tolist()} deg (+- {np.round(np.degrees(se[3:]), 3).tolist()}), '
+        f'quaternion xyzw {np.round(q, 6).tolist()}',
         f'samples {result.samples}; measurement scatter {result.sigma_position_m * 1e3:.3f} mm, '
         f'{math.degrees(result.sigma_z_axis):.3f} deg; {result.nfev} evaluations, '
         f'{result.seconds:.1f} s',
@@ -164,12 +166,14 @@ def _cmd_calibrate(args) -> int:
             with open(args.out, 'w', encoding='utf-8') as fh:
                 fh.write(robot_yaml_text(result, source, str(cfg.source)))
         except OSError as exc:
-            raise UsageError(f'--out {args.out}: cannot write file: {exc.strerror or exc}') from None
+            raise UsageError(f'--out {args.out}: cannot write file: '
+                             f'{exc.strerror or exc}') from None
     if args.plot:
         try:
             plot_residuals(result, args.plot)
         except OSError as exc:
-            raise UsageError(f'--plot {args.plot}: cannot write file: {exc.strerror or exc}') from None
+            raise UsageError(f'--plot {args.plot}: cannot write file: '
+                             f'{exc.strerror or exc}') from None
     if args.json:
         d = result.to_dict()
         d.update(config=str(cfg.source), data=source, out=args.out, plot=args.plot)
@@ -188,9 +192,10 @@ def register(subparsers) -> None:
     """Add the ``calibrate`` subcommand."""
     p = subparsers.add_parser(
         'calibrate', help='fit robot parameters and the mocap frame to recorded poses',
-        description='Fit scalars of the robot file (default: pitch radius of every segment, D_a, '
-                    'D_eff, a scale on k(lam)) and the pose of the base frame in the motion-capture '
-                    'frame to quasi-static samples of pressures and measured end-effector poses '
+        description='Fit scalars of the robot file (default: pitch radius of every segment, '
+                    'D_a, D_eff, a scale on k(lam)) and the pose of the base frame in the '
+                    'motion-capture frame to quasi-static samples of pressures and measured '
+                    'end-effector poses '
                     '(nonlinear least squares on position and z-axis). CSV header: '
                     't_s,p1_kpa,...,pN_kpa,x_m,y_m,z_m,qx,qy,qz,qw (kPa gauge, pose in the mocap '
                     'frame). Bag: a rosbag2 directory (sqlite3 or mcap) with pressure_command '
@@ -205,14 +210,17 @@ def register(subparsers) -> None:
     src.add_argument('--bag', metavar='DIR', help='rosbag2 directory (sqlite3 or mcap)')
     p.add_argument('--fit', nargs='+', action='extend', metavar='NAME',
                    help="robot-file keys to fit instead of the default, e.g. actuator.d_a_mm "
-                        "'segments[0].pitch_radius_mm' 'segments[*].top_plate_mass_kg' stiffness_scale")
+                        "'segments[0].pitch_radius_mm' 'segments[*].top_plate_mass_kg' "
+                        'stiffness_scale')
     p.add_argument('--settle-s', type=_settle, default=0.5, metavar='S',
-                   help='bag: drop poses within this time after a command change; default: %(default)s')
+                   help='bag: drop poses within this time after a command change; '
+                        'default: %(default)s')
     p.add_argument('--pressure-topic', default=PRESSURE_TOPIC, metavar='T',
                    help='bag: pressure topic; default: %(default)s')
     p.add_argument('--pose-topic', default=POSE_TOPIC, metavar='T',
                    help='bag: measured pose topic; default: %(default)s')
     p.add_argument('--out', metavar='FILE', help='write the calibrated robot file (YAML)')
-    p.add_argument('--json', action='store_true', help='print one JSON object instead of the table')
+    p.add_argument('--json', action='store_true',
+                   help='print one JSON object instead of the table')
     p.add_argument('--plot', metavar='FILE', help='write a PNG of the per-sample residuals')
     p.set_defaults(func=_cmd_calibrate)

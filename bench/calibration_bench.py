@@ -1,4 +1,4 @@
-"""Calibration benchmark (`make bench-calibrate`): wall and CPU time of `calibrate` on ~200 samples.
+"""Calibration benchmark (`make bench-calibrate`): time of `calibrate` on ~200 samples.
 
 A synthetic recording of a mismatched robot (pitch radius +4 %, D_a -5 %,
 stiffness +6 %, top-plate masses +5 %) seen by a mocap system whose frame is

@@ -1,4 +1,4 @@
-"""``bellow-ancf calibrate``: CSV and bag (sqlite3, mcap) in, robot file / JSON / plot out, bad input."""
+"""``bellow-ancf calibrate``: CSV and bags (sqlite3, mcap) in; robot file, JSON, plot out."""
 
 import json
 
@@ -41,8 +41,9 @@ def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
     csv_path = tmp_path / 'rec.csv'
     write_csv(csv_path, recorded)
     out, png = tmp_path / 'cal.yaml', tmp_path / 'res.png'
-    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--csv', str(csv_path),
-                             '--out', str(out), '--plot', str(png), '--json')
+    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment',
+                             '--csv', str(csv_path), '--out', str(out), '--plot', str(png),
+                             '--json')
     assert code == 0, err
     d = json.loads(stdout.strip().splitlines()[-1])
     assert set(d['parameters']) == {'segments[0].pitch_radius_mm', 'actuator.d_a_mm',
@@ -103,11 +104,13 @@ HEADER = ','.join(csv_header(3)) + '\n'
     (lambda tp, rec: ['--bag', str(tp / 'nothing')], 'no such bag'),
     (lambda tp, rec: ['--bag', str(_bag(tp / 'b', rec, 'sqlite3')), '--pose-topic', 'tip'],
      "no topic 'tip'"),
-    (lambda tp, rec: ['--bag', str(_bag(tp / 'b', rec, 'mcap')), '--settle-s', '5'], 'never settle'),
+    (lambda tp, rec: ['--bag', str(_bag(tp / 'b', rec, 'mcap')), '--settle-s', '5'],
+     'never settle'),
     (lambda tp, rec: ['--csv', 'x.csv', '--fit', 'actuator.nope'], 'not a scalar parameter'),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, recorded, make, match):
-    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment', *make(tmp_path, recorded))
+    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment',
+                             *make(tmp_path, recorded))
     assert code == 2
     assert match in err
     assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
@@ -122,5 +125,6 @@ def test_bag_without_the_topics(tmp_path, capsys):
         c = w.add_connection('/chatter', 'std_msgs/msg/String', typestore=store)
         w.write(c, 1, store.serialize_cdr(store.types['std_msgs/msg/String'](data='hi'),
                                           'std_msgs/msg/String'))
-    code, _, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag', str(tmp_path / 'other'))
+    code, _, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag',
+                        str(tmp_path / 'other'))
     assert code == 2 and "no topic 'pressure_command'" in err and '/chatter' in err

@@ -1,4 +1,4 @@
-"""The excitation publisher with real rclpy: the whole sequence in order, in limits, then the vent."""
+"""The excitation publisher with real rclpy: the whole sequence, in order and limits, then vent."""
 
 import os
 import random

@@ -42,7 +42,6 @@ No ROS import.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -70,7 +69,6 @@ PRIOR_SIGMA = 0.2
 
 class CalibrationError(ValueError):
     """The data cannot be calibrated (too few samples, failed solves, ...): one line."""
-
 
 
 # ------------------------------------------------------------- rotations
@@ -151,10 +149,11 @@ class CalibrationResult:
     def to_dict(self) -> dict:
         """JSON contract of ``bellow-ancf calibrate --json``."""
         return {
-            'parameters': {k: {'value': float(v), 'std_error': float(s), 'ci95': [float(lo), float(hi)],
-                               'nominal': float(n)}
-                           for k, v, s, (lo, hi), n in zip(self.keys, self.values, self.std_errors,
-                                                            self.ci95, self.nominal)},
+            'parameters': {k: {'value': float(v), 'std_error': float(s),
+                               'ci95': [float(lo), float(hi)], 'nominal': float(n)}
+                           for k, v, s, (lo, hi), n in zip(self.keys, self.values,
+                                                           self.std_errors, self.ci95,
+                                                           self.nominal)},
             'frame': {'translation_m': self.translation_m.tolist(),
                       'quaternion_xyzw': self.quaternion_xyzw.tolist(),
                       'translation_std_error_m': self.frame_std_errors[:3].tolist(),
@@ -201,7 +200,7 @@ class _Problem:
         return fws
 
     def errors(self, v, fws=None):
-        """Unweighted position and z-axis errors (n, 3) each, in the mocap frame."""
+        """Unweighted position and z-axis errors, (n, 3) each, in the mocap frame."""
         values, R, t, _ = self.unpack(v)
         pos, z = RecordingModel.pose_arrays(self._predict(v) if fws is None else fws)
         return pos @ R.T + t - self.m, z @ R.T - self.n
@@ -293,7 +292,8 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
     failed = [i for i, fw in enumerate(fws0) if fw is None]
     if failed:
         raise CalibrationError(f'the forward model of the nominal robot does not converge for '
-                               f'sample {failed[0] + 1} (pressures {rec.pressures_pa[failed[0]] / 1e3} kPa)')
+                               f'sample {failed[0] + 1} (pressures '
+                               f'{rec.pressures_pa[failed[0]] / 1e3} kPa)')
     pos0, z0 = RecordingModel.pose_arrays(fws0)
     n_meas = Rotation.from_quat(rec.quaternions_xyzw).as_matrix()[:, :, 2]
     R0, t0 = kabsch(pos0, rec.positions_m, z0, n_meas, length**2 * n)
@@ -334,7 +334,8 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
         v = sol.x
         ep, ez = prob.errors(v)
         dof = max(1.0 - (k + 6) / (6.0 * n), 0.05)
-        sig = np.array([math.sqrt(np.sum(ep**2) / (3 * n * dof)), math.sqrt(np.sum(ez**2) / (2 * n * dof))])
+        sig = np.array([math.sqrt(np.sum(ep**2) / (3 * n * dof)),
+                        math.sqrt(np.sum(ez**2) / (2 * n * dof))])
         sig = np.maximum(sig, _SIGMA_FLOOR)
         change = np.max(np.abs(sig / prob.sig - 1.0))
         prob.sig = sig
@@ -342,7 +343,8 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
         if change < 0.1:
             break
     if prob.failed:
-        raise CalibrationError(f'the forward model does not converge for {prob.failed} sample(s) at the '
+        raise CalibrationError(f'the forward model does not converge for {prob.failed} '
+                               'sample(s) at the '
                                'fitted parameters')
     return _result(cal, prob, v, sol, before, nfev, time.perf_counter() - start)
 
@@ -367,13 +369,15 @@ def _check_data(cfg: RobotConfig, rec: Recording, k: int) -> None:
                                f'{cfg.name} has {A} actuators')
     needed = k + 6
     if len(rec) < needed:
-        raise CalibrationError(f'{rec.source}: {len(rec)} sample(s) for {needed} parameters ({k} of '
+        raise CalibrationError(f'{rec.source}: {len(rec)} sample(s) for {needed} parameters '
+                               f'({k} of '
                                f'the robot, 6 of the mocap frame); need at least {needed} samples')
-    bad = np.flatnonzero(np.any((rec.pressures_pa < cfg.p_min - 1e-6) | (rec.pressures_pa > cfg.p_max + 1e-6),
-                                axis=1))
+    outside = (rec.pressures_pa < cfg.p_min - 1e-6) | (rec.pressures_pa > cfg.p_max + 1e-6)
+    bad = np.flatnonzero(np.any(outside, axis=1))
     if bad.size:
         raise CalibrationError(f'{rec.source}: sample {bad[0] + 1} has pressures '
-                               f'{np.round(rec.pressures_pa[bad[0]] / 1e3, 3).tolist()} kPa outside '
+                               f'{np.round(rec.pressures_pa[bad[0]] / 1e3, 3).tolist()} kPa '
+                               'outside '
                                f'the limits [{cfg.p_min / 1e3:g}, {cfg.p_max / 1e3:g}] kPa')
     finite = np.isfinite(rec.pressures_pa).all() and np.isfinite(rec.positions_m).all() \
         and np.isfinite(rec.quaternions_xyzw).all()
@@ -388,7 +392,8 @@ def _pinv_sym(A):
     return (V[:, keep] / w[keep]) @ V[:, keep].T
 
 
-def _result(cal: RecordingModel, prob: _Problem, v, sol, before, nfev, seconds) -> CalibrationResult:
+def _result(cal: RecordingModel, prob: _Problem, v, sol, before, nfev,
+            seconds) -> CalibrationResult:
     k = prob.k
     n = len(prob.m)
     values, R, t, _ = prob.unpack(v)
@@ -424,5 +429,6 @@ def _result(cal: RecordingModel, prob: _Problem, v, sol, before, nfev, seconds) 
         errors_before_mm=before[2], errors_after_mm=after[2], angle_errors_before_deg=before[3],
         angle_errors_after_deg=after[3], samples=n, sigma_position_m=float(prob.sig[0]),
         sigma_z_axis=float(prob.sig[1]), correlation=corr, warnings=warnings,
-        config=cal.config(values), converged=bool(sol.success and sol.status > 0), message=sol.message,
+        config=cal.config(values), converged=bool(sol.success and sol.status > 0),
+        message=sol.message,
         nfev=nfev, seconds=seconds, unstable_samples=unstable)

@@ -51,9 +51,11 @@ def excitation_sequence(cfg: RobotConfig, points_per_scheme: int = 4, n_random: 
 def simulate_recording(cfg: RobotConfig, pressures_pa, translation_m=(0.0, 0.0, 0.0),
                        rotation_vector=(0.0, 0.0, 0.0), position_noise_m: float = 0.0,
                        angle_noise_rad: float = 0.0, seed: int = 0, source: str = '<simulated>'):
-    """Settled poses of robot ``cfg`` seen by a mocap system in which the base frame sits at
-    ``translation_m`` with orientation ``rotation_vector`` [rad]; Gaussian noise per
-    position component and a random rotation of ``angle_noise_rad`` per axis.
+    """Settled poses of robot ``cfg`` seen by a motion-capture system.
+
+    In the mocap frame the base frame sits at ``translation_m`` with orientation
+    ``rotation_vector`` [rad]; Gaussian noise per position component and a random
+    rotation of ``angle_noise_rad`` per axis.
 
     Returns ``(recording, true_base_positions (n, 3), true_base_z_axes (n, 3))``.
     """
@@ -65,7 +67,8 @@ def simulate_recording(cfg: RobotConfig, pressures_pa, translation_m=(0.0, 0.0, 
     for p in P:
         fw = solve_forward(model, p, cfg.payload, warm_start=prev)
         if not fw.success:
-            raise RuntimeError(f'simulated robot: forward solve failed at {p / 1e3} kPa: {fw.message}')
+            raise RuntimeError(f'simulated robot: forward solve failed at {p / 1e3} kPa: '
+                               f'{fw.message}')
         prev = fw
         pos.append(fw.position)
         rot.append(fw.rotation)

@@ -115,7 +115,8 @@ def with_values(d: dict, keys: Sequence[str], values: Sequence[float]) -> dict:
     for key, value in zip(keys, values):
         if key == STIFFNESS_SCALE:
             act = out['actuator']
-            act['stiffness_coeffs_n_per_m'] = [float(value) * c for c in act['stiffness_coeffs_n_per_m']]
+            coeffs = act['stiffness_coeffs_n_per_m']
+            act['stiffness_coeffs_n_per_m'] = [float(value) * c for c in coeffs]
             continue
         for container, index in _locations(out, key):
             container[index] = float(value)

@@ -146,7 +146,8 @@ def read_csv(path, n_actuators: int | None = None) -> Recording:
                 rows.append(values)
                 lines.append(line)
         except (csv.Error, UnicodeDecodeError) as exc:
-            raise RecordingError(f'{label}, line {reader.line_num}: malformed CSV: {exc}') from None
+            raise RecordingError(f'{label}, line {reader.line_num}: malformed CSV: '
+                                 f'{exc}') from None
     if header is None:
         raise RecordingError(f'{label}: the file is empty (expected the header '
                              f'{",".join(csv_header(n_actuators or 3))})')
@@ -200,7 +201,8 @@ def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float =
     pose_pos = np.asarray(pose_pos, dtype=float).reshape(-1, 3)
     pose_quat = np.asarray(pose_quat, dtype=float).reshape(-1, 4)
     if not math.isfinite(settle_s) or settle_s < 0:
-        raise RecordingError(f'settle time must be a non-negative number of seconds, got {settle_s}')
+        raise RecordingError(f'settle time must be a non-negative number of seconds, '
+                             f'got {settle_s}')
     order = np.argsort(cmd_t, kind='stable')
     cmd_t, cmd_p = cmd_t[order], cmd_p[order]
     order = np.argsort(pose_t, kind='stable')
@@ -217,7 +219,8 @@ def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float =
         t0 = cmd_t[k] + settle_s
         sel = np.flatnonzero((pose_t >= t0) & (pose_t < end))
         if sel.size:
-            ok = np.all(np.isfinite(pose_pos[sel]), axis=1) & np.all(np.isfinite(pose_quat[sel]), axis=1)
+            ok = (np.all(np.isfinite(pose_pos[sel]), axis=1)
+                  & np.all(np.isfinite(pose_quat[sel]), axis=1))
             ok &= np.linalg.norm(pose_quat[sel], axis=1) > _MIN_QUAT_NORM
             sel = sel[ok]
         if sel.size == 0:
@@ -329,7 +332,8 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
     except RecordingError:
         raise
     except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
-        raise RecordingError(f'{label}: cannot read the bag: {type(exc).__name__}: {exc}') from None
+        raise RecordingError(f'{label}: cannot read the bag: '
+                             f'{type(exc).__name__}: {exc}') from None
     if not cmd_t:
         raise RecordingError(f'{label}: topic {p_topic} holds no messages')
     if not pose_t:
@@ -376,13 +380,13 @@ def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3
             else:
                 x, q = value
                 stamp = T['builtin_interfaces/msg/Time'](sec=ns // 1_000_000_000,
-                                                          nanosec=ns % 1_000_000_000)
+                                                         nanosec=ns % 1_000_000_000)
                 msg = T[POSE_STAMPED](
                     header=T['std_msgs/msg/Header'](stamp=stamp, frame_id=frame_id),
                     pose=T['geometry_msgs/msg/Pose'](
                         position=T['geometry_msgs/msg/Point'](x=x[0], y=x[1], z=x[2]),
                         orientation=T['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2],
-                                                                       w=q[3])))
+                                                                      w=q[3])))
                 writer.write(c_pose, ns, store.serialize_cdr(msg, POSE_STAMPED))
 
 

@@ -60,7 +60,8 @@ class RecordingModel:
 
     def config(self, values) -> RobotConfig:
         """Robot description with ``values`` of the keys (ConfigError if invalid)."""
-        return robot_from_dict(pk.with_values(self.base, self.keys, values), source='<calibration>')
+        return robot_from_dict(pk.with_values(self.base, self.keys, values),
+                               source='<calibration>')
 
     def model(self, values) -> RobotModel:
         """The robot model for ``values`` (cached; ConfigError if invalid)."""
@@ -110,7 +111,7 @@ class RecordingModel:
         return pos, z
 
     def sensitivities(self, values, fws):
-        """``d position/d theta`` and ``d z/d theta`` (n, 3, k) by the implicit function theorem."""
+        """``d position/d theta``, ``d z/d theta`` (n, 3, k) by the implicit function theorem."""
         values = np.asarray(values, dtype=float)
         k = len(self.keys)
         h = _REL_STEP * self.scales
@@ -155,8 +156,9 @@ class RecordingModel:
                 v = values.copy()
                 v[j] += s * h
                 model = self.model(v)
-                fws = [solve_forward(model, p, model.cfg.payload, warm_start=w, check_stability=False,
-                                     tol=1e-12) for p, w in zip(self.P, self._warm)]
+                fws = [solve_forward(model, p, model.cfg.payload, warm_start=w,
+                                     check_stability=False, tol=1e-12)
+                       for p, w in zip(self.P, self._warm)]
                 if not all(fw.converged for fw in fws):
                     raise RuntimeError(f'forward solve failed at {self.keys[j]} = {v[j]:g}')
                 res.append(self.pose_arrays(fws))

@@ -9,8 +9,9 @@ workspace schemes (section VI.B) at ``points_per_scheme`` points each, then
 new step for ``bellow-ancf calibrate``).  After the last step, and on shutdown
 (Ctrl-C/SIGTERM), it publishes the vent command (0 Pa gauge on every actuator)
 once and stops.  With ``wait_for_subscribers`` it starts only once that many
-subscribers listen on ``pressure_command``.  Record meanwhile, e.g. ``ros2 bag record /pressure_command
-/measured_pose``; choose ``dwell_s`` well above calibrate's ``--settle-s``.
+subscribers listen on ``pressure_command``.  Record meanwhile, e.g.
+``ros2 bag record /pressure_command /measured_pose``; choose ``dwell_s`` well above
+calibrate's ``--settle-s``.
 
 Publishes ``pressure_command`` (std_msgs/Float64MultiArray, reliable, keep-last
 5, unit ``pressure_unit`` with the labelled layout of the other nodes) and
@@ -53,8 +54,8 @@ class ExcitationPublisher(Node):
     def __init__(self, node_name: str = 'excitation_publisher', **kwargs: Any) -> None:
         """Declare the parameters, build the sequence and start the step timer."""
         super().__init__(node_name, **kwargs)
-        D, S, I = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_INTEGER)
+        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                     ParameterType.PARAMETER_INTEGER)
         self.declare_parameter('robot_config', 'one_segment', descriptor(
             'Robot description (shipped name or YAML path): actuator count and pressure limits.',
             S, read_only=True))
@@ -63,10 +64,10 @@ class ExcitationPublisher(Node):
         self.declare_parameter('rate_hz', 10.0, descriptor(
             'Republishing rate of the current step [Hz].', D, lo=0.1, hi=1000.0, read_only=True))
         self.declare_parameter('points_per_scheme', 4, descriptor(
-            'Points per workspace scheme, p_min to p_max (>= 2).', I, read_only=True))
+            'Points per workspace scheme, p_min to p_max (>= 2).', INT, read_only=True))
         self.declare_parameter('n_random', 40, descriptor(
-            'Random in-limit pressure vectors after the schemes (>= 0).', I, read_only=True))
-        self.declare_parameter('seed', 0, descriptor('Seed of the random vectors.', I,
+            'Random in-limit pressure vectors after the schemes (>= 0).', INT, read_only=True))
+        self.declare_parameter('seed', 0, descriptor('Seed of the random vectors.', INT,
                                                      read_only=True))
         self.declare_parameter('pressure_unit', 'Pa', descriptor(
             'Unit of pressure_command: Pa or kPa (gauge; the layout label says the unit).', S,
@@ -76,7 +77,7 @@ class ExcitationPublisher(Node):
             lo=0.0, hi=3600.0, read_only=True))
         self.declare_parameter('wait_for_subscribers', 0, descriptor(
             'Start (then wait start_delay_s) only once pressure_command has this many '
-            'subscribers, e.g. 2 for the robot and a recorder.', I, read_only=True))
+            'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True))
         guard_parameters(self, ('pressure_unit', 'robot_config'))
 
         self.cfg = load_robot(self.get_parameter('robot_config').value)
@@ -109,7 +110,8 @@ class ExcitationPublisher(Node):
         if self.finished:
             return
         if self._t0 is None:
-            if self._pub.get_subscription_count() < int(self.get_parameter('wait_for_subscribers').value):
+            wanted = int(self.get_parameter('wait_for_subscribers').value)
+            if self._pub.get_subscription_count() < wanted:
                 return
             self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
         t = time.monotonic() - self._t0
