@@ -165,12 +165,91 @@ def _parse(argv):
     return ap.parse_args(argv)
 
 
+class _DemoFailed(RuntimeError):
+    """A stage of the demo failed (the message says which, with the node's log)."""
+
+
+def _excite_and_record(args, rec, steps, env, logs, procs, bag) -> None:
+    """Stages 1-2: run the excitation against the simulated robot, write the bag."""
+    from .core.recordings import write_bag
+    print(f'[1/4] excitation: {len(steps)} steps of {args.dwell_s:g} s, recording ...',
+          flush=True)
+    exc = _Process('excitation_publisher', {
+        'robot_config': args.robot, 'dwell_s': args.dwell_s, 'rate_hz': 10.0,
+        'points_per_scheme': args.points_per_scheme, 'n_random': args.n_random,
+        'wait_for_subscribers': 2, 'start_delay_s': 0.5}, env, logs)
+    procs.append(exc)
+
+    def vented():
+        with rec.lock:
+            return len(rec.commands) > len(steps) and not np.any(rec.commands[-1][1])
+    if not _wait(vented, len(steps) * args.dwell_s + 90.0):
+        raise _DemoFailed('excitation did not finish:\n' + exc.tail())
+    time.sleep(args.dwell_s)
+    exc.stop()
+    with rec.lock:
+        commands, poses = list(rec.commands), list(rec.mocap)
+    shutil.rmtree(bag, ignore_errors=True)
+    t_ref = commands[0][0]
+    write_bag(bag, [(t - t_ref, p) for t, p in commands],
+              [(t - t_ref, x, q) for t, x, q in poses if t >= t_ref], storage='sqlite3')
+    print(f'[2/4] bag {bag}: {len(commands)} pressure commands, {len(poses)} poses')
+
+
+def _calibrate(args, env, bag, robot_file, res_png) -> dict:
+    """Stage 3: ``bellow-ancf calibrate --bag`` as a user runs it; its JSON."""
+    print('[3/4] bellow-ancf calibrate', flush=True)
+    cmd = [sys.executable, '-m', 'bellow_ancf_ros.cli', 'calibrate', '--config', args.robot,
+           '--bag', str(bag), '--settle-s', str(args.settle_s), '--out', str(robot_file),
+           '--plot', str(res_png), '--json']
+    run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    sys.stderr.write(run.stderr)
+    if run.returncode != 0:
+        raise _DemoFailed(f'calibrate failed (exit {run.returncode})')
+    cal = json.loads(run.stdout.strip().splitlines()[-1])
+    for key, p in cal['parameters'].items():
+        print(f'  {key:32s} {p["nominal"]:10.5g} -> {p["value"]:10.5g} +- {p["std_error"]:.3g}')
+    fr = cal['frame']
+    rv = np.degrees(Rotation.from_quat(fr['quaternion_xyzw']).as_rotvec())
+    t_mm = np.round(np.array(fr['translation_m']) * 1e3, 2).tolist()
+    print(f'  mocap frame found: base at {t_mm} mm, '
+          f'rotation vector {np.round(rv, 3).tolist()} deg')
+    print(f'  samples {cal["samples"]}: position RMSE {cal["rmse_before_mm"]:.3f} -> '
+          f'{cal["rmse_after_mm"]:.3f} mm, z-axis {cal["rmse_before_deg"]:.3f} -> '
+          f'{cal["rmse_after_deg"]:.3f} deg; {robot_file}, {res_png}')
+    return cal
+
+
+def _track(args, cfg, rec, env, logs, procs, label, config):
+    """Stage 4: feedforward tracking of a circle with robot file ``config``."""
+    print(f'[4/4] feedforward tracking, {label} robot file, {args.track_s:g} s ...', flush=True)
+    inv = _Process('inverse_kinetostatic_node', {'robot_config': config}, env, logs)
+    traj_params = {'robot_config': args.robot, 'period_s': args.track_s, 'start_delay_s': 2.0,
+                   'trajectory': 'planar_circle' if cfg.n_segments == 1 else 'bending_circle'}
+    if cfg.n_segments > 1:
+        traj_params['bending_angle_deg'] = 10.0
+    traj = _Process('trajectory_publisher', traj_params, env, logs)
+    procs += [inv, traj]
+    with rec.lock:
+        n0 = len(rec.targets)
+    if not _wait(lambda: len(rec.targets) > n0 + 5, 60.0):
+        raise _DemoFailed('no targets:\n' + traj.tail() + '\n' + inv.tail())
+    t0 = time.monotonic() + 2.0        # the robot reaches the path first
+    time.sleep(args.track_s + 2.0)
+    t1 = time.monotonic()
+    traj.stop()
+    inv.stop()
+    with rec.lock:
+        result = _tracking_rmse(rec.targets[n0:], rec.base, t0, t1)
+    print(f'  {label}: tracking RMSE {result[0] * 1e3:.3f} mm (best delay {result[1]:.2f} s)')
+    return result
+
+
 def main(argv=None) -> int:
     """Run the four stages; print RMSE before and after."""
     args = _parse(argv)
     from .core import load_robot
     from .core.excitation import excitation_sequence
-    from .core.recordings import write_bag
 
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -193,87 +272,21 @@ def main(argv=None) -> int:
     procs = [sim]
     try:
         if not _wait(lambda: len(rec.mocap) > 10, 60.0):
-            print('simulated robot did not come up:\n' + sim.tail())
-            return 1
-        # 1-2: excitation, recorded
-        print(f'[1/4] excitation: {len(steps)} steps of {args.dwell_s:g} s, recording ...',
-              flush=True)
-        exc = _Process('excitation_publisher', {
-            'robot_config': args.robot, 'dwell_s': args.dwell_s, 'rate_hz': 10.0,
-            'points_per_scheme': args.points_per_scheme, 'n_random': args.n_random,
-            'wait_for_subscribers': 2, 'start_delay_s': 0.5}, env, logs)
-        procs.append(exc)
-
-        def vented():
-            with rec.lock:
-                return len(rec.commands) > len(steps) and not np.any(rec.commands[-1][1])
-        if not _wait(vented, len(steps) * args.dwell_s + 90.0):
-            print('excitation did not finish:\n' + exc.tail())
-            return 1
-        time.sleep(args.dwell_s)
-        exc.stop()
-        with rec.lock:
-            commands, poses = list(rec.commands), list(rec.mocap)
-        shutil.rmtree(bag, ignore_errors=True)
-        t_ref = commands[0][0]
-        write_bag(bag, [(t - t_ref, p) for t, p in commands],
-                  [(t - t_ref, x, q) for t, x, q in poses if t >= t_ref], storage='sqlite3')
-        print(f'[2/4] bag {bag}: {len(commands)} pressure commands, {len(poses)} poses')
-        # 3: calibrate
-        print('[3/4] bellow-ancf calibrate', flush=True)
-        cmd = [sys.executable, '-m', 'bellow_ancf_ros.cli', 'calibrate', '--config', args.robot,
-               '--bag', str(bag), '--settle-s', str(args.settle_s), '--out', str(robot_file),
-               '--plot', str(res_png), '--json']
-        run = subprocess.run(cmd, env=env, capture_output=True, text=True)
-        sys.stderr.write(run.stderr)
-        if run.returncode != 0:
-            print(f'calibrate failed (exit {run.returncode})')
-            return 1
-        cal = json.loads(run.stdout.strip().splitlines()[-1])
-        for key, p in cal['parameters'].items():
-            print(
-                f'  {key:32s} {p["nominal"]:10.5g} -> {p["value"]:10.5g} +- {p["std_error"]:.3g}')
-        fr = cal['frame']
-        rv = np.degrees(Rotation.from_quat(fr['quaternion_xyzw']).as_rotvec())
-        t_mm = np.round(np.array(fr['translation_m']) * 1e3, 2).tolist()
-        print(f'  mocap frame found: base at {t_mm} mm, '
-              f'rotation vector {np.round(rv, 3).tolist()} deg')
-        print(f'  samples {cal["samples"]}: position RMSE {cal["rmse_before_mm"]:.3f} -> '
-              f'{cal["rmse_after_mm"]:.3f} mm, z-axis {cal["rmse_before_deg"]:.3f} -> '
-              f'{cal["rmse_after_deg"]:.3f} deg; {robot_file}, {res_png}')
-        # 4: feedforward tracking with the nominal and the calibrated file
-        results = {}
-        for label, config in (('nominal', args.robot), ('calibrated', str(robot_file.resolve()))):
-            print(f'[4/4] feedforward tracking, {label} robot file, {args.track_s:g} s ...',
-                  flush=True)
-            inv = _Process('inverse_kinetostatic_node', {'robot_config': config}, env, logs)
-            traj_name = 'planar_circle' if cfg.n_segments == 1 else 'bending_circle'
-            traj_params = {'robot_config': args.robot, 'trajectory': traj_name,
-                           'period_s': args.track_s, 'start_delay_s': 2.0}
-            if cfg.n_segments > 1:
-                traj_params['bending_angle_deg'] = 10.0
-            traj = _Process('trajectory_publisher', traj_params, env, logs)
-            procs += [inv, traj]
-            with rec.lock:
-                n0 = len(rec.targets)
-            if not _wait(lambda: len(rec.targets) > n0 + 5, 60.0):
-                print('no targets:\n' + traj.tail() + '\n' + inv.tail())
-                return 1
-            t0 = time.monotonic() + 2.0        # the robot reaches the path first
-            time.sleep(args.track_s + 2.0)
-            t1 = time.monotonic()
-            traj.stop()
-            inv.stop()
-            with rec.lock:
-                results[label] = _tracking_rmse(rec.targets[n0:], rec.base, t0, t1)
-            print(f'  {label}: tracking RMSE {results[label][0] * 1e3:.3f} mm '
-                  f'(best delay {results[label][1]:.2f} s)')
+            raise _DemoFailed('simulated robot did not come up:\n' + sim.tail())
+        _excite_and_record(args, rec, steps, env, logs, procs, bag)
+        _calibrate(args, env, bag, robot_file, res_png)
+        results = {label: _track(args, cfg, rec, env, logs, procs, label, config)
+                   for label, config in (('nominal', args.robot),
+                                         ('calibrated', str(robot_file.resolve())))}
         _plot_tracking(results, track_png, args.robot)
         before, after = results['nominal'][0], results['calibrated'][0]
         print('feedforward tracking RMSE of the simulated robot: '
               f'{before * 1e3:.3f} mm (nominal file) '
               f'-> {after * 1e3:.3f} mm (calibrated file); plots {res_png}, {track_png}')
         return 0 if after < before else 1
+    except _DemoFailed as exc:
+        print(f'calibration demo failed: {exc}')
+        return 1
     finally:
         for p in reversed(procs):
             p.stop()

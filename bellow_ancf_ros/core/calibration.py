@@ -11,32 +11,33 @@ z-axis ``z_i(theta)`` in the base frame (paper section IV.B)::
 
     e_pos = (R r_i + t - m_i) / sigma_p,     e_z = (R z_i - n_i) / sigma_z
 
-minimised by ``scipy.optimize.least_squares`` (trust-region reflective,
-bounds ``0.2 .. 5`` times a positive nominal value).  ``R = exp([w]) R0``
+minimised by ``scipy.optimize.least_squares``.  ``R = exp([w]) R0``
 with ``R0, t0`` from a rigid (Kabsch) alignment of the nominal model's
 predictions to the measurements; the ``w``-derivative uses the left Jacobian
 of SO(3), exactly.  ``sigma_p``, ``sigma_z`` are re-estimated from the
 residuals of each group and the fit repeated until they settle (at most
 three rounds), so the reported uncertainties rest on the measured scatter.
 
-Sensitivities (the Jacobian's robot columns), :meth:`RecordingModel.sensitivities`:
-the implicit function theorem on the equilibrium (eq. 25),
-``R(x; theta) = 0  =>  dx/dtheta = -J^{-1} dR/dtheta`` with the KKT Jacobian
-``J`` of eq. (27) factorised once per sample (the converged solve's ``lu``).
-``dR/dtheta`` at fixed ``x`` (through stage 1, eqs. 10/24, the stiffnesses of
-eqs. 2/4, gravity, geometry) is a forward difference (relative step 1e-7) of
-residual evaluations of the model with the parameter moved (no solves).  The alternative,
-:meth:`RecordingModel.sensitivities_fd`, differences whole forward solves; a test
-compares the two.  Forward solves are warm-started from the same sample's
-solution at the previous parameters.
+Sensitivities (the Jacobian's robot columns) come from the model
+(:mod:`.sensitivities`): the implicit function theorem on the equilibrium
+(eq. 25) with one factorisation of the KKT matrix (eq. 27) per sample.
+Forward solves are warm-started from the same sample's solution at the
+previous parameters, moved to first order by the sensitivities.
 
-Uncertainty: covariance ``s^2 (J^T J)^-1`` of the weighted problem (pseudo-
-inverse), ``s^2 = SSR/(m - n)``; 95 % intervals with Student's ``t``
-(``m - n`` degrees of freedom).  Parameters the data cannot separate are
-named in ``warnings``: pairs with ``|correlation| > 0.99`` and the directions
-of a near-singular normal matrix (column-normalised Jacobian with singular
-value ratio below 1e-3).  RMSE before calibration: the nominal robot with the
-best mocap frame (fitted alone); after: the calibrated robot and frame.
+Uncertainty: the posterior covariance ``(J^T J / s^2 + P)^-1`` of the
+weighted problem (pseudo-inverse), ``s^2 = SSR/(m - n)`` over the ``m`` data
+residuals and ``n`` parameters, ``P`` the weak prior (:data:`PRIOR_SIGMA`: 20 %
+of a non-zero nominal value, 1 sigma; none on zero nominal values), which
+keeps directions the data cannot see at the nominal value; 95 % intervals
+with Student's ``t`` (``m - n`` degrees of freedom).  Parameters the data
+cannot separate are named in ``warnings`` (from the data alone, without the
+prior): pairs with ``|correlation| > 0.99`` and the directions of a
+near-singular normal matrix (column-normalised Jacobian with singular value
+ratio below 1e-3).  Minimiser: Levenberg-Marquardt (MINPACK through
+``least_squares(method='lm')``); parameter values the robot file refuses, and
+samples whose forward solve fails, give a large residual, so such a step is
+rejected.  RMSE before calibration: the nominal robot with the best mocap
+frame (fitted alone); after: the calibrated robot and frame.
 No ROS import.
 """
 
@@ -321,10 +322,6 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
     if prior_sigma is not None:   # weights of the prior residuals; none on zero nominal values
         prob.prior = np.where(cal.nominal != 0.0, 1.0 / prior_sigma, 0.0)
 
-    lo = np.full(k + 6, -np.inf)
-    hi = np.full(k + 6, np.inf)
-    pos_nom = cal.nominal > 0
-    lo[:k][pos_nom], hi[:k][pos_nom] = -0.8, 4.0
     nfev, sol = 0, None
     for _ in range(rounds):
         sol = optimize.least_squares(prob.residual, v, jac=prob.jacobian,
