@@ -32,7 +32,6 @@ NODE_EXECUTABLES = {
     'inverse_kinetostatic_node': 'bellow_ancf_ros.nodes.inverse_kinetostatic_node:main',
     'forward_kinetostatic_node': 'bellow_ancf_ros.nodes.forward_kinetostatic_node:main',
     'trajectory_publisher': 'bellow_ancf_ros.nodes.trajectory_publisher:main',
-    'excitation_publisher': 'bellow_ancf_ros.nodes.excitation_publisher:main',
 }
 MESSAGE_DEPENDENCIES = ('rclpy', 'geometry_msgs', 'std_msgs', 'visualization_msgs',
                         'diagnostic_msgs', 'lifecycle_msgs')
