@@ -154,8 +154,10 @@ def _cmd_calibrate(args) -> int:
         cli._warn(f'{rec.source}: {note}')
     try:
         result = calibrate(cfg, rec, keys)
-    except CalibrationError as exc:
+    except (CalibrationError, ConfigError) as exc:
         raise UsageError(str(exc)) from None
+    except ValueError as exc:         # a core check of the data (pressures, counts)
+        raise UsageError(f'{rec.source}: {exc}') from None
     except (RuntimeError, ArithmeticError, np.linalg.LinAlgError) as exc:
         raise SolverError(f'calibration failed: {type(exc).__name__}: {exc}') from exc
     for w in result.warnings:
