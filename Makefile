@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # Keep ROS 2 discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 
-.PHONY: all venv demo demo-offline test bench clean
+.PHONY: all venv demo demo-offline demo-calibrate test bench bench-calibrate clean
 
 all: test
 
@@ -22,6 +22,11 @@ $(STAMP): requirements.txt setup.py
 demo: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.ros_demo
 
+# calibration end to end: excitation -> simulated mismatched robot seen by an offset mocap ->
+# rosbag2 -> bellow-ancf calibrate -> feedforward tracking with the nominal and calibrated files
+demo-calibrate: $(STAMP)
+	$(VENV)/bin/python -m bellow_ancf_ros.calibration_demo
+
 # the core alone: forward and inverse problems printed (no ROS)
 demo-offline: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demo
@@ -32,6 +37,10 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/python bench/run_bench.py
 	$(VENV)/bin/python bench/fuzz_bench.py
+
+# calibration of ~200 samples, one and two segments (target: under a minute)
+bench-calibrate: $(STAMP)
+	$(VENV)/bin/python bench/calibration_bench.py
 
 clean:
 	rm -rf $(VENV)

@@ -42,6 +42,7 @@ setup(
         'scipy',
         'PyYAML',
         'matplotlib',
+        'rosbags',
     ],
     extras_require={'test': ['pytest', 'hypothesis']},
     python_requires='>=3.10',
@@ -57,6 +58,8 @@ setup(
             'inverse_kinetostatic_node = bellow_ancf_ros.nodes.inverse_kinetostatic_node:main',
             'forward_kinetostatic_node = bellow_ancf_ros.nodes.forward_kinetostatic_node:main',
             'trajectory_publisher = bellow_ancf_ros.nodes.trajectory_publisher:main',
+            'excitation_publisher = bellow_ancf_ros.nodes.excitation_publisher:main',
+            'simulated_robot_node = bellow_ancf_ros.nodes.simulated_robot_node:main',
         ],
     },
 )

@@ -566,6 +566,7 @@ def build_parser() -> argparse.ArgumentParser:
             raise  # cli_tools exists but one of its own imports is missing
     else:
         tools.register(subparsers)
+    importlib.import_module('bellow_ancf_ros.cli_calibrate').register(subparsers)
     return parser
 
 

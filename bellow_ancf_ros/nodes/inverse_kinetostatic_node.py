@@ -107,6 +107,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
 from ..core.inverse import ITERATION_BUDGET, TIME_BUDGET, precompute_corners
 from . import common
+from .measured_feedback import FeedbackLink
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
@@ -167,6 +168,7 @@ class InverseKinetostaticNode(LifecycleNode):
             read_only=True))
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
                          extra_check=self._configure_time_check)
+        self._feedback = FeedbackLink(self, self._publish_diag)   # parameter feedback (closed loop)
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
         self._active = False
@@ -252,6 +254,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
         self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='inverse-solver')
+        self._feedback.configure(cfg, self._worker.submit)
         self._configured = True
         self.get_logger().info(
             f'configured: robot {cfg.name!r} ({cfg.n_segments} segment(s), {model.A} actuators, '
@@ -263,6 +266,7 @@ class InverseKinetostaticNode(LifecycleNode):
     def on_activate(self, state: State) -> TransitionCallbackReturn:
         with self._lock:
             self._active = True
+        self._feedback.reset()
         self.get_logger().info('active: pressure commands enabled')
         return super().on_activate(state)
 
@@ -315,6 +319,7 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._active = False
             self._configured = False
+        self._feedback.release()
         if self._worker is not None:
             self._worker.stop()
             self._worker = None
@@ -408,8 +413,9 @@ class InverseKinetostaticNode(LifecycleNode):
         except common.InputError as exc:
             self._refuse(str(exc))
             return
-        stamp = msg.header.stamp
-        self._worker.submit((pos, z, stamp, time.monotonic()))
+        item = (pos, z, msg.header.stamp, time.monotonic())
+        self._feedback.remember(item)
+        self._worker.submit(item)
 
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
@@ -433,6 +439,7 @@ class InverseKinetostaticNode(LifecycleNode):
         payload = float(self.get_parameter('payload_kg').value)
         t0 = time.perf_counter()
         try:
+            pos, z = self._feedback.correct(pos, z)   # closed loop: the shifted target
             inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
                                 time_budget_s=self._time_budget())
         except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
@@ -463,6 +470,9 @@ class InverseKinetostaticNode(LifecycleNode):
             'payload_kg': payload,
             'pressure_unit': self._unit(),
         }
+        if usable:
+            self._feedback.after_solve(inv)
+        values.update(self._feedback.status())
         if not usable:
             self.stats['failed'] += 1
             msg = f'solve failed ({inv.message}); last command kept'
@@ -501,6 +511,9 @@ class InverseKinetostaticNode(LifecycleNode):
                    f'{", continuing" if more else ""}: {inv.message}')
             self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
             self._publish_diag(DiagnosticStatus.WARN, msg, values)
+        elif inv.reachable and self._feedback.fallback:
+            self._publish_diag(DiagnosticStatus.WARN, 'target reached by feedforward only: '
+                               f'feedback {values["feedback_state"]}', values)
         elif inv.reachable:
             self._publish_diag(DiagnosticStatus.OK, 'target reached', values)
         else:

@@ -1,0 +1,228 @@
+"""``bellow-ancf calibrate``: fit the model to recordings of a robot.
+
+Registered by :func:`register` into the parser of :mod:`bellow_ancf_ros.cli`::
+
+    bellow-ancf calibrate --config CFG (--csv FILE | --bag DIR) [--fit NAME ...] [--settle-s 0.5]
+                          [--pressure-topic T] [--pose-topic T] [--out calibrated.yaml]
+                          [--json] [--plot FILE]
+
+Input formats: :mod:`bellow_ancf_ros.core.recordings`; the fit:
+:mod:`bellow_ancf_ros.core.calibration`; parameter keys:
+:mod:`bellow_ancf_ros.core.parameter_keys`.  A table on stdout (or with
+``--json`` one JSON object on the last stdout line), warnings on stderr
+(``bellow-ancf: warning: ...``), bad input as one line on stderr with exit
+status 2, a forward-model failure at the fitted parameters exit status 1.
+No ROS import.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import sys
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from . import cli
+from .cli import EXIT_OK, SolverError, UsageError, json_safe
+from .core import ConfigError, load_robot
+from .core import parameter_keys as pk
+from .core.calibration import CalibrationError, CalibrationResult, calibrate
+from .core.recordings import POSE_TOPIC, PRESSURE_TOPIC, RecordingError, read_bag, read_csv
+from .core.solver import limit_blas_threads
+
+__all__ = ['register', 'robot_yaml_text', 'plot_residuals']
+
+
+def _bind(parser) -> None:
+    """Raise the error classes of the ``cli`` module actually running (also as ``__main__``)."""
+    global UsageError, SolverError
+    mod = sys.modules.get(type(parser).__module__)
+    if mod is not None and hasattr(mod, 'UsageError') and hasattr(mod, 'SolverError'):
+        UsageError, SolverError = mod.UsageError, mod.SolverError
+
+
+def _settle(text: str) -> float:
+    value = cli._finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'must not be negative, got {text!r}')
+    return value
+
+
+# ------------------------------------------------------------------- output
+def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source: str) -> str:
+    """A complete robot file of the calibrated robot, provenance in comments."""
+    d = result.config.to_dict()
+    d['name'] = f'{d["name"]}_calibrated'
+    lines = [
+        f'# Robot description written by `bellow-ancf calibrate` on '
+        f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}',
+        f'# from {result.samples} samples in {data_source}; nominal robot: {nominal_source}.',
+        f'# Position RMSE {result.rmse_before_mm:.3f} mm -> {result.rmse_after_mm:.3f} mm, '
+        f'z-axis RMSE {result.rmse_before_deg:.3f} deg -> {result.rmse_after_deg:.3f} deg '
+        f'(nominal robot, best mocap frame -> calibrated).',
+        '# Fitted (value +- standard error, 95 % interval; nominal):',
+    ]
+    for key, v, s, (lo, hi), n in zip(result.keys, result.values, result.std_errors, result.ci95,
+                                      result.nominal):
+        lines.append(f'#   {key} = {v:.6g} +- {s:.3g} [{lo:.6g}, {hi:.6g}]; nominal {n:.6g}')
+    t, q = result.translation_m, result.quaternion_xyzw
+    lines.append(f'# Base frame in the mocap frame: translation_m {np.round(t, 6).tolist()}, '
+                 f'quaternion_xyzw {np.round(q, 6).tolist()}')
+    for w in result.warnings:
+        lines.append(f'# Warning: {w}')
+    text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+    return '\n'.join(lines) + '\n' + text
+
+
+def plot_residuals(result: CalibrationResult, path: str) -> None:
+    """PNG: position and z-axis error of every sample, before and after calibration."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 6), dpi=100)
+    FigureCanvasAgg(fig)
+    idx = np.arange(1, result.samples + 1)
+    ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2, sharex=None)
+    ax1.plot(idx, result.errors_before_mm, '.', color='tab:red', ms=4,
+             label=f'nominal, best frame (RMSE {result.rmse_before_mm:.3f} mm)')
+    ax1.plot(idx, result.errors_after_mm, '.', color='tab:blue', ms=4,
+             label=f'calibrated (RMSE {result.rmse_after_mm:.3f} mm)')
+    ax1.set_ylabel('position error [mm]')
+    ax1.legend(fontsize=8)
+    ax1.grid(True, alpha=0.3)
+    ax2.plot(idx, result.angle_errors_before_deg, '.', color='tab:red', ms=4,
+             label=f'nominal (RMSE {result.rmse_before_deg:.3f} deg)')
+    ax2.plot(idx, result.angle_errors_after_deg, '.', color='tab:blue', ms=4,
+             label=f'calibrated (RMSE {result.rmse_after_deg:.3f} deg)')
+    ax2.set_xlabel('sample')
+    ax2.set_ylabel('z-axis error [deg]')
+    ax2.legend(fontsize=8)
+    ax2.grid(True, alpha=0.3)
+    fig.suptitle('calibration residuals per sample', fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, format='png')
+
+
+def _table(result: CalibrationResult) -> list[str]:
+    head = (f'{"parameter":<36} {"nominal":>11} {"calibrated":>11} {"std. error":>10}'
+            '  95 % interval')
+    lines = [head, '-' * len(head)]
+    for key, v, s, (lo, hi), n in zip(result.keys, result.values, result.std_errors, result.ci95,
+                                      result.nominal):
+        lines.append(f'{key:<36} {n:>11.6g} {v:>11.6g} {s:>10.3g}  [{lo:.6g}, {hi:.6g}]')
+    t, q = result.translation_m, result.quaternion_xyzw
+    rv = np.degrees(Rotation.from_quat(q).as_rotvec())
+    se = result.frame_std_errors
+    lines += [
+        '',
+        f'base frame in the mocap frame: translation {np.round(t * 1e3, 3).tolist()} mm '
+        f'(+- {np.round(se[:3] * 1e3, 3).tolist()}), rotation vector '
+        f'{np.round(rv, 3).tolist()} deg (+- {np.round(np.degrees(se[3:]), 3).tolist()}), '
+        f'quaternion xyzw {np.round(q, 6).tolist()}',
+        f'samples {result.samples}; measurement scatter {result.sigma_position_m * 1e3:.3f} mm, '
+        f'{math.degrees(result.sigma_z_axis):.3f} deg; {result.nfev} evaluations, '
+        f'{result.seconds:.1f} s',
+        f'position RMSE  {result.rmse_before_mm:8.3f} mm  -> {result.rmse_after_mm:8.3f} mm',
+        f'z-axis RMSE    {result.rmse_before_deg:8.3f} deg -> {result.rmse_after_deg:8.3f} deg'
+        '   (before: nominal robot with the best mocap frame)',
+    ]
+    return lines
+
+
+# ----------------------------------------------------------------- command
+def _cmd_calibrate(args) -> int:
+    limit_blas_threads()
+    try:
+        cfg = load_robot(args.config)
+    except ConfigError as exc:
+        raise UsageError(f'--config: {exc}') from None
+    keys = args.fit if args.fit else pk.default_keys(cfg.to_dict())
+    try:
+        keys = pk.check_keys(cfg.to_dict(), keys)
+        if args.csv is not None:
+            rec = read_csv(args.csv, cfg.n_actuators_total)
+        else:
+            rec = read_bag(args.bag, args.pressure_topic, args.pose_topic, args.settle_s,
+                           cfg.n_actuators_total)
+    except (pk.ParameterKeyError, RecordingError) as exc:
+        raise UsageError(str(exc)) from None
+    for note in rec.notes:
+        cli._warn(f'{rec.source}: {note}')
+    try:
+        result = calibrate(cfg, rec, keys)
+    except (CalibrationError, ConfigError) as exc:
+        raise UsageError(str(exc)) from None
+    except ValueError as exc:         # a core check of the data (pressures, counts)
+        raise UsageError(f'{rec.source}: {exc}') from None
+    except (RuntimeError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise SolverError(f'calibration failed: {type(exc).__name__}: {exc}') from exc
+    for w in result.warnings:
+        cli._warn(w)
+    source = args.csv if args.csv is not None else args.bag
+    if args.out:
+        try:
+            with open(args.out, 'w', encoding='utf-8') as fh:
+                fh.write(robot_yaml_text(result, source, str(cfg.source)))
+        except OSError as exc:
+            raise UsageError(f'--out {args.out}: cannot write file: '
+                             f'{exc.strerror or exc}') from None
+    if args.plot:
+        try:
+            plot_residuals(result, args.plot)
+        except OSError as exc:
+            raise UsageError(f'--plot {args.plot}: cannot write file: '
+                             f'{exc.strerror or exc}') from None
+    if args.json:
+        d = result.to_dict()
+        d.update(config=str(cfg.source), data=source, out=args.out, plot=args.plot)
+        print(__import__('json').dumps(json_safe(d), allow_nan=False), flush=True)
+    else:
+        lines = _table(result)
+        if args.out:
+            lines.append(f'robot file     {args.out}')
+        if args.plot:
+            lines.append(f'plot           {args.plot}')
+        print('\n'.join(lines), flush=True)
+    return EXIT_OK
+
+
+def register(subparsers) -> None:
+    """Add the ``calibrate`` subcommand."""
+    p = subparsers.add_parser(
+        'calibrate', help='fit robot parameters and the mocap frame to recorded poses',
+        description='Fit scalars of the robot file (default: pitch radius of every segment, '
+                    'D_a, D_eff, a scale on k(lam)) and the pose of the base frame in the '
+                    'motion-capture frame to quasi-static samples of pressures and measured '
+                    'end-effector poses '
+                    '(nonlinear least squares on position and z-axis). CSV header: '
+                    't_s,p1_kpa,...,pN_kpa,x_m,y_m,z_m,qx,qy,qz,qw (kPa gauge, pose in the mocap '
+                    'frame). Bag: a rosbag2 directory (sqlite3 or mcap) with pressure_command '
+                    '(std_msgs/Float64MultiArray) and measured_pose (geometry_msgs/PoseStamped).',
+        epilog='Example: bellow-ancf calibrate --config one_segment --bag rec/ --out robot.yaml '
+               '--plot residuals.png')
+    _bind(p)
+    p.add_argument('--config', required=True, metavar='CFG',
+                   help='nominal robot: file path or shipped name (one_segment, two_segment)')
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument('--csv', metavar='FILE', help='CSV file of settled samples')
+    src.add_argument('--bag', metavar='DIR', help='rosbag2 directory (sqlite3 or mcap)')
+    p.add_argument('--fit', nargs='+', action='extend', metavar='NAME',
+                   help="robot-file keys to fit instead of the default, e.g. actuator.d_a_mm "
+                        "'segments[0].pitch_radius_mm' 'segments[*].top_plate_mass_kg' "
+                        'stiffness_scale')
+    p.add_argument('--settle-s', type=_settle, default=0.5, metavar='S',
+                   help='bag: drop poses within this time after a command change; '
+                        'default: %(default)s')
+    p.add_argument('--pressure-topic', default=PRESSURE_TOPIC, metavar='T',
+                   help='bag: pressure topic; default: %(default)s')
+    p.add_argument('--pose-topic', default=POSE_TOPIC, metavar='T',
+                   help='bag: measured pose topic; default: %(default)s')
+    p.add_argument('--out', metavar='FILE', help='write the calibrated robot file (YAML)')
+    p.add_argument('--json', action='store_true',
+                   help='print one JSON object instead of the table')
+    p.add_argument('--plot', metavar='FILE', help='write a PNG of the per-sample residuals')
+    p.set_defaults(func=_cmd_calibrate)

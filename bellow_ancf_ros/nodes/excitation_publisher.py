@@ -1,0 +1,161 @@
+"""Excitation for calibration: steps ``pressure_command`` through the workspace, then vents.
+
+The first step of calibrating a robot (README: record, calibrate, use): this
+node drives the actuators directly (no controller) through
+:func:`bellow_ancf_ros.core.excitation.excitation_sequence`: the paper's
+workspace schemes (section VI.B) at ``points_per_scheme`` points each, then
+``n_random`` random in-limit vectors (seed ``seed``).  Each step is held for
+``dwell_s`` seconds and republished at ``rate_hz`` (a repeated command is not a
+new step for ``bellow-ancf calibrate``).  After the last step, and on shutdown
+(Ctrl-C/SIGTERM), it publishes the vent command (0 Pa gauge on every actuator)
+once and stops.  With ``wait_for_subscribers`` it starts only once that many
+subscribers listen on ``pressure_command``.  Record meanwhile, e.g.
+``ros2 bag record /pressure_command /measured_pose``; choose ``dwell_s`` well above
+calibrate's ``--settle-s``.
+
+Publishes ``pressure_command`` (std_msgs/Float64MultiArray, reliable, keep-last
+5, unit ``pressure_unit`` with the labelled layout of the other nodes) and
+``/diagnostics`` (step count).  Every published vector passes
+:func:`~bellow_ancf_ros.nodes.common.safe_pressures`.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import ParameterType
+from rclpy.duration import Duration
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+
+from ..core import load_robot
+from ..core.excitation import excitation_sequence
+from . import common
+from .ros_util import (
+    command_qos,
+    descriptor,
+    diagnostics_qos,
+    guard_parameters,
+    main_for,
+    pressure_message,
+    publish_diagnostic,
+)
+
+__all__ = ['ExcitationPublisher', 'main']
+
+VENT_ACK_TIMEOUT_S = 1.0
+
+
+class ExcitationPublisher(Node):
+    """Steps the actuator pressures through the excitation sequence, then vents."""
+
+    def __init__(self, node_name: str = 'excitation_publisher', **kwargs: Any) -> None:
+        """Declare the parameters, build the sequence and start the step timer."""
+        super().__init__(node_name, **kwargs)
+        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                     ParameterType.PARAMETER_INTEGER)
+        self.declare_parameter('robot_config', 'one_segment', descriptor(
+            'Robot description (shipped name or YAML path): actuator count and pressure limits.',
+            S, read_only=True))
+        self.declare_parameter('dwell_s', 3.0, descriptor(
+            'Time each step is held [s].', D, lo=0.01, hi=3600.0, read_only=True))
+        self.declare_parameter('rate_hz', 10.0, descriptor(
+            'Republishing rate of the current step [Hz].', D, lo=0.1, hi=1000.0, read_only=True))
+        self.declare_parameter('points_per_scheme', 4, descriptor(
+            'Points per workspace scheme, p_min to p_max (>= 2).', INT, read_only=True))
+        self.declare_parameter('n_random', 40, descriptor(
+            'Random in-limit pressure vectors after the schemes (>= 0).', INT, read_only=True))
+        self.declare_parameter('seed', 0, descriptor('Seed of the random vectors.', INT,
+                                                     read_only=True))
+        self.declare_parameter('pressure_unit', 'Pa', descriptor(
+            'Unit of pressure_command: Pa or kPa (gauge; the layout label says the unit).', S,
+            constraints="one of: 'Pa', 'kPa'"))
+        self.declare_parameter('start_delay_s', 1.0, descriptor(
+            'Wait this long before the first step [s] (for recorders to connect).', D,
+            lo=0.0, hi=3600.0, read_only=True))
+        self.declare_parameter('wait_for_subscribers', 0, descriptor(
+            'Start (then wait start_delay_s) only once pressure_command has this many '
+            'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True))
+        guard_parameters(self, ('pressure_unit', 'robot_config'))
+
+        self.cfg = load_robot(self.get_parameter('robot_config').value)
+        self.sequence = excitation_sequence(
+            self.cfg, int(self.get_parameter('points_per_scheme').value),
+            int(self.get_parameter('n_random').value), int(self.get_parameter('seed').value))
+        for p in self.sequence:       # refuse at start-up rather than mid-run
+            common.safe_pressures(p, self.cfg.p_min, self.cfg.p_max, self.cfg.n_actuators_total)
+        self.dwell = float(self.get_parameter('dwell_s').value)
+        self.step = -1
+        self.published = 0
+        self.finished = False
+        self.vented = False
+        self._pub = self.create_publisher(Float64MultiArray, 'pressure_command', command_qos())
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self._t0 = None
+        rate = float(self.get_parameter('rate_hz').value)
+        self._timer = self.create_timer(1.0 / rate, self._tick)
+        self.get_logger().info(
+            f'excitation of robot {self.cfg.name!r}: {len(self.sequence)} steps of '
+            f'{self.dwell:g} s ({len(self.sequence) * self.dwell:.0f} s), then vent')
+
+    def _publish(self, pressures_pa) -> None:
+        p = common.safe_pressures(pressures_pa, self.cfg.p_min, self.cfg.p_max,
+                                  self.cfg.n_actuators_total)
+        self._pub.publish(pressure_message(p, self.get_parameter('pressure_unit').value))
+        self.published += 1
+
+    def _tick(self) -> None:
+        if self.finished:
+            return
+        if self._t0 is None:
+            wanted = int(self.get_parameter('wait_for_subscribers').value)
+            if self._pub.get_subscription_count() < wanted:
+                return
+            self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
+        t = time.monotonic() - self._t0
+        if t < 0:
+            return
+        step = int(t // self.dwell)
+        if step >= len(self.sequence):
+            self.vent('excitation finished')
+            self.finished = True
+            self._timer.cancel()
+            return
+        if step != self.step:
+            self.step = step
+            self._diag(DiagnosticStatus.OK, f'step {step + 1} of {len(self.sequence)}')
+        self._publish(self.sequence[step])
+
+    def vent(self, why: str) -> None:
+        """Publish the vent command (0 Pa gauge on every actuator) once."""
+        if self.vented:
+            return
+        self._publish(common.vent_pressures(self.cfg.n_actuators_total, self.cfg.p_min,
+                                            self.cfg.p_max))
+        self.vented = True
+        self._diag(DiagnosticStatus.OK, f'{why}: vented')
+        self.get_logger().info(f'{why}: vent command (0 Pa gauge) published')
+
+    def vent_and_wait(self) -> None:
+        """Vent on shutdown and wait (bounded) until subscribers have it."""
+        self.vent('shutdown')
+        try:
+            if self._pub.get_subscription_count() > 0:
+                self._pub.wait_for_all_acked(Duration(seconds=VENT_ACK_TIMEOUT_S))
+        except Exception:  # noqa: BLE001 - best effort on the way out
+            pass
+
+    def _diag(self, level: bytes, message: str) -> None:
+        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: excitation',
+                           self.cfg.name, level, message,
+                           {'step': self.step + 1, 'steps': len(self.sequence),
+                            'published': self.published})
+
+
+main = main_for(ExcitationPublisher, before_destroy=lambda n: n.vent_and_wait())
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,177 @@
+"""The inverse node's closed loop: ``measured_pose`` -> core integral feedback -> shifted target.
+
+:class:`FeedbackLink` is all the inverse node needs for parameter
+``feedback`` (``none``, the default and the paper's feedforward, or
+``integral``): it declares the feedback parameters, and when feedback is on
+it subscribes ``measured_pose`` (geometry_msgs/PoseStamped in ``base_frame``),
+feeds :class:`~bellow_ancf_ros.core.feedback.IntegralFeedback` (the control
+law, plain Python in the core) and re-submits the newest target at
+``feedback_rate_hz`` so that a held target keeps being corrected.  Measured
+poses in another frame, with NaN/inf or (two or more segments) an
+orientation that cannot be normalised are refused (throttled warning,
+diagnostics WARN) and never reach the integrator.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any, Callable
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import ParameterType
+
+from ..core.feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
+from . import common
+from .ros_util import Refusals, command_qos, descriptor
+
+__all__ = ['FeedbackLink']
+
+
+class FeedbackLink:
+    """Feedback parameters, ``measured_pose`` subscription and control law of one node."""
+
+    def __init__(self, node, publish_diag: Callable) -> None:
+        D, S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
+        node.declare_parameter('feedback', 'none', descriptor(
+            "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
+            "or 'integral' (integral action on the task-space error). Read on configure.", S,
+            constraints="one of: 'none', 'integral'"))
+        d = FeedbackSettings()
+        for name, default, text, lo, hi in (
+                ('feedback_gain_per_s', d.gain_per_s,
+                 'Integral gain [1/s]: an error decays with time constant 1/gain.', 0.01, 50.0),
+                ('feedback_max_correction_mm', d.max_correction_m * 1e3,
+                 'Clamp on the position correction [mm].', 0.01, 100.0),
+                ('feedback_max_correction_deg', math.degrees(d.max_correction_rad),
+                 'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
+                ('measured_pose_timeout_s', d.measured_pose_timeout_s,
+                 'Older measurements: fallback to feedforward, integrator frozen [s].', 0.01, 10.0),
+                ('measured_pose_max_jump_mm', d.max_measurement_jump_m * 1e3,
+                 'A measured pose this far from the previous one is implausible [mm].', 0.1, 1000.0),
+                ('feedback_reset_jump_mm', d.reset_jump_m * 1e3,
+                 'A target jump this large resets the correction [mm].', 0.1, 1000.0),
+                ('feedback_rate_hz', 20.0,
+                 'Rate at which the newest target is re-solved with a fresh correction [Hz].',
+                 0.1, 1000.0)):
+            node.declare_parameter(name, float(default), descriptor(
+                text + ' Read on configure.', D, lo=lo, hi=hi))
+        mode = node.get_parameter('feedback').value
+        if mode not in FEEDBACK_MODES:
+            raise ValueError(f"parameter feedback: {mode!r} is not one of {list(FEEDBACK_MODES)}")
+        self.node = node
+        self._lock = threading.Lock()
+        self._refusals = Refusals(node, 'measured poses', publish_diag)
+        self._law: IntegralFeedback | None = None
+        self._sub = self._timer = None
+        self._frame = ''
+        self._use_orientation = False
+        self._last_item = None
+        self.refused = 0
+        self.received = 0
+
+    # ------------------------------------------------------------ lifecycle
+    def configure(self, cfg, resubmit: Callable[[Any], None]) -> None:
+        """Read the parameters; with feedback on, subscribe and start the re-solve timer."""
+        g = self.node.get_parameter
+        self.release()
+        if g('feedback').value == 'none':
+            return
+        s = FeedbackSettings(
+            gain_per_s=g('feedback_gain_per_s').value,
+            max_correction_m=1e-3 * g('feedback_max_correction_mm').value,
+            max_correction_rad=math.radians(g('feedback_max_correction_deg').value),
+            measured_pose_timeout_s=g('measured_pose_timeout_s').value,
+            max_measurement_jump_m=1e-3 * g('measured_pose_max_jump_mm').value,
+            reset_jump_m=1e-3 * g('feedback_reset_jump_mm').value)
+        self._use_orientation = cfg.n_segments >= 2
+        self._frame = g('base_frame').value
+        with self._lock:
+            self._law = IntegralFeedback(s, self._use_orientation)
+        self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
+                                                  self._on_measured, command_qos())
+
+        def tick():
+            item = self._last_item
+            if item is not None:
+                resubmit(item)
+        self._timer = self.node.create_timer(1.0 / g('feedback_rate_hz').value, tick)
+        self.node.get_logger().info(
+            f'feedback: integral on measured_pose (gain {s.gain_per_s:g} /s, clamp '
+            f'{s.max_correction_m * 1e3:g} mm, timeout {s.measured_pose_timeout_s:g} s)')
+
+    def release(self) -> None:
+        """Drop the subscription, the timer and the integrator."""
+        if self._timer is not None:
+            self.node.destroy_timer(self._timer)
+        if self._sub is not None:
+            self.node.destroy_subscription(self._sub)
+        self._sub = self._timer = self._last_item = None
+        with self._lock:
+            self._law = None
+
+    def reset(self) -> None:
+        """Clear the correction (e.g. on activate)."""
+        with self._lock:
+            if self._law is not None:
+                self._law.reset()
+
+    @property
+    def enabled(self) -> bool:
+        return self._law is not None
+
+    # ------------------------------------------------------------ data flow
+    def remember(self, item: Any) -> None:
+        """The newest accepted target item (re-submitted at ``feedback_rate_hz``)."""
+        self._last_item = item
+
+    def _on_measured(self, msg: PoseStamped) -> None:
+        self.received += 1
+        p, o = msg.pose.position, msg.pose.orientation
+        try:
+            if msg.header.frame_id != self._frame:
+                raise common.InputError(f'measured pose frame {msg.header.frame_id!r} is not the '
+                                        f'base frame {self._frame!r} (no tf2 transform is done)')
+            pos = np.array([p.x, p.y, p.z], dtype=float)
+            if not np.all(np.isfinite(pos)):
+                raise common.InputError(f'measured position is not finite: {pos.tolist()}')
+            z = (common.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
+                 if self._use_orientation else None)
+        except common.InputError as exc:
+            self.refused += 1
+            self._refusals.report(str(exc), self.refused)
+            return
+        with self._lock:
+            if self._law is not None:
+                self._law.measurement(time.monotonic(), pos, z)
+
+    def correct(self, position: np.ndarray, z_axis: np.ndarray | None):
+        """The target to hand to the inverse (unchanged when feedback is off)."""
+        with self._lock:
+            if self._law is None:
+                return position, z_axis
+            return self._law.corrected_target(time.monotonic(), position, z_axis)
+
+    def after_solve(self, inv) -> None:
+        """Anti-windup input: the inverse's outcome for the corrected target."""
+        fw = inv.forward
+        with self._lock:
+            if self._law is not None and fw is not None:
+                self._law.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
+                                 fw.position, fw.z_axis)
+
+    @property
+    def fallback(self) -> bool:
+        """True while feedback is on but pure feedforward is used (no fresh measurement)."""
+        with self._lock:
+            return self._law is not None and self._law.fallback
+
+    def status(self) -> dict:
+        """Diagnostics values of the loop (``feedback: none`` when off)."""
+        with self._lock:
+            if self._law is None:
+                return {'feedback': 'none'}
+            return dict(self._law.status(time.monotonic()), feedback='integral',
+                        refused_measured_poses=self.refused)

@@ -1,0 +1,160 @@
+"""rclpy tests of the closed-loop wiring: simulated_robot_node and the inverse node's feedback.
+
+Same idioms as test_ros_nodes.py (its Harness: isolated random domain,
+namespaced nodes, one executor thread, polling with deadlines).
+"""
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
+from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
+from test_ros_nodes import (  # noqa: E402,F401 - fixtures ros_context and h
+    assert_safe,
+    diag_statuses,
+    h,
+    kv,
+    pose_of,
+    pressure_msg,
+    ros_context,
+    target_msg,
+    wait_for,
+)
+
+
+def positions(h, topic, n):
+    with h.lock:
+        return np.array([pose_of(m)[0] for _, m in h.msgs[topic][-n:]])
+
+
+# ------------------------------------------------------------------ simulated robot node
+def test_simulated_robot_node_regulates_measures_and_refuses_bad_input(h, one):
+    h.record(PoseStamped, 'measured_pose')
+    h.record(Float64MultiArray, 'measured_pressure')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(SimulatedRobotNode, seed=5)
+    pub = h.publisher(Float64MultiArray, 'pressure_command')
+    p = [70e3, 10e3, -30e3]
+    pub.publish(pressure_msg(p))
+    wait_for(lambda: h.count('measured_pressure') > 0
+             and np.allclose(h.last('measured_pressure').data, p, atol=1.0), what='regulated')
+    assert h.last('measured_pressure').layout.dim[0].label == 'actuator_pressure_gauge_pa'
+    n0 = h.count('measured_pose')
+    wait_for(lambda: h.count('measured_pose') >= n0 + 50, what='50 measured poses')
+    assert h.last('measured_pose').header.frame_id == 'base'
+    own = solve_forward(node.robot.model, p)
+    meas = positions(h, 'measured_pose', 40)
+    np.testing.assert_allclose(meas.mean(axis=0), own.position, atol=0.15e-3)   # 0.15 mm noise
+    assert 0.05e-3 < meas.std(axis=0).mean() < 0.3e-3
+    model = solve_forward(one, p)
+    assert np.linalg.norm(own.position - model.position) > 1e-3   # not the model
+
+    # bad input: refused, the last set-points stay
+    for bad in (pressure_msg([70.0, 10.0, -30.0], label='actuator_pressure_gauge_kpa'),
+                pressure_msg([np.nan, 0.0, 0.0]), pressure_msg([0.0, 0.0]),
+                pressure_msg([500e3, 0.0, 0.0])):
+        pub.publish(bad)
+    wait_for(lambda: node.stats['refused'] >= 4, what='4 refusals')
+    wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'refused' in s.message
+                         for s in diag_statuses(h, 'simulated robot')), what='WARN diagnostics')
+    n1 = h.count('measured_pressure')
+    wait_for(lambda: h.count('measured_pressure') > n1 + 5, what='more measured pressures')
+    np.testing.assert_allclose(h.last('measured_pressure').data, p, atol=1.0)
+
+
+# ------------------------------------------------------------------ inverse feedback
+def test_feedback_none_is_feedforward_without_measured_pose_subscription(h, one):
+    node = h.add(InverseKinetostaticNode)
+    assert node.get_parameter('feedback').value == 'none'
+    assert not node._feedback.enabled
+    pub = h.client.create_publisher(PoseStamped, 'measured_pose', command_qos())
+    assert pub.get_subscription_count() == 0
+
+
+def test_bad_feedback_parameter_refused(h):
+    with pytest.raises(ValueError, match="parameter feedback: 'pid'"):
+        h.add(InverseKinetostaticNode, feedback='pid')
+
+
+def test_closed_loop_in_process_reaches_held_target(h, one):
+    """Inverse (feedback integral) -> simulated mismatched robot -> measured_pose -> inverse."""
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(PoseStamped, 'measured_pose')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    sim = h.add(SimulatedRobotNode, seed=9)
+    node = h.add(InverseKinetostaticNode, feedback='integral')
+    assert node._feedback.enabled
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    pub.publish(target_msg(target))   # once: the node keeps correcting the held target
+
+    def converged():
+        if h.count('measured_pose') < 60:
+            return False
+        return np.linalg.norm(positions(h, 'measured_pose', 50).mean(axis=0) - target) < 0.3e-3
+    wait_for(converged, timeout=30.0, what='measured pose within 0.3 mm of the target')
+    st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
+    assert kv(st)['feedback_state'] == 'integrating' and st.level == DiagnosticStatus.OK
+    assert float(kv(st)['feedback_correction_mm']) > 0.5   # it learned the mismatch
+    cfg = load_robot('one_segment')
+    with h.lock:
+        for _, m in h.msgs['pressure_command']:
+            assert_safe(m.data, cfg)
+
+
+def test_feedback_refuses_bad_measured_poses_and_falls_back_when_they_stop(h, one):
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(PoseStamped, 'commanded_pose')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, feedback='integral', measured_pose_timeout_s=0.3)
+    pub = h.publisher(PoseStamped, 'target_pose')
+    meas = h.publisher(PoseStamped, 'measured_pose')
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    pub.publish(target_msg(target))
+    wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'waiting for measured_pose'
+                         in s.message for s in diag_statuses(h, 'inverse')),
+             what='WARN: waiting for measured poses')
+    # wrong frame, NaN, zero quaternion (one segment: orientation unused, so only frame/NaN)
+    meas.publish(target_msg(target, frame='world'))
+    meas.publish(target_msg([np.nan, 0.0, 0.1]))
+    wait_for(lambda: node._feedback.refused >= 2, what='2 refused measured poses')
+    wait_for(lambda: any('measured poses refused' in s.message and 'world' in s.message
+                         for s in diag_statuses(h, 'inverse')), what='refusal diagnostics')
+    # a robot 2 mm off in +x: the correction moves the handed target to -x
+    offset = np.array([2e-3, 0.0, 0.0])
+    def feed_and_check():
+        meas.publish(target_msg(target + offset))
+        if h.count('commanded_pose') == 0:
+            return False
+        shift = pose_of(h.last('commanded_pose'))[0] - target
+        return shift[0] < -0.5e-3
+    wait_for(feed_and_check, timeout=10.0, what='correction against the offset')
+    # measurements stop: fallback to feedforward, WARN, the command returns to the target
+    wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'too old' in s.message
+                         for s in diag_statuses(h, 'inverse')), what='fallback WARN')
+    wait_for(lambda: np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - target) < 1e-6,
+             what='pure feedforward command')
+    st = diag_statuses(h, 'inverse')[-1]
+    assert float(kv(st)['feedback_correction_mm']) > 0.5   # frozen, not reset
+    cfg = load_robot('one_segment')
+    with h.lock:
+        for _, m in h.msgs['pressure_command']:
+            assert_safe(m.data, cfg)
+
+
+def test_two_segment_measured_pose_with_zero_quaternion_refused(h, two):
+    node = h.add(InverseKinetostaticNode, robot_config='two_segment', feedback='integral')
+    meas = h.publisher(PoseStamped, 'measured_pose')
+    fw = solve_forward(two, [0.0] * 6)
+    meas.publish(target_msg(fw.position, quat=(0.0, 0.0, 0.0, 0.0)))
+    wait_for(lambda: node._feedback.refused >= 1, what='refused zero quaternion')
+    assert node._feedback.status()['measured_pose_age_s'] == 'none'   # never reached the law
