@@ -140,6 +140,10 @@ class SimulatedRobot:
     stability_every : run the stability check on every n-th equilibrium (and
         on any solve that needed continuation); it costs as much as the solve.
 
+    Threads: :meth:`step` from one thread only; :meth:`measure`,
+    :meth:`command` and :meth:`set_payload` may be called from others (the
+    state, the set-points and the payload are replaced whole, never mutated).
+
     A failed equilibrium solve (not converged, or unstable when checked)
     keeps the last good state and is counted in :attr:`failures` with its
     message in :attr:`last_failure`: the robot never reports a configuration

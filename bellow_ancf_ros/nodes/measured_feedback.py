@@ -9,7 +9,10 @@ law, plain Python in the core) and re-submits the newest target at
 ``feedback_rate_hz`` so that a held target keeps being corrected.  Measured
 poses in another frame, with NaN/inf or (two or more segments) an
 orientation that cannot be normalised are refused (throttled warning,
-diagnostics WARN) and never reach the integrator.
+diagnostics WARN) and never reach the integrator.  A measured pose's stamp
+says when it was taken: its age decides the fallback to feedforward, and it
+is compared with the target in effect at that time (a zero stamp, or one in
+the future, counts as taken on arrival).
 """
 
 from __future__ import annotations
@@ -145,7 +148,16 @@ class FeedbackLink:
             return
         with self._lock:
             if self._law is not None:
-                self._law.measurement(time.monotonic(), pos, z)
+                self._law.measurement(self._taken_at(msg.header.stamp), pos, z)
+
+    def _taken_at(self, stamp) -> float:
+        """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
+        now = time.monotonic()
+        if stamp.sec == 0 and stamp.nanosec == 0:
+            return now
+        age = 1e-9 * (self.node.get_clock().now().nanoseconds
+                      - (stamp.sec * 1_000_000_000 + stamp.nanosec))
+        return now - age if age >= 0.0 else now
 
     def correct(self, position: np.ndarray, z_axis: np.ndarray | None):
         """The target to hand to the inverse (unchanged when feedback is off)."""

@@ -116,7 +116,6 @@ class SimulatedRobotNode(Node):
             seed=None if seed < 0 else seed)
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._lock = threading.Lock()
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0}
         self.last_refusal_reason = ''
         qos = command_qos()
@@ -147,8 +146,7 @@ class SimulatedRobotNode(Node):
                 if reason:
                     self.get_logger().warning(f'refused parameter change: {reason}')
                     return SetParametersResult(successful=False, reason=reason)
-                with self._lock:
-                    self.robot.set_payload(float(p.value))
+                self.robot.set_payload(float(p.value))
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ input
@@ -163,8 +161,7 @@ class SimulatedRobotNode(Node):
             self.last_refusal_reason = str(exc)
             self._refusals.report(str(exc), self.stats['refused'])
             return
-        with self._lock:
-            self.robot.command(p)
+        self.robot.command(p)   # one array assignment: the physics thread reads it whole
 
     # ------------------------------------------------------------ physics
     def _physics_loop(self) -> None:
@@ -178,11 +175,10 @@ class SimulatedRobotNode(Node):
             else:
                 next_t = time.monotonic()   # running late: no catch-up burst
             now = time.monotonic()
-            with self._lock:
-                failures = self.robot.failures
-                self.robot.step(now - last)
-                failed = self.robot.failures > failures
-                p = self.robot.pressures_pa
+            failures = self.robot.failures
+            self.robot.step(now - last)   # only this thread steps the robot
+            failed = self.robot.failures > failures
+            p = self.robot.pressures_pa
             last = now
             if failed:
                 self.stats['failed_solves'] += 1
@@ -195,18 +191,14 @@ class SimulatedRobotNode(Node):
                 return
 
     def _mocap(self) -> None:
-        with self._lock:
-            pos, R = self.robot.measure()
+        pos, R = self.robot.measure()   # reads the newest complete state (no lock needed)
         self._pub_pose.publish(pose_message(pos, common.quaternion_from_rotation(R), self._frame,
                                             self.get_clock().now().to_msg()))
         self.stats['published_poses'] += 1
 
     def _status(self) -> None:
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK
-        with self._lock:
-            p = self.robot.pressures_pa
-            solves = self.robot.solves
-            payload = self.robot.payload_kg
+        p, solves, payload = self.robot.pressures_pa, self.robot.solves, self.robot.payload_kg
         values = dict(self.stats, solves=solves, payload_kg=payload,
                       pressures=' '.join(f'{v:.6g}' for v in common.to_unit(p, self._unit)))
         self._publish_diag(level, 'simulating', values)
