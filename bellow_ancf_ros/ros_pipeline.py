@@ -27,6 +27,7 @@ class NodeProcess:
     def __init__(self, module: str, params: dict, env: dict, log_dir: Path,
                  remaps: dict | None = None, tag: str = '') -> None:
         self.module = module
+        self._interrupted = False
         self.log_path = log_dir / f'{tag}{module}.log'
         cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args']
         for k, v in params.items():
@@ -41,13 +42,19 @@ class NodeProcess:
         """True while the process runs."""
         return self.proc.poll() is None
 
-    def stop(self, timeout: float = 10.0) -> int | None:
-        """SIGINT to the process group, wait, then SIGKILL; returns the exit code."""
-        if self.proc.poll() is None:
+    def interrupt(self) -> None:
+        """SIGINT to the process group (Ctrl-C) once, without waiting."""
+        if self.proc.poll() is None and not self._interrupted:
+            self._interrupted = True
             try:
                 os.killpg(self.proc.pid, signal.SIGINT)
             except ProcessLookupError:
                 pass
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGINT to the process group, wait, then SIGKILL; returns the exit code."""
+        if self.proc.poll() is None:
+            self.interrupt()
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
