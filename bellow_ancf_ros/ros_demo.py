@@ -67,6 +67,7 @@ class Case:
 
     @property
     def plant(self) -> str:
+        """The simulated robot's file: the shipped mismatched one."""
         return self.robot + '_mismatched'
 
 
@@ -86,13 +87,15 @@ def _recorder(domain: int) -> Recorder:
     from std_msgs.msg import Float64MultiArray
     return Recorder(domain, {
         'target_pose': PoseStamped, 'pressure_command': Float64MultiArray,
-        'measured_pose': PoseStamped, 'predicted_pose': PoseStamped, '/diagnostics': DiagnosticArray})
+        'measured_pose': PoseStamped, 'predicted_pose': PoseStamped,
+        '/diagnostics': DiagnosticArray})
 
 
 class Run:
     """One case in one mode: its node processes, recorder and phase times."""
 
     def __init__(self, case: Case, mode: str, args, domain: int, log_dir: Path) -> None:
+        """Start the robot, inverse and forward node processes and the recorder."""
         self.case, self.mode, self.args, self.log_dir = case, mode, args, log_dir
         self.name = f'{case.label}, {MODE_NAMES[mode]}'
         self.env = child_env(domain)
@@ -120,7 +123,8 @@ class Run:
     def wait_up(self) -> None:
         """Wait until the robot measures, the forward node predicts, the inverse commands."""
         rec = self.rec
-        if not wait_until(lambda: rec.count('measured_pose') > 0 and rec.count('predicted_pose') > 0
+        if not wait_until(lambda: rec.count('measured_pose') > 0
+                          and rec.count('predicted_pose') > 0
                           and rec.publishers('pressure_command') >= 1
                           and all(p.alive() for p in self.procs.values()),
                           self.args.startup_timeout):
@@ -180,22 +184,26 @@ class Run:
               flush=True)
 
     def run_until_stop(self) -> None:
+        """Wait for the end of the evaluated period (a dead node raises)."""
         while time.monotonic() < self.times['stop']:
             time.sleep(0.05)
             self._check()
 
     def stop_trajectory(self) -> None:
+        """Stop the trajectory publisher: the last target is held from now on."""
         self.procs['trajectory'].stop()
         self.stopped.add('trajectory')
         self.times['hold'] = time.monotonic()
         self.times['end'] = self.times['hold'] + self.args.hold
 
     def hold(self) -> None:
+        """Wait until the end of the hold phase (a dead node raises)."""
         while time.monotonic() < self.times['end']:
             time.sleep(0.05)
             self._check()
 
     def fail(self, exc: Exception) -> None:
+        """Report a failed run with the nodes' last log lines."""
         print(f'FAILED ({self.name}): {exc}')
         for p in self.procs.values():
             print(f'--- {p.module} log (last lines):\n{p.tail()}')
@@ -302,7 +310,8 @@ def analyse(run: dict, cfg) -> dict:
             near = [meas[j][1] for j in np.flatnonzero(np.abs(mt - t) <= 0.05)]
             if near:
                 model_err.append(np.linalg.norm(_pose(m)[0] - np.mean(near, axis=0)))
-    res['model_rms_mm'] = float(np.sqrt(np.mean(np.square(model_err))) * 1e3) if model_err else None
+    res['model_rms_mm'] = (float(np.sqrt(np.mean(np.square(model_err))) * 1e3) if model_err
+                           else None)
     # pressure safety over the whole run
     cmds = [np.asarray(m.data, dtype=float) for _, m in rec['pressure_command']]
     res['n_commands'] = len(cmds)
@@ -394,7 +403,8 @@ def plot(results: dict, path: Path) -> None:
 def _parse(argv):
     ap = argparse.ArgumentParser(prog='python -m bellow_ancf_ros.ros_demo',
                                  description=__doc__.split('\n\n')[0])
-    ap.add_argument('--plot', default='demo_tracking.png', help='PNG output (default: %(default)s)')
+    ap.add_argument('--plot', default='demo_tracking.png',
+                    help='PNG output (default: %(default)s)')
     ap.add_argument('--lead-in', type=float, default=2.0,
                     help='[s] the path\'s first point is held at least this long')
     ap.add_argument('--hold', type=float, default=2.0, help='[s] the last target is held')
@@ -422,6 +432,7 @@ def _fmt(r: dict, two: bool) -> str:
 
 
 def main(argv=None) -> int:
+    """Run the cases, print the summary, write the plot; exit status 0 when the goals hold."""
     args = _parse(argv)
     from .core import load_robot
     from .core.solver import limit_blas_threads

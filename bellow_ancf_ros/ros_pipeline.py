@@ -26,6 +26,7 @@ class NodeProcess:
 
     def __init__(self, module: str, params: dict, env: dict, log_dir: Path,
                  remaps: dict | None = None, tag: str = '') -> None:
+        """Start ``python -m bellow_ancf_ros.nodes.<module>``; its log goes to ``log_dir``."""
         self.module = module
         self._interrupted = False
         self.log_path = log_dir / f'{tag}{module}.log'
@@ -91,6 +92,7 @@ class Recorder:
     """rclpy in this process: records ``topics`` (name -> message type) with arrival times."""
 
     def __init__(self, domain: int, topics: dict, name: str = 'ros_demo_recorder') -> None:
+        """Own context on ``domain``, one subscription per topic, spun in a thread."""
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor

@@ -17,17 +17,18 @@ from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
-from test_ros_nodes import (  # noqa: E402,F401 - fixtures ros_context and h
+import test_ros_nodes as _rn  # noqa: E402
+from test_ros_nodes import (  # noqa: E402
     assert_safe,
     diag_statuses,
-    h,
     kv,
     pose_of,
     pressure_msg,
-    ros_context,
     target_msg,
     wait_for,
 )
+
+ros_context, h = _rn.ros_context, _rn.h   # the fixtures (isolated domain, harness)
 
 
 def positions(h, topic, n):
@@ -101,6 +102,7 @@ def test_closed_loop_in_process_reaches_held_target(h, one):
         if h.count('measured_pose') < 60:
             return False
         return np.linalg.norm(positions(h, 'measured_pose', 50).mean(axis=0) - target) < 0.3e-3
+
     wait_for(converged, timeout=30.0, what='measured pose within 0.3 mm of the target')
     st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
     assert kv(st)['feedback_state'] == 'integrating' and st.level == DiagnosticStatus.OK
@@ -131,12 +133,14 @@ def test_feedback_refuses_bad_measured_poses_and_falls_back_when_they_stop(h, on
                          for s in diag_statuses(h, 'inverse')), what='refusal diagnostics')
     # a robot 2 mm off in +x: the correction moves the handed target to -x
     offset = np.array([2e-3, 0.0, 0.0])
+
     def feed_and_check():
         meas.publish(target_msg(target + offset))
         if h.count('commanded_pose') == 0:
             return False
         shift = pose_of(h.last('commanded_pose'))[0] - target
         return shift[0] < -0.5e-3
+
     wait_for(feed_and_check, timeout=10.0, what='correction against the offset')
     # measurements stop: fallback to feedforward, WARN, the command returns to the target
     wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'too old' in s.message

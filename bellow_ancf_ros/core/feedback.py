@@ -93,6 +93,7 @@ class FeedbackSettings:
     max_dt_s: float = 0.1
 
     def __post_init__(self) -> None:
+        """Refuse a non-positive or non-finite setting, naming it."""
         for f in fields(self):
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -101,7 +102,7 @@ class FeedbackSettings:
 
 
 def rotation_error(z_from: Any, z_to: Any) -> np.ndarray:
-    """Rotation vector (axis * angle, rad) of the smallest rotation taking ``z_from`` to ``z_to``."""
+    """Rotation vector (axis * angle, rad) of the smallest rotation ``z_from`` -> ``z_to``."""
     a = np.asarray(z_from, dtype=float).reshape(3)
     b = np.asarray(z_to, dtype=float).reshape(3)
     a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
@@ -128,6 +129,7 @@ class IntegralFeedback:
 
     def __init__(self, settings: FeedbackSettings | None = None,
                  use_orientation: bool = False) -> None:
+        """Start with no correction; ``use_orientation`` for two or more segments."""
         self.settings = settings or FeedbackSettings()
         self.use_orientation = bool(use_orientation)
         self.reset()
@@ -175,9 +177,9 @@ class IntegralFeedback:
         if self._prev_p is not None:
             if np.linalg.norm(p - self._prev_p) > s.max_measurement_jump_m:
                 plausible = False
-            if (self.use_orientation and z is not None and self._prev_z is not None
-                    and np.linalg.norm(rotation_error(self._prev_z, z)) > s.max_measurement_jump_rad):
-                plausible = False
+            if self.use_orientation and z is not None and self._prev_z is not None:
+                turn = float(np.linalg.norm(rotation_error(self._prev_z, z)))
+                plausible = plausible and turn <= s.max_measurement_jump_rad
         self._prev_p, self._prev_z = p, z
         self._meas_ok = plausible
         if not plausible:

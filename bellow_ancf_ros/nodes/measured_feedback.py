@@ -37,6 +37,7 @@ class FeedbackLink:
     """Feedback parameters, ``measured_pose`` subscription and control law of one node."""
 
     def __init__(self, node, publish_diag: Callable) -> None:
+        """Declare the feedback parameters on ``node`` (refuses a bad ``feedback`` value)."""
         D, S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
         node.declare_parameter('feedback', 'none', descriptor(
             "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
@@ -51,9 +52,11 @@ class FeedbackLink:
                 ('feedback_max_correction_deg', math.degrees(d.max_correction_rad),
                  'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
                 ('measured_pose_timeout_s', d.measured_pose_timeout_s,
-                 'Older measurements: fallback to feedforward, integrator frozen [s].', 0.01, 10.0),
+                 'Older measurements: fallback to feedforward, integrator frozen [s].',
+                 0.01, 10.0),
                 ('measured_pose_max_jump_mm', d.max_measurement_jump_m * 1e3,
-                 'A measured pose this far from the previous one is implausible [mm].', 0.1, 1000.0),
+                 'A measured pose this far from the previous one is implausible [mm].',
+                 0.1, 1000.0),
                 ('feedback_reset_jump_mm', d.reset_jump_m * 1e3,
                  'A target jump this large resets the correction [mm].', 0.1, 1000.0),
                 ('feedback_rate_hz', 20.0,
@@ -123,6 +126,7 @@ class FeedbackLink:
 
     @property
     def enabled(self) -> bool:
+        """True when feedback is on (after configure)."""
         return self._law is not None
 
     # ------------------------------------------------------------ data flow

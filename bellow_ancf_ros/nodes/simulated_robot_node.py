@@ -64,14 +64,15 @@ class SimulatedRobotNode(Node):
     """Subscribes pressure commands, publishes measured pose and pressures of a simulated robot."""
 
     def __init__(self, node_name: str = 'simulated_robot_node', **kwargs: Any) -> None:
+        """Declare the parameters, build the robot, start the physics thread and timers."""
         super().__init__(node_name, **kwargs)
-        D, S, I = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_INTEGER)
+        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                     ParameterType.PARAMETER_INTEGER)
         ro = {'read_only': True}
         self.declare_parameter('robot_config', 'one_segment_mismatched', descriptor(
             "The simulated robot's own description (shipped name or YAML path); default the "
             'mismatched one-segment example, a robot that is not the model.', S, **ro))
-        d = descriptor('ANCF elements per actuator of the simulation; 0 = the robot file\'s.', I,
+        d = descriptor('ANCF elements per actuator of the simulation; 0 = the robot file\'s.', INT,
                        **ro)
         d.integer_range = [IntegerRange(from_value=0, to_value=60, step=1)]
         self.declare_parameter('n_elements', 0, d)
@@ -98,7 +99,7 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('angle_noise_deg', 0.1, descriptor(
             'Motion-capture orientation noise, standard deviation per axis [deg].', D,
             lo=0.0, hi=45.0, **ro))
-        d = descriptor('Seed of the noise generator; -1 = random.', I, **ro)
+        d = descriptor('Seed of the noise generator; -1 = random.', INT, **ro)
         d.integer_range = [IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]
         self.declare_parameter('seed', -1, d)
         g = self.get_parameter
@@ -108,7 +109,8 @@ class SimulatedRobotNode(Node):
         seed = int(g('seed').value)
         n_el = int(g('n_elements').value)
         self.robot = SimulatedRobot(
-            cfg, n_elements=n_el or None, payload_kg=common.validate_payload(g('payload_kg').value),
+            cfg, n_elements=n_el or None,
+            payload_kg=common.validate_payload(g('payload_kg').value),
             time_constant_s=float(g('regulator_time_constant_s').value),
             slew_rate_pa_per_s=1e3 * float(g('regulator_slew_rate_kpa_per_s').value),
             position_noise_m=1e-3 * float(g('position_noise_mm').value),
@@ -208,6 +210,7 @@ class SimulatedRobotNode(Node):
                            self.cfg.name, level, message, values)
 
     def destroy_node(self):
+        """Stop the physics thread, then destroy the node."""
         self._stop.set()
         self._thread.join(5.0)
         return super().destroy_node()
