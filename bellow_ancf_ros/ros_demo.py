@@ -336,7 +336,20 @@ def _rms(v: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- plot
 def plot(results: dict, path: Path) -> None:
-    """3-D paths (target, measured FF, measured CL) and errors over time, one column per case."""
+    """Write :func:`figure` as a PNG to ``path``."""
+    import matplotlib.pyplot as plt
+    fig = figure(results)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100, bbox_inches='tight')
+    plt.close(fig)
+
+
+def figure(results: dict):
+    """3-D paths (target, measured FF, measured CL) and errors over time, one column per case.
+
+    Only the evaluated period is drawn (no lead-in from the straight robot, no hold), and
+    the 3-D axes use plain tick labels (no offset label that would collide with them).
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -394,9 +407,7 @@ def plot(results: dict, path: Path) -> None:
             a.legend(fontsize=8, loc='upper right')
     fig.suptitle('bellow_ancf_ros: mismatched simulated robot, measured pose vs target '
                  f'({PAPER})', fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, bbox_inches='tight')
-    plt.close(fig)
+    return fig
 
 
 # ---------------------------------------------------------------- main

@@ -34,3 +34,32 @@ def test_main_demo_short_run_one_segment(tmp_path):
     assert out.count('last (vent): [0.0, 0.0, 0.0]') == 2
     assert 'closed-loop / feedforward position RMSE' in out
     assert plot.is_file() and plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
+    """Issue 10 item 11: no offset label on the 3-D axes, no line back to the start."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from bellow_ancf_ros import ros_demo
+
+    t = np.linspace(0.0, 20.0, 400, endpoint=False)
+    circle = np.column_stack([0.02 * np.cos(t / 20 * 2 * np.pi),
+                              0.02 * np.sin(t / 20 * 2 * np.pi), np.full_like(t, 0.20912)])
+    res = {'t': t, 'target': circle, 'measured': circle + 1e-3, 'pos_err': np.full_like(t, 1e-3),
+           'ang_err': np.full_like(t, 0.01)}
+    fig = ros_demo.figure({'one_segment': {'none': res, 'integral': res},
+                           'two_segment': {'none': res, 'integral': res}})
+    fig.canvas.draw()
+    axes3d = [a for a in fig.axes if a.name == '3d']
+    assert len(axes3d) == 2
+    for ax in axes3d:
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            assert axis.get_major_formatter().get_offset() == ''
+        labels = [tl.get_text() for tl in ax.zaxis.get_ticklabels() if tl.get_text()]
+        assert labels and all(len(lab) <= 6 for lab in labels), labels   # e.g. '209', '211'
+        for line in ax.get_lines():
+            xs, ys, zs = line.get_data_3d()
+            assert len(xs) == len(t)          # exactly the evaluated samples, nothing appended
+            np.testing.assert_allclose(xs[-1], circle[-1, 0] * 1e3 + (line.get_label() != 'target'))
+    plt.close(fig)

@@ -41,6 +41,18 @@ solution, with solve starts at least ``1/max_rate_hz`` apart.  Targets that
 arrive while a solve runs overwrite each other: stale ones are dropped,
 memory is bounded, and the output rate is at most ``max_rate_hz``.
 
+Closed loop
+-----------
+Parameter ``feedback`` (``none``, the default, the paper's feedforward; or
+``integral``): with ``integral`` the node also subscribes ``measured_pose``
+(geometry_msgs/PoseStamped in ``base_frame``) and hands the inverse a target
+shifted by an integral correction of the measured task-space error
+(:mod:`bellow_ancf_ros.core.feedback`, wired by
+:class:`~bellow_ancf_ros.nodes.measured_feedback.FeedbackLink`); the newest
+target is re-solved at ``feedback_rate_hz``.  ``commanded_pose`` is then the
+model's pose for the shifted target.  Stale or implausible measurements:
+pure feedforward, integrator frozen, diagnostics WARN.
+
 Lifecycle and safety
 --------------------
 * Pressures are published only while the node is *active*; targets that
