@@ -61,5 +61,6 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
         for line in ax.get_lines():
             xs, ys, zs = line.get_data_3d()
             assert len(xs) == len(t)          # exactly the evaluated samples, nothing appended
-            np.testing.assert_allclose(xs[-1], circle[-1, 0] * 1e3 + (line.get_label() != 'target'))
+            shift = 0.0 if line.get_label() == 'target' else 1.0   # measured = target + 1 mm
+            np.testing.assert_allclose(xs[-1], circle[-1, 0] * 1e3 + shift)
     plt.close(fig)

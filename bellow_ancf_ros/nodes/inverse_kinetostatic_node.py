@@ -142,7 +142,7 @@ class InverseKinetostaticNode(LifecycleNode):
             'Configure and activate at start-up (so that a plain ros2 run works).', B,
             read_only=True))
         guard_parameters(self, ('payload_kg', 'pressure_unit'))
-        self._feedback = FeedbackLink(self, self._publish_diag)   # parameter feedback (closed loop)
+        self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
         self._active = False
