@@ -119,7 +119,8 @@ class FeedbackLink:
             self._law = None
 
     def reset(self) -> None:
-        """Clear the correction (e.g. on activate)."""
+        """Clear the correction and forget the last target (on activate: wait for a new one)."""
+        self._last_item = None
         with self._lock:
             if self._law is not None:
                 self._law.reset()
