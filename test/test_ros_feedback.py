@@ -162,3 +162,36 @@ def test_two_segment_measured_pose_with_zero_quaternion_refused(h, two):
     meas.publish(target_msg(fw.position, quat=(0.0, 0.0, 0.0, 0.0)))
     wait_for(lambda: node._feedback.refused >= 1, what='refused zero quaternion')
     assert node._feedback.status()['measured_pose_age_s'] == 'none'   # never reached the law
+
+
+def test_closed_loop_vents_on_deactivate_and_stays_vented(h, one):
+    """With feedback on, the re-solve timer must not undo the vent; re-activation waits."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    h.record(Float64MultiArray, 'pressure_command')
+    sim = h.add(SimulatedRobotNode, seed=4)
+    node = h.add(InverseKinetostaticNode, feedback='integral')
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    target = solve_forward(one, [40e3, 40e3, 90e3]).position
+    pub.publish(target_msg(target))
+    wait_for(lambda: node.stats['published'] >= 10, what='closed-loop commands')
+    change = h.service(ChangeState, f'{h.ns}/inverse_kinetostatic_node/change_state')
+    req = ChangeState.Request()
+    req.transition.id = Transition.TRANSITION_DEACTIVATE
+    n_before = h.count('pressure_command')
+    assert h.call(change, req).success
+    wait_for(lambda: h.count('pressure_command') > n_before, what='vent')
+    vent_at = h.count('pressure_command')
+    assert list(h.last('pressure_command').data) == [0.0, 0.0, 0.0]
+    # the re-solve timer keeps running at 20 Hz: let it tick many times, nothing goes out
+    resubmitted = node._worker.submitted
+    wait_for(lambda: node._worker.submitted >= resubmitted + 6, what='re-solve ticks')
+    assert h.count('pressure_command') == vent_at
+    req.transition.id = Transition.TRANSITION_ACTIVATE
+    assert h.call(change, req).success
+    submitted, poses = node._worker.submitted, sim.stats['published_poses']
+    wait_for(lambda: sim.stats['published_poses'] >= poses + 30, what='0.3 s passing')
+    assert node._worker.submitted == submitted   # no re-solve of the old target
+    assert h.count('pressure_command') == vent_at
