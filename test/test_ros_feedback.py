@@ -70,6 +70,24 @@ def test_simulated_robot_node_regulates_measures_and_refuses_bad_input(h, one):
     wait_for(lambda: h.count('measured_pressure') > n1 + 5, what='more measured pressures')
     np.testing.assert_allclose(h.last('measured_pressure').data, p, atol=1.0)
 
+    # a payload set at run time: the robot sinks (its own equilibrium with the load)
+    assert not sim_set(node, -1.0), 'negative payload must be refused'
+    assert sim_set(node, 0.05)
+    loaded = solve_forward(node.robot.model, p, payload_kg=0.05).position
+    assert loaded[2] < own.position[2] - 0.2e-3
+
+    def sank():
+        n = h.count('measured_pose')
+        return n > 40 and np.linalg.norm(
+            positions(h, 'measured_pose', 30).mean(axis=0) - loaded) < 0.15e-3
+    wait_for(sank, what='measured pose at the loaded equilibrium')
+
+
+def sim_set(node, payload):
+    """Set the simulated robot's payload_kg through rclpy; True if accepted."""
+    from rclpy.parameter import Parameter
+    return node.set_parameters([Parameter('payload_kg', value=payload)])[0].successful
+
 
 # ------------------------------------------------------------------ inverse feedback
 def test_feedback_none_is_feedforward_without_measured_pose_subscription(h, one):
