@@ -41,15 +41,15 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from bellow_ancf_ros import ros_demo
+    from bellow_ancf_ros import ros_demo, ros_demo_plot
 
     t = np.linspace(0.0, 20.0, 400, endpoint=False)
     circle = np.column_stack([0.02 * np.cos(t / 20 * 2 * np.pi),
                               0.02 * np.sin(t / 20 * 2 * np.pi), np.full_like(t, 0.20912)])
     res = {'t': t, 'target': circle, 'measured': circle + 1e-3, 'pos_err': np.full_like(t, 1e-3),
            'ang_err': np.full_like(t, 0.01)}
-    fig = ros_demo.figure({'one_segment': {'none': res, 'integral': res},
-                           'two_segment': {'none': res, 'integral': res}})
+    fig = ros_demo_plot.figure({'one_segment': {'none': res, 'integral': res},
+                                'two_segment': {'none': res, 'integral': res}}, ros_demo.CASES)
     fig.canvas.draw()
     axes3d = [a for a in fig.axes if a.name == '3d']
     assert len(axes3d) == 2
