@@ -213,3 +213,16 @@ def test_closed_loop_vents_on_deactivate_and_stays_vented(h, one):
     wait_for(lambda: sim.stats['published_poses'] >= poses + 30, what='0.3 s passing')
     assert node._worker.submitted == submitted   # no re-solve of the old target
     assert h.count('pressure_command') == vent_at
+
+
+def test_measured_pose_from_a_best_effort_publisher_is_used(h, one):
+    """Motion-capture drivers publish best effort: the subscription must match them."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    node = h.add(InverseKinetostaticNode, feedback='integral')
+    pub = h.client.create_publisher(PoseStamped, 'measured_pose', qos_profile_sensor_data)
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='best-effort match')
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    wait_for(lambda: (pub.publish(target_msg(target)) or True)
+             and node._feedback.status()['measured_pose_age_s'] != 'none',
+             what='measured pose reaches the law')

@@ -25,12 +25,23 @@ from typing import Any, Callable
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..core.feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from . import common
-from .ros_util import Refusals, command_qos, descriptor
+from .ros_util import QOS_DEPTH, Refusals, descriptor
 
-__all__ = ['FeedbackLink']
+__all__ = ['FeedbackLink', 'measured_pose_qos']
+
+
+def measured_pose_qos() -> QoSProfile:
+    """Best effort, keep-last :data:`QOS_DEPTH`: matches reliable and best-effort publishers.
+
+    Motion-capture drivers usually publish best effort (sensor data); a reliable
+    subscription would not match them.  A lost sample is replaced by the next one.
+    """
+    return QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT,
+                      history=HistoryPolicy.KEEP_LAST, depth=QOS_DEPTH)
 
 
 class FeedbackLink:
@@ -97,7 +108,7 @@ class FeedbackLink:
         with self._lock:
             self._law = IntegralFeedback(s, self._use_orientation)
         self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
-                                                  self._on_measured, command_qos())
+                                                  self._on_measured, measured_pose_qos())
 
         def tick():
             item = self._last_item
