@@ -11,10 +11,13 @@ discovery)::
         --measured_pressure--> forward_kinetostatic_node --predicted_pose-->
 
 first with ``feedback: none`` (the paper's feedforward controller), then with
-``feedback: integral``.  Each run: the nodes come up, the trajectory starts, a
-lead-in (``--lead-in``, default 2 s) lets the robot reach the path, one full
-period is evaluated, then the trajectory publisher stops and the last target
-is held (``--hold``, default 3 s) for the steady-state error.
+``feedback: integral`` (one segment: both at once, in two domains; two
+segments: one after the other).  Each run: the nodes come up; this process
+holds the path's first point (lead-in) until the trajectory publisher,
+started with ``start_delay_s`` = ``--lead-in`` (default 1.5 s), sends its
+first target; one full period (20 s, 30 s) is evaluated; then the trajectory
+publisher stops and the last target is held (``--hold``, default 1.5 s) for
+the steady-state error.
 
 Measured = ``measured_pose`` of the simulated robot (motion capture with
 0.15 mm noise), each sample against the newest target that had arrived
@@ -74,7 +77,7 @@ class Case:
 
 CASES = (
     Case('one_segment', 'planar_circle', 20.0, None, 'one segment, planar circle', True),
-    Case('two_segment', 'bending_circle', 25.0, 10.0, 'two segments, bending circle at 10 deg',
+    Case('two_segment', 'bending_circle', 30.0, 10.0, 'two segments, bending circle at 10 deg',
          False),
 )
 
@@ -335,11 +338,11 @@ def _parse(argv):
                                  description=__doc__.split('\n\n')[0])
     ap.add_argument('--plot', default='demo_tracking.png',
                     help='PNG output (default: %(default)s)')
-    ap.add_argument('--lead-in', type=float, default=2.0,
+    ap.add_argument('--lead-in', type=float, default=1.5,
                     help='[s] the path\'s first point is held at least this long')
-    ap.add_argument('--hold', type=float, default=2.0, help='[s] the last target is held')
+    ap.add_argument('--hold', type=float, default=1.5, help='[s] the last target is held')
     ap.add_argument('--period-scale', type=float, default=1.0,
-                    help='scale the trajectory periods (20 s, 25 s) by this (tests: shorter runs)')
+                    help='scale the trajectory periods (20 s, 30 s) by this (tests: shorter runs)')
     ap.add_argument('--seed', type=int, default=1, help='motion-capture noise seed')
     ap.add_argument('--physics-rate', type=float, default=25.0,
                     help='simulated robot physics rate [Hz] (default: %(default)s)')

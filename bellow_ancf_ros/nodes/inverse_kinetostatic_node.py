@@ -72,9 +72,9 @@ Lifecycle and safety
 * No tf2 (not installable from PyPI): targets must already be in
   ``base_frame``.
 
-Signals: ``main`` initialises rclpy without its signal handlers and turns
-SIGINT/SIGTERM into ``KeyboardInterrupt``, so that the context is still valid
-when the vent command goes out.
+Signals: ``main`` initialises rclpy without its signal handlers; SIGINT/SIGTERM
+end the spin loop cleanly (a flag, never an exception inside rclpy), so that the
+context is still valid when the vent command goes out.
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ The pure (rclpy-free) helpers live in :mod:`bellow_ancf_ros.nodes.common`.
 from __future__ import annotations
 
 import signal
+import threading
 import time
 from typing import Any
 
@@ -97,8 +98,22 @@ def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
     return st
 
 
-def _sigterm_to_keyboard_interrupt(signum, frame):  # pragma: no cover - signal path
-    raise KeyboardInterrupt
+#: Set by SIGINT/SIGTERM once spinning: the spin loop ends and the node vents.
+_STOP = threading.Event()
+_SPINNING = threading.Event()
+
+
+def _on_stop_signal(signum, frame):  # pragma: no cover - signal path
+    """SIGINT/SIGTERM: while spinning, ask the spin loop to stop; before that, interrupt.
+
+    Raising KeyboardInterrupt while the executor is inside rclpy's C++ code (taking a
+    message) turns into a RuntimeError there and the vent would be skipped, so the spin
+    loop is stopped by a flag instead.
+    """
+    if _SPINNING.is_set():
+        _STOP.set()
+    else:
+        raise KeyboardInterrupt
 
 
 def run_node(node, before_destroy=None) -> None:
@@ -108,8 +123,9 @@ def run_node(node, before_destroy=None) -> None:
     """
     executor = SingleThreadedExecutor()
     executor.add_node(node)
+    _SPINNING.set()
     try:
-        while rclpy.ok():
+        while rclpy.ok() and not _STOP.is_set():
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -124,11 +140,11 @@ def run_node(node, before_destroy=None) -> None:
 
 
 def init_rclpy(args=None) -> None:
-    """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt."""
+    """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM stop the spin loop cleanly."""
     limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _sigterm_to_keyboard_interrupt)
+    signal.signal(signal.SIGINT, _on_stop_signal)
+    signal.signal(signal.SIGTERM, _on_stop_signal)
 
 
 def guard_parameters(node, names) -> None:
