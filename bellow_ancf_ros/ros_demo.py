@@ -14,10 +14,10 @@ first with ``feedback: none`` (the paper's feedforward controller), then with
 ``feedback: integral`` (one segment: both at once, in two domains; two
 segments: one after the other).  Each run: the nodes come up; this process
 holds the path's first point (lead-in) until the trajectory publisher,
-started with ``start_delay_s`` = ``--lead-in`` (default 1.5 s), sends its
-first target; one full period (20 s, 30 s) is evaluated; then the trajectory
-publisher stops and the last target is held (``--hold``, default 1.5 s) for
-the steady-state error.
+started with ``start_delay_s`` = ``--lead-in`` (default 2 s) once the lead-in
+targets reach the inverse node, sends its first target; one full period
+(20 s, 25 s) is evaluated; then the trajectory publisher stops and the last
+target is held (``--hold``, default 2.5 s) for the steady-state error.
 
 Measured = ``measured_pose`` of the simulated robot (motion capture with
 0.15 mm noise), each sample against the newest target that had arrived
@@ -77,7 +77,7 @@ class Case:
 
 CASES = (
     Case('one_segment', 'planar_circle', 20.0, None, 'one segment, planar circle', True),
-    Case('two_segment', 'bending_circle', 30.0, 10.0, 'two segments, bending circle at 10 deg',
+    Case('two_segment', 'bending_circle', 25.0, 10.0, 'two segments, bending circle at 10 deg',
          False),
 )
 
@@ -152,6 +152,8 @@ class Run:
         q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
         first = pose_message(pos[0], q, 'base', self._zero_stamp())
         pub = self.rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
+        if not wait_until(lambda: pub.get_subscription_count() >= 1, self.args.startup_timeout):
+            raise RuntimeError('the inverse node does not subscribe target_pose')
         self._lead_in = self.rec.node.create_timer(0.1, lambda: pub.publish(first))
         traj = {'robot_config': case.robot, 'trajectory': case.trajectory, 'rate_hz': 10.0,
                 'period_s': case.period_s, 'start_delay_s': self.args.lead_in}
@@ -338,11 +340,11 @@ def _parse(argv):
                                  description=__doc__.split('\n\n')[0])
     ap.add_argument('--plot', default='demo_tracking.png',
                     help='PNG output (default: %(default)s)')
-    ap.add_argument('--lead-in', type=float, default=1.5,
+    ap.add_argument('--lead-in', type=float, default=2.0,
                     help='[s] the path\'s first point is held at least this long')
-    ap.add_argument('--hold', type=float, default=1.5, help='[s] the last target is held')
+    ap.add_argument('--hold', type=float, default=2.5, help='[s] the last target is held')
     ap.add_argument('--period-scale', type=float, default=1.0,
-                    help='scale the trajectory periods (20 s, 30 s) by this (tests: shorter runs)')
+                    help='scale the trajectory periods (20 s, 25 s) by this (tests: shorter runs)')
     ap.add_argument('--seed', type=int, default=1, help='motion-capture noise seed')
     ap.add_argument('--physics-rate', type=float, default=25.0,
                     help='simulated robot physics rate [Hz] (default: %(default)s)')
