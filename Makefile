@@ -18,7 +18,7 @@ $(STAMP): requirements.txt setup.py
 	$(VENV)/bin/python -m pip install -e .
 	touch $@
 
-# main job: the ROS pipeline (three nodes as processes, two-segment robot, ~20 s trajectory)
+# main job: model vs a mismatched simulated robot, feedforward then closed loop (ROS processes, ~2 min)
 demo: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.ros_demo
 

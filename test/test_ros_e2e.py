@@ -414,15 +414,15 @@ def test_flood_answers_last_target_with_bounded_memory(stack):
     assert inverse.running
 
 
-def test_ros_demo_short_run_two_segments(tmp_path):
-    """The `make demo` pipeline (three processes, two-segment robot), shortened to seconds."""
+def test_ros_wiring_check_short_run_two_segments(tmp_path):
+    """The wiring check (three processes, the model against itself), shortened to seconds."""
     plot = tmp_path / 'tracking.png'
     # a domain of its own: the module's node stack (another random domain) is still running
     busy = int(os.environ.get('ROS_DOMAIN_ID', '-1'))
     domain = random.choice([d for d in range(102) if d != busy])
     env = dict(os.environ)
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
-    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.ros_demo', '--duration', '3',
+    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.ros_wiring_check', '--duration', '3',
                           '--period', '3', '--rate', '10', '--plot', str(plot),
                           '--domain-id', str(domain)],
                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120,

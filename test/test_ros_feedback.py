@@ -17,17 +17,18 @@ from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
-from test_ros_nodes import (  # noqa: E402,F401 - fixtures ros_context and h
+import test_ros_nodes as _rn  # noqa: E402
+from test_ros_nodes import (  # noqa: E402
     assert_safe,
     diag_statuses,
-    h,
     kv,
     pose_of,
     pressure_msg,
-    ros_context,
     target_msg,
     wait_for,
 )
+
+ros_context, h = _rn.ros_context, _rn.h   # the fixtures (isolated domain, harness)
 
 
 def positions(h, topic, n):
@@ -69,6 +70,24 @@ def test_simulated_robot_node_regulates_measures_and_refuses_bad_input(h, one):
     wait_for(lambda: h.count('measured_pressure') > n1 + 5, what='more measured pressures')
     np.testing.assert_allclose(h.last('measured_pressure').data, p, atol=1.0)
 
+    # a payload set at run time: the robot sinks (its own equilibrium with the load)
+    assert not sim_set(node, -1.0), 'negative payload must be refused'
+    assert sim_set(node, 0.05)
+    loaded = solve_forward(node.robot.model, p, payload_kg=0.05).position
+    assert loaded[2] < own.position[2] - 0.2e-3
+
+    def sank():
+        n = h.count('measured_pose')
+        return n > 40 and np.linalg.norm(
+            positions(h, 'measured_pose', 30).mean(axis=0) - loaded) < 0.15e-3
+    wait_for(sank, what='measured pose at the loaded equilibrium')
+
+
+def sim_set(node, payload):
+    """Set the simulated robot's payload_kg through rclpy; True if accepted."""
+    from rclpy.parameter import Parameter
+    return node.set_parameters([Parameter('payload_kg', value=payload)])[0].successful
+
 
 # ------------------------------------------------------------------ inverse feedback
 def test_feedback_none_is_feedforward_without_measured_pose_subscription(h, one):
@@ -101,6 +120,7 @@ def test_closed_loop_in_process_reaches_held_target(h, one):
         if h.count('measured_pose') < 60:
             return False
         return np.linalg.norm(positions(h, 'measured_pose', 50).mean(axis=0) - target) < 0.3e-3
+
     wait_for(converged, timeout=30.0, what='measured pose within 0.3 mm of the target')
     st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
     assert kv(st)['feedback_state'] == 'integrating' and st.level == DiagnosticStatus.OK
@@ -131,12 +151,14 @@ def test_feedback_refuses_bad_measured_poses_and_falls_back_when_they_stop(h, on
                          for s in diag_statuses(h, 'inverse')), what='refusal diagnostics')
     # a robot 2 mm off in +x: the correction moves the handed target to -x
     offset = np.array([2e-3, 0.0, 0.0])
+
     def feed_and_check():
         meas.publish(target_msg(target + offset))
         if h.count('commanded_pose') == 0:
             return False
         shift = pose_of(h.last('commanded_pose'))[0] - target
         return shift[0] < -0.5e-3
+
     wait_for(feed_and_check, timeout=10.0, what='correction against the offset')
     # measurements stop: fallback to feedforward, WARN, the command returns to the target
     wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'too old' in s.message
@@ -158,3 +180,49 @@ def test_two_segment_measured_pose_with_zero_quaternion_refused(h, two):
     meas.publish(target_msg(fw.position, quat=(0.0, 0.0, 0.0, 0.0)))
     wait_for(lambda: node._feedback.refused >= 1, what='refused zero quaternion')
     assert node._feedback.status()['measured_pose_age_s'] == 'none'   # never reached the law
+
+
+def test_closed_loop_vents_on_deactivate_and_stays_vented(h, one):
+    """With feedback on, the re-solve timer must not undo the vent; re-activation waits."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    h.record(Float64MultiArray, 'pressure_command')
+    sim = h.add(SimulatedRobotNode, seed=4)
+    node = h.add(InverseKinetostaticNode, feedback='integral')
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    target = solve_forward(one, [40e3, 40e3, 90e3]).position
+    pub.publish(target_msg(target))
+    wait_for(lambda: node.stats['published'] >= 10, what='closed-loop commands')
+    change = h.service(ChangeState, f'{h.ns}/inverse_kinetostatic_node/change_state')
+    req = ChangeState.Request()
+    req.transition.id = Transition.TRANSITION_DEACTIVATE
+    n_before = h.count('pressure_command')
+    assert h.call(change, req).success
+    wait_for(lambda: h.count('pressure_command') > n_before, what='vent')
+    vent_at = h.count('pressure_command')
+    assert list(h.last('pressure_command').data) == [0.0, 0.0, 0.0]
+    # the re-solve timer keeps running at 20 Hz: let it tick many times, nothing goes out
+    resubmitted = node._worker.submitted
+    wait_for(lambda: node._worker.submitted >= resubmitted + 6, what='re-solve ticks')
+    assert h.count('pressure_command') == vent_at
+    req.transition.id = Transition.TRANSITION_ACTIVATE
+    assert h.call(change, req).success
+    submitted, poses = node._worker.submitted, sim.stats['published_poses']
+    wait_for(lambda: sim.stats['published_poses'] >= poses + 30, what='0.3 s passing')
+    assert node._worker.submitted == submitted   # no re-solve of the old target
+    assert h.count('pressure_command') == vent_at
+
+
+def test_measured_pose_from_a_best_effort_publisher_is_used(h, one):
+    """Motion-capture drivers publish best effort: the subscription must match them."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    node = h.add(InverseKinetostaticNode, feedback='integral')
+    pub = h.client.create_publisher(PoseStamped, 'measured_pose', qos_profile_sensor_data)
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='best-effort match')
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    wait_for(lambda: (pub.publish(target_msg(target)) or True)
+             and node._feedback.status()['measured_pose_age_s'] != 'none',
+             what='measured pose reaches the law')

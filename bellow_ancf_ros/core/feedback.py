@@ -6,19 +6,23 @@ its model, so it settles elsewhere.  :class:`IntegralFeedback` shifts the
 target handed to the inverse by a correction that integrates the measured
 task-space error::
 
-    e_p = p_target - p_measured                    (position error, m)
+    e_p = p_target(t_m) - p_measured(t_m)          (position error, m)
     c_p <- clamp(c_p + k dt e_p, max_correction_m)
     p_handed_to_inverse = p_target + c_p
 
 and, for robots with two or more segments, the end-effector z-axis
 (rotation vectors, rad)::
 
-    e_r = angle(z_measured -> z_target) * unit(z_measured x z_target)
+    e_r = angle(z_measured -> z_target) * unit(z_measured x z_target)   (both at t_m)
     c_r <- clamp(c_r + k dt e_r, max_correction_rad)   (component along z_target removed)
     z_handed_to_inverse = Rot(c_r) z_target
 
 ``k`` is ``gain_per_s`` (1/s): an error is integrated away with time
-constant ``1/k`` once the regulators (0.1 s) have followed.
+constant ``1/k`` once the regulators (0.1 s) have followed.  ``t_m`` is the
+time the measurement was *taken* (its stamp): it is compared with the target
+that was in effect then, not with the newest one, so that the transport
+delay of the measurement does not turn the target's motion into a spurious
+error (a moving target would otherwise be led by ``speed * delay``).
 
 Safeguards
 ----------
@@ -50,6 +54,7 @@ caller (the ROS node uses ``time.monotonic()``; tests use simulated time).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -58,6 +63,9 @@ import numpy as np
 from .simulated_robot import rotation_from_vector
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback', 'rotation_error']
+
+#: Targets older than this are forgotten [s] (measurements are compared with the target then).
+HISTORY_S = 2.0
 
 #: Values of the inverse node's ``feedback`` parameter.
 FEEDBACK_MODES = ('none', 'integral')
@@ -74,7 +82,7 @@ JUMP = 'fallback to feedforward: measured_pose jumped implausibly'
 class FeedbackSettings:
     """Gains, limits and timeouts of :class:`IntegralFeedback` (SI units)."""
 
-    gain_per_s: float = 3.0
+    gain_per_s: float = 2.5
     max_correction_m: float = 0.010
     max_correction_rad: float = math.radians(10.0)
     measured_pose_timeout_s: float = 0.25
@@ -85,6 +93,7 @@ class FeedbackSettings:
     max_dt_s: float = 0.1
 
     def __post_init__(self) -> None:
+        """Refuse a non-positive or non-finite setting, naming it."""
         for f in fields(self):
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -93,7 +102,7 @@ class FeedbackSettings:
 
 
 def rotation_error(z_from: Any, z_to: Any) -> np.ndarray:
-    """Rotation vector (axis * angle, rad) of the smallest rotation taking ``z_from`` to ``z_to``."""
+    """Rotation vector (axis * angle, rad) of the smallest rotation ``z_from`` -> ``z_to``."""
     a = np.asarray(z_from, dtype=float).reshape(3)
     b = np.asarray(z_to, dtype=float).reshape(3)
     a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
@@ -120,6 +129,7 @@ class IntegralFeedback:
 
     def __init__(self, settings: FeedbackSettings | None = None,
                  use_orientation: bool = False) -> None:
+        """Start with no correction; ``use_orientation`` for two or more segments."""
         self.settings = settings or FeedbackSettings()
         self.use_orientation = bool(use_orientation)
         self.reset()
@@ -137,6 +147,7 @@ class IntegralFeedback:
         self.correction_rad = np.zeros(3)
         self._last_t: float | None = None
         self._used_meas_t: float | None = None
+        self._history: deque = deque()    # (time, target position, target z-axis)
         self._target_p = self._target_z = None
         self._saturated = False
         self.state = WAITING
@@ -148,7 +159,7 @@ class IntegralFeedback:
 
     # ------------------------------------------------------------ inputs
     def measurement(self, t: float, position: Any, z_axis: Any = None) -> bool:
-        """Record a measured pose at time ``t``; False if refused as an implausible jump.
+        """Record a pose measured (taken) at time ``t``; False if refused as an implausible jump.
 
         A sample farther than the jump limits from the previous *received*
         sample is refused (the next one is compared with it, so a real,
@@ -166,9 +177,9 @@ class IntegralFeedback:
         if self._prev_p is not None:
             if np.linalg.norm(p - self._prev_p) > s.max_measurement_jump_m:
                 plausible = False
-            if (self.use_orientation and z is not None and self._prev_z is not None
-                    and np.linalg.norm(rotation_error(self._prev_z, z)) > s.max_measurement_jump_rad):
-                plausible = False
+            if self.use_orientation and z is not None and self._prev_z is not None:
+                turn = float(np.linalg.norm(rotation_error(self._prev_z, z)))
+                plausible = plausible and turn <= s.max_measurement_jump_rad
         self._prev_p, self._prev_z = p, z
         self._meas_ok = plausible
         if not plausible:
@@ -201,6 +212,9 @@ class IntegralFeedback:
             self.reset()
             self.resets += 1
         self._target_p, self._target_z = p_t, z_t
+        self._history.append((float(t), p_t, z_t))
+        while len(self._history) > 2 and self._history[1][0] < float(t) - HISTORY_S:
+            self._history.popleft()
         age = self.measurement_age(t)
         if age is None:
             self.state = WAITING
@@ -220,14 +234,28 @@ class IntegralFeedback:
             return p_t.copy(), None if z_t is None else z_t.copy()
         return self._apply(p_t, z_t)
 
-    def _integrate(self, dt: float, p_t: np.ndarray, z_t: np.ndarray | None) -> None:
+    def _target_at(self, t: float):
+        """The target in effect at time ``t`` (None before the first one since a reset)."""
+        found = None
+        for entry in self._history:
+            if entry[0] > t:
+                break
+            found = entry
+        return None if found is None else found[1:]
+
+    def _integrate(self, dt: float, p_now: np.ndarray, z_now: np.ndarray | None) -> None:
         s = self.settings
+        then = self._target_at(self._meas_t)
+        if then is None:          # measured before the current targets began: nothing to compare
+            self.state = TRACKING
+            return
+        p_t, z_t = then
         k = s.gain_per_s * dt
         c_new = _clamp(self.correction_m + k * (p_t - self._meas_p), s.max_correction_m)
         r_new = self.correction_rad
         if self.use_orientation and self._meas_z is not None:
             r = self.correction_rad + k * rotation_error(self._meas_z, z_t)
-            r_new = _clamp(r - (r @ z_t) * z_t, s.max_correction_rad)
+            r_new = _clamp(r - (r @ z_now) * z_now, s.max_correction_rad)
         if self._saturated:
             # anti-windup: only unwind while the inverse is at a limit
             if np.linalg.norm(c_new) > np.linalg.norm(self.correction_m):

@@ -81,6 +81,7 @@ class PressureRegulators:
                  time_constant_s: float = DEFAULT_TIME_CONSTANT_S,
                  slew_rate_pa_per_s: float = DEFAULT_SLEW_RATE_PA_PER_S,
                  initial_pa: Any = None) -> None:
+        """Regulators at ``initial_pa`` (default: vent, 0 Pa gauge) with that set-point."""
         if not (math.isfinite(p_min) and math.isfinite(p_max) and p_min < p_max):
             raise ValueError(f'pressure limits must be finite with p_min < p_max, got '
                              f'[{p_min}, {p_max}] Pa')
@@ -140,6 +141,10 @@ class SimulatedRobot:
     stability_every : run the stability check on every n-th equilibrium (and
         on any solve that needed continuation); it costs as much as the solve.
 
+    Threads: :meth:`step` from one thread only; :meth:`measure`,
+    :meth:`command` and :meth:`set_payload` may be called from others (the
+    state, the set-points and the payload are replaced whole, never mutated).
+
     A failed equilibrium solve (not converged, or unstable when checked)
     keeps the last good state and is counted in :attr:`failures` with its
     message in :attr:`last_failure`: the robot never reports a configuration
@@ -153,6 +158,7 @@ class SimulatedRobot:
                  position_noise_m: float = DEFAULT_POSITION_NOISE_M,
                  angle_noise_rad: float = DEFAULT_ANGLE_NOISE_RAD,
                  seed: int | None = None, stability_every: int = 10) -> None:
+        """Load the robot, solve its vent equilibrium (``RuntimeError`` if there is none)."""
         cfg = config if isinstance(config, RobotConfig) else load_robot(config)
         self.cfg = cfg
         self.model = RobotModel(cfg, n_elements=n_elements)

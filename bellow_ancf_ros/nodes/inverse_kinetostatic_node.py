@@ -50,8 +50,21 @@ Every solve has a wall-clock budget of ``BUDGET_PERIODS / max_rate_hz``
 when it runs out, the best in-limit equilibrium found so far is sent with a
 WARN diagnostic ("solve budget used up"), and the solve continues from it in
 the next slice unless a newer target has arrived (at most
-``MAX_CONTINUATIONS`` slices per target; then the best answer stands).  The corners of the pressure box, which the first unreachable target
-needs, are solved at configure for the configured payload.
+``MAX_CONTINUATIONS`` slices per target; then the best answer stands).
+The corners of the pressure box, which the first unreachable target needs,
+are solved at configure for the configured payload.
+
+Closed loop
+-----------
+Parameter ``feedback`` (``none``, the default, the paper's feedforward; or
+``integral``): with ``integral`` the node also subscribes ``measured_pose``
+(geometry_msgs/PoseStamped in ``base_frame``) and hands the inverse a target
+shifted by an integral correction of the measured task-space error
+(:mod:`bellow_ancf_ros.core.feedback`, wired by
+:class:`~bellow_ancf_ros.nodes.measured_feedback.FeedbackLink`); the newest
+target is re-solved at ``feedback_rate_hz``.  ``commanded_pose`` is then the
+model's pose for the shifted target.  Stale or implausible measurements:
+pure feedforward, integrator frozen, diagnostics WARN.
 
 Lifecycle and safety
 --------------------
@@ -85,9 +98,9 @@ Lifecycle and safety
 * No tf2 (not installable from PyPI): targets must already be in
   ``base_frame``.
 
-Signals: ``main`` initialises rclpy without its signal handlers and turns
-SIGINT/SIGTERM into ``KeyboardInterrupt``, so that the context is still valid
-when the vent command goes out.
+Signals: ``main`` initialises rclpy without its signal handlers; SIGINT/SIGTERM
+end the spin loop cleanly (a flag, never an exception inside rclpy), so that the
+context is still valid when the vent command goes out.
 """
 
 from __future__ import annotations
@@ -194,6 +207,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self._cfg.name if self._cfg is not None else '')
+        self.heartbeat.add_source(self._feedback_heartbeat)
 
         if self.get_parameter('autostart').value:
             if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
@@ -227,6 +241,15 @@ class InverseKinetostaticNode(LifecycleNode):
         state = 'active' if self._active else 'inactive'
         return common.configure_time_refusal(param.name, self._node_path(), state,
                                              self.get_parameter(param.name).value)
+
+    def _feedback_heartbeat(self):
+        """Feedback state for the heartbeat; WARN while it falls back to feedforward."""
+        values = self._feedback.status()
+        if self._feedback.fallback and self._active:
+            return (DiagnosticStatus.WARN,
+                    f'feedback fallback, pure feedforward: {values.get("feedback_state", "")}',
+                    values)
+        return values
 
     # ---------------------------------------------------------- lifecycle
     def on_configure(self, state: State) -> TransitionCallbackReturn:

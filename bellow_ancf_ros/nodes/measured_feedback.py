@@ -9,7 +9,10 @@ law, plain Python in the core) and re-submits the newest target at
 ``feedback_rate_hz`` so that a held target keeps being corrected.  Measured
 poses in another frame, with NaN/inf or (two or more segments) an
 orientation that cannot be normalised are refused (throttled warning,
-diagnostics WARN) and never reach the integrator.
+diagnostics WARN) and never reach the integrator.  A measured pose's stamp
+says when it was taken: its age decides the fallback to feedforward, and it
+is compared with the target in effect at that time (a zero stamp, or one in
+the future, counts as taken on arrival).
 """
 
 from __future__ import annotations
@@ -22,18 +25,30 @@ from typing import Any, Callable
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..core.feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from . import common
-from .ros_util import Refusals, command_qos, descriptor
+from .ros_util import QOS_DEPTH, Refusals, descriptor
 
-__all__ = ['FeedbackLink']
+__all__ = ['FeedbackLink', 'measured_pose_qos']
+
+
+def measured_pose_qos() -> QoSProfile:
+    """Best effort, keep-last :data:`QOS_DEPTH`: matches reliable and best-effort publishers.
+
+    Motion-capture drivers usually publish best effort (sensor data); a reliable
+    subscription would not match them.  A lost sample is replaced by the next one.
+    """
+    return QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT,
+                      history=HistoryPolicy.KEEP_LAST, depth=QOS_DEPTH)
 
 
 class FeedbackLink:
     """Feedback parameters, ``measured_pose`` subscription and control law of one node."""
 
     def __init__(self, node, publish_diag: Callable) -> None:
+        """Declare the feedback parameters on ``node`` (refuses a bad ``feedback`` value)."""
         D, S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
         node.declare_parameter('feedback', 'none', descriptor(
             "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
@@ -48,9 +63,11 @@ class FeedbackLink:
                 ('feedback_max_correction_deg', math.degrees(d.max_correction_rad),
                  'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
                 ('measured_pose_timeout_s', d.measured_pose_timeout_s,
-                 'Older measurements: fallback to feedforward, integrator frozen [s].', 0.01, 10.0),
+                 'Older measurements: fallback to feedforward, integrator frozen [s].',
+                 0.01, 10.0),
                 ('measured_pose_max_jump_mm', d.max_measurement_jump_m * 1e3,
-                 'A measured pose this far from the previous one is implausible [mm].', 0.1, 1000.0),
+                 'A measured pose this far from the previous one is implausible [mm].',
+                 0.1, 1000.0),
                 ('feedback_reset_jump_mm', d.reset_jump_m * 1e3,
                  'A target jump this large resets the correction [mm].', 0.1, 1000.0),
                 ('feedback_rate_hz', 20.0,
@@ -91,7 +108,7 @@ class FeedbackLink:
         with self._lock:
             self._law = IntegralFeedback(s, self._use_orientation)
         self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
-                                                  self._on_measured, command_qos())
+                                                  self._on_measured, measured_pose_qos())
 
         def tick():
             item = self._last_item
@@ -113,13 +130,15 @@ class FeedbackLink:
             self._law = None
 
     def reset(self) -> None:
-        """Clear the correction (e.g. on activate)."""
+        """Clear the correction and forget the last target (on activate: wait for a new one)."""
+        self._last_item = None
         with self._lock:
             if self._law is not None:
                 self._law.reset()
 
     @property
     def enabled(self) -> bool:
+        """True when feedback is on (after configure)."""
         return self._law is not None
 
     # ------------------------------------------------------------ data flow
@@ -145,7 +164,16 @@ class FeedbackLink:
             return
         with self._lock:
             if self._law is not None:
-                self._law.measurement(time.monotonic(), pos, z)
+                self._law.measurement(self._taken_at(msg.header.stamp), pos, z)
+
+    def _taken_at(self, stamp) -> float:
+        """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
+        now = time.monotonic()
+        if stamp.sec == 0 and stamp.nanosec == 0:
+            return now
+        age = 1e-9 * (self.node.get_clock().now().nanoseconds
+                      - (stamp.sec * 1_000_000_000 + stamp.nanosec))
+        return now - age if age >= 0.0 else now
 
     def correct(self, position: np.ndarray, z_axis: np.ndarray | None):
         """The target to hand to the inverse (unchanged when feedback is off)."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -385,10 +386,25 @@ def _ignore_further_signals() -> _ShuttingDown:
     return handler
 
 
+#: Set by the first SIGINT/SIGTERM while spinning: the spin loop ends and the node vents.
+_STOP = threading.Event()
+_SPINNING = threading.Event()
+
+
 def _first_signal(signum, frame):  # pragma: no cover - signal path
-    """First SIGINT/SIGTERM: stop spinning (KeyboardInterrupt); later ones are only counted."""
+    """First SIGINT/SIGTERM: stop spinning; later ones are only counted.
+
+    While spinning, the loop is stopped by a flag rather than by raising:
+    KeyboardInterrupt raised while the executor is inside rclpy's C++ code
+    (taking a message) becomes a RuntimeError there, and the process would
+    exit with an error.  Before spinning (in a constructor), it raises
+    KeyboardInterrupt.
+    """
     _ignore_further_signals()
-    raise KeyboardInterrupt
+    if _SPINNING.is_set():
+        _STOP.set()
+    else:
+        raise KeyboardInterrupt
 
 
 def run_node(node, before_destroy=None) -> None:
@@ -401,8 +417,9 @@ def run_node(node, before_destroy=None) -> None:
     """
     executor = SingleThreadedExecutor()
     executor.add_node(node)
+    _SPINNING.set()
     try:
-        while rclpy.ok():
+        while rclpy.ok() and not _STOP.is_set():
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -418,10 +435,10 @@ def run_node(node, before_destroy=None) -> None:
 
 
 def init_rclpy(args=None) -> None:
-    """Initialise rclpy without its signal handlers; SIGINT/SIGTERM -> KeyboardInterrupt.
+    """Initialise rclpy without its signal handlers; SIGINT/SIGTERM stop the node.
 
-    The first signal raises KeyboardInterrupt and makes every later one a
-    no-op, so that a second Ctrl-C (terminal and ``ros2 launch`` both send
+    The first signal ends the spin loop (see :func:`_first_signal`) and makes
+    every later one a no-op, so that a second Ctrl-C (terminal and ``ros2 launch`` both send
     one) cannot interrupt the vent on the way out.
     """
     limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)

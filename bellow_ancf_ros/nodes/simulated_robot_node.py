@@ -64,14 +64,15 @@ class SimulatedRobotNode(Node):
     """Subscribes pressure commands, publishes measured pose and pressures of a simulated robot."""
 
     def __init__(self, node_name: str = 'simulated_robot_node', **kwargs: Any) -> None:
+        """Declare the parameters, build the robot, start the physics thread and timers."""
         super().__init__(node_name, **kwargs)
-        D, S, I = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_INTEGER)
+        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                     ParameterType.PARAMETER_INTEGER)
         ro = {'read_only': True}
         self.declare_parameter('robot_config', 'one_segment_mismatched', descriptor(
             "The simulated robot's own description (shipped name or YAML path); default the "
             'mismatched one-segment example, a robot that is not the model.', S, **ro))
-        d = descriptor('ANCF elements per actuator of the simulation; 0 = the robot file\'s.', I,
+        d = descriptor('ANCF elements per actuator of the simulation; 0 = the robot file\'s.', INT,
                        **ro)
         d.integer_range = [IntegerRange(from_value=0, to_value=60, step=1)]
         self.declare_parameter('n_elements', 0, d)
@@ -98,7 +99,7 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('angle_noise_deg', 0.1, descriptor(
             'Motion-capture orientation noise, standard deviation per axis [deg].', D,
             lo=0.0, hi=45.0, **ro))
-        d = descriptor('Seed of the noise generator; -1 = random.', I, **ro)
+        d = descriptor('Seed of the noise generator; -1 = random.', INT, **ro)
         d.integer_range = [IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]
         self.declare_parameter('seed', -1, d)
         g = self.get_parameter
@@ -108,7 +109,8 @@ class SimulatedRobotNode(Node):
         seed = int(g('seed').value)
         n_el = int(g('n_elements').value)
         self.robot = SimulatedRobot(
-            cfg, n_elements=n_el or None, payload_kg=common.validate_payload(g('payload_kg').value),
+            cfg, n_elements=n_el or None,
+            payload_kg=common.validate_payload(g('payload_kg').value),
             time_constant_s=float(g('regulator_time_constant_s').value),
             slew_rate_pa_per_s=1e3 * float(g('regulator_slew_rate_kpa_per_s').value),
             position_noise_m=1e-3 * float(g('position_noise_mm').value),
@@ -116,7 +118,6 @@ class SimulatedRobotNode(Node):
             seed=None if seed < 0 else seed)
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._lock = threading.Lock()
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0}
         self.last_refusal_reason = ''
         qos = command_qos()
@@ -147,8 +148,7 @@ class SimulatedRobotNode(Node):
                 if reason:
                     self.get_logger().warning(f'refused parameter change: {reason}')
                     return SetParametersResult(successful=False, reason=reason)
-                with self._lock:
-                    self.robot.set_payload(float(p.value))
+                self.robot.set_payload(float(p.value))
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ input
@@ -163,8 +163,7 @@ class SimulatedRobotNode(Node):
             self.last_refusal_reason = str(exc)
             self._refusals.report(str(exc), self.stats['refused'])
             return
-        with self._lock:
-            self.robot.command(p)
+        self.robot.command(p)   # one array assignment: the physics thread reads it whole
 
     # ------------------------------------------------------------ physics
     def _physics_loop(self) -> None:
@@ -178,11 +177,10 @@ class SimulatedRobotNode(Node):
             else:
                 next_t = time.monotonic()   # running late: no catch-up burst
             now = time.monotonic()
-            with self._lock:
-                failures = self.robot.failures
-                self.robot.step(now - last)
-                failed = self.robot.failures > failures
-                p = self.robot.pressures_pa
+            failures = self.robot.failures
+            self.robot.step(now - last)   # only this thread steps the robot
+            failed = self.robot.failures > failures
+            p = self.robot.pressures_pa
             last = now
             if failed:
                 self.stats['failed_solves'] += 1
@@ -195,18 +193,14 @@ class SimulatedRobotNode(Node):
                 return
 
     def _mocap(self) -> None:
-        with self._lock:
-            pos, R = self.robot.measure()
+        pos, R = self.robot.measure()   # reads the newest complete state (no lock needed)
         self._pub_pose.publish(pose_message(pos, common.quaternion_from_rotation(R), self._frame,
                                             self.get_clock().now().to_msg()))
         self.stats['published_poses'] += 1
 
     def _status(self) -> None:
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK
-        with self._lock:
-            p = self.robot.pressures_pa
-            solves = self.robot.solves
-            payload = self.robot.payload_kg
+        p, solves, payload = self.robot.pressures_pa, self.robot.solves, self.robot.payload_kg
         values = dict(self.stats, solves=solves, payload_kg=payload,
                       pressures=' '.join(f'{v:.6g}' for v in common.to_unit(p, self._unit)))
         self._publish_diag(level, 'simulating', values)
@@ -216,6 +210,7 @@ class SimulatedRobotNode(Node):
                            self.cfg.name, level, message, values)
 
     def destroy_node(self):
+        """Stop the physics thread, then destroy the node."""
         self._stop.set()
         self._thread.join(5.0)
         return super().destroy_node()
