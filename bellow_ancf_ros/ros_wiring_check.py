@@ -56,6 +56,7 @@ def _recorder(domain: int) -> Recorder:
                              'commanded_pose': PoseStamped, 'predicted_pose': PoseStamped,
                              '/diagnostics': DiagnosticArray})
 
+
 NODES = ('inverse_kinetostatic_node', 'forward_kinetostatic_node', 'trajectory_publisher')
 
 
@@ -118,7 +119,8 @@ def analyse(rec: dict, t_start: float, t_end: float) -> dict:
         if not (t_start <= t_d <= t_end):
             continue
         for st in arr.status:
-            kind = 'inverse' if 'inverse' in st.name else 'forward' if 'forward' in st.name else None
+            kind = ('inverse' if 'inverse' in st.name
+                    else 'forward' if 'forward' in st.name else None)
             if kind is None:
                 continue
             lvl = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
@@ -156,7 +158,8 @@ def _plot(res: dict, path: Path, title: str) -> None:
     ax1.set_title('target vs predicted (log scale)', fontsize=9)
     ax1.grid(True, which='both', alpha=0.3)
     ax2 = fig.add_subplot(2, 2, 4, sharex=ax1)
-    ax2.semilogy(res['t'], np.maximum(np.degrees(res['ang_err']), floor), '.-', color='tab:green', ms=3)
+    ax2.semilogy(res['t'], np.maximum(np.degrees(res['ang_err']), floor), '.-',
+                 color='tab:green', ms=3)
     ax2.set_ylabel('angle error [deg]')
     ax2.set_xlabel('time [s]')
     ax2.grid(True, which='both', alpha=0.3)
@@ -169,11 +172,15 @@ def _plot(res: dict, path: Path, title: str) -> None:
 
 # ---------------------------------------------------------------- main
 def _parse(argv):
-    ap = argparse.ArgumentParser(prog='python -m bellow_ancf_ros.ros_wiring_check', description=__doc__.split('\n\n')[0])
-    ap.add_argument('--plot', default='wiring_check.png', help='PNG output path (default: %(default)s)')
+    ap = argparse.ArgumentParser(prog='python -m bellow_ancf_ros.ros_wiring_check',
+                                 description=__doc__.split('\n\n')[0])
+    ap.add_argument('--plot', default='wiring_check.png',
+                    help='PNG output path (default: %(default)s)')
     ap.add_argument('--duration', type=float, default=20.0, help='trajectory run time [s]')
-    ap.add_argument('--trajectory', default='bending_circle', help='trajectory name (default: %(default)s)')
-    ap.add_argument('--bending-angle', type=float, default=10.0, help='bending angle [deg] of bending_circle')
+    ap.add_argument('--trajectory', default='bending_circle',
+                    help='trajectory name (default: %(default)s)')
+    ap.add_argument('--bending-angle', type=float, default=10.0,
+                    help='bending angle [deg] of bending_circle')
     ap.add_argument('--period', type=float, default=20.0, help='trajectory period [s]')
     ap.add_argument('--rate', type=float, default=10.0, help='target rate [Hz]')
     ap.add_argument('--robot', default=ROBOT, help='robot config (default: %(default)s)')
@@ -208,9 +215,10 @@ def main(argv=None) -> int:
         t0 = time.monotonic()
         procs['inverse'] = NodeProcess('inverse_kinetostatic_node', common_params, env, log_dir)
         procs['forward'] = NodeProcess('forward_kinetostatic_node', common_params, env, log_dir)
-        up = wait_until(lambda: rec.publishers('pressure_command') >= 1
-                   and rec.publishers('predicted_pose') >= 1
-                   and all(p.proc.poll() is None for p in procs.values()), args.startup_timeout)
+        up = wait_until(lambda: (rec.publishers('pressure_command') >= 1
+                                 and rec.publishers('predicted_pose') >= 1
+                                 and all(p.proc.poll() is None for p in procs.values())),
+                        args.startup_timeout)
         if not up:
             raise RuntimeError('inverse/forward nodes did not come up')
         print(f'  inverse and forward nodes up after {time.monotonic() - t0:.1f} s')
@@ -221,8 +229,9 @@ def main(argv=None) -> int:
         n_pred = rec.count('predicted_pose')
         procs['trajectory'] = NodeProcess('trajectory_publisher', traj_params, env, log_dir)
         # the recorder must see the targets too (discovery of a new process takes up to ~3 s)
-        if not wait_until(lambda: rec.publishers('target_pose') >= 1
-                     and rec.count('predicted_pose') > n_pred, args.startup_timeout):
+        if not wait_until(lambda: (rec.publishers('target_pose') >= 1
+                                   and rec.count('predicted_pose') > n_pred),
+                          args.startup_timeout):
             raise RuntimeError('no prediction arrived: the pipeline is not flowing')
         t_start = time.monotonic()
         print(f'  pipeline flowing; running {args.trajectory!r} for {args.duration:g} s ...')
@@ -254,7 +263,8 @@ def main(argv=None) -> int:
 
     res = analyse(snapshot, t_start, t_end)
     vent = snapshot['pressure_command'][-1][1].data if snapshot['pressure_command'] else None
-    pressures = np.array(res['pressures']) if res['pressures'] else np.zeros((0, cfg.n_actuators_total))
+    pressures = (np.array(res['pressures']) if res['pressures']
+                 else np.zeros((0, cfg.n_actuators_total)))
     safe = bool(pressures.size) and np.all(np.isfinite(pressures)) and np.all(
         (pressures >= cfg.p_min) & (pressures <= cfg.p_max))
     print()
@@ -270,7 +280,8 @@ def main(argv=None) -> int:
     pe, ae = res['pos_err'], res['ang_err']
     print(f'  position error target vs predicted: RMS {math.sqrt(np.mean(pe**2)) * 1e3:.3g} mm, '
           f'max {pe.max() * 1e3:.3g} mm')
-    print(f'  angle error target vs predicted z-axis: RMS {np.degrees(math.sqrt(np.mean(ae**2))):.3g} deg, '
+    ang_rms = np.degrees(math.sqrt(np.mean(ae**2)))
+    print(f'  angle error target vs predicted z-axis: RMS {ang_rms:.3g} deg, '
           f'max {np.degrees(ae.max()):.3g} deg')
     for kind in ('inverse', 'forward'):
         s = res['solve_ms'][kind]
