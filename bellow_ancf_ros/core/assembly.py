@@ -40,8 +40,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
-from . import ancf, kernels
+from . import ancf, kernels, linsolve
 from .config import RobotConfig
 from .stage1 import Stage1
 
@@ -63,6 +64,19 @@ class Evaluation:
     residual: np.ndarray
     jacobian: sp.csc_matrix | None = None
     dres_dlam: np.ndarray | None = None  # (N, A) partial derivative w.r.t. stretches
+    model: object = None  # the RobotModel whose KKT solver serves ``solve`` (core.linsolve)
+
+    def solve(self, b):
+        """Solve ``J x = b`` with the Jacobian (banded LU, reused along a path; core.linsolve).
+
+        Raises ``numpy.linalg.LinAlgError`` when the Jacobian is singular.
+        """
+        if self.model is not None:
+            return linsolve.kkt_solver(self.model).solve(self.jacobian, b)
+        try:  # a Jacobian without the model's pattern (e.g. the cantilever rig)
+            return spla.splu(sp.csc_matrix(self.jacobian), permc_spec="COLAMD").solve(b)
+        except RuntimeError as exc:
+            raise np.linalg.LinAlgError(str(exc)) from exc
 
 
 class RobotModel:
@@ -271,22 +285,50 @@ class RobotModel:
         self._aed = aed
         self._pdofs = pdofs
 
+    def structural_nonzeros(self):
+        """Mask of the CSC pattern's entries that can be non-zero (built once, cached).
+
+        The pattern holds every element dof of an attachment's element; when
+        the attachment sits on a node the other node's weights are exactly zero
+        (``h(0) = [1, 0, 0, 0]``).  Two evaluations at random states with
+        random multipliers mark the entries that are exactly zero in both.
+        """
+        mask = getattr(self, "_structural_nonzeros", None)
+        if mask is None:
+            rng = np.random.default_rng(12345)
+            mask = np.zeros(self._nnz, bool)
+            for _ in range(2):
+                lam = rng.uniform(0.9, 1.1, self.A)
+                x = self.straight_state(lam)
+                x += 1e-2 * rng.standard_normal(self.N)
+                mask |= self.evaluate(x, lam, 1.0, 0.1, jacobian=True).jacobian.data != 0.0
+            self._structural_nonzeros = mask
+        return mask
+
     # -------------------------------------------------------------- parameters
     def element_parameters(self, lam):
         """Per-actuator ``le, k_t, k_b`` and their derivatives w.r.t. ``lam`` (eqs. 2, 4)."""
         cfg = self.cfg
         lam = np.asarray(lam, dtype=float)
+        key = lam.tobytes()
+        cached = getattr(self, "_par_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]  # Newton iterations at fixed stretches ask again and again
         k = self.stage1.k(lam)
         dk = self.stage1.dk(lam)
         le = lam * cfg.l0 / self.n
         kt = k * cfg.l0
         kb = cfg.d_a**2 * cfg.l0 * lam * k / 8.0
-        return {
+        par = {
             "le": le, "kt": kt, "kb": kb,
             "dle": np.full_like(lam, cfg.l0 / self.n),
             "dkt": dk * cfg.l0,
             "dkb": cfg.d_a**2 * cfg.l0 * (k + lam * dk) / 8.0,
         }
+        for v in par.values():
+            v.flags.writeable = False  # shared by the cache
+        self._par_cache = (key, par)
+        return par
 
     # ------------------------------------------------------------------ loads
     def external_forces(self, lam, load_scale=1.0, payload=0.0):
@@ -361,6 +403,7 @@ class RobotModel:
         ev = Evaluation(residual=res)
         if jacobian:
             ev.jacobian = sp.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=(self.N, self.N))
+            ev.model = self
         if lam_derivative:
             ev.dres_dlam = d
         return ev

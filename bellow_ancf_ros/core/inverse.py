@@ -40,7 +40,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse.linalg as spla
 from scipy.optimize import least_squares
 
 from .assembly import RobotModel
@@ -313,10 +312,9 @@ def _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, h
         if it == max_iter:
             break
         try:
-            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
-        except RuntimeError:
+            sol = ev.solve(np.column_stack([R, ev.dres_dlam]))  # core.linsolve: reused banded LU
+        except np.linalg.LinAlgError:
             return None
-        sol = lu.solve(np.column_stack([R, ev.dres_dlam]))
         w0, W = sol[:, 0], sol[:, 1:]
         dlam = stretch_step(w0, W)
         if dlam is None:

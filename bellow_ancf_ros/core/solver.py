@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 __all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads"]
 
@@ -77,10 +76,9 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         if it == max_iter:
             break
         try:
-            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
-        except RuntimeError:
+            dx = -ev.solve(ev.residual)  # banded LU, reused with refinement (core.linsolve)
+        except np.linalg.LinAlgError:
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
-        dx = -lu.solve(ev.residual)
         if not np.all(np.isfinite(dx)):
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
         merit = np.dot(r, r)
