@@ -282,6 +282,9 @@ class RobotModel:
         self._csc_indices = (uniq % self.N).astype(np.int32)
         ucols = uniq // self.N
         self._csc_indptr = np.searchsorted(ucols, np.arange(self.N + 1)).astype(np.int32)
+        # shared by every Jacobian: read-only, so that no in-place sparse operation can alter them
+        self._csc_indices.flags.writeable = False
+        self._csc_indptr.flags.writeable = False
         self._aed = aed
         self._pdofs = pdofs
 

@@ -15,8 +15,9 @@ For any ``rho >= 0`` and any positive row weights ``W``::
 so a successful Cholesky factorisation of the penalised matrix
 ``A(rho) = H_s - s I + rho C_s^T W C_s`` proves the equilibrium stable, and
 by Finsler's lemma some finite ``rho`` succeeds whenever it is.  ``A`` is
-sparse with the coupling of the robot's chain; in reverse Cuthill-McKee order
-it is banded with a bandwidth independent of the element and segment counts,
+sparse with the coupling of the robot's chain;
+in the level order of :mod:`core.linsolve` (unknowns by height along the
+robot) it is banded with a bandwidth independent of the element and segment counts,
 and its Cholesky factorisation (compiled, no BLAS, one thread) is linear in
 the size.  Two penalties are tried (``rho = 10`` and ``1e4`` times
 ``max|H_s|``, rows of ``C_s`` normalised); if both fail, the exact dense test
@@ -29,29 +30,30 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from . import solver
-from .linsolve import single_blas_thread
+from .linsolve import level_order, single_blas_thread
 
 __all__ = ["StabilityCheck", "BandedPattern", "banded_cholesky", "single_blas_thread"]
 
 PENALTIES = (10.0, 1e4)
 
 class BandedPattern:
-    """Reverse Cuthill-McKee order and bandwidth of ``H + C_q^T C_q`` for one model (built once)."""
+    """Level order (core.linsolve) and bandwidth of ``H + C_q^T C_q`` for one model (built once)."""
 
     def __init__(self, model):
         nq, N = model.nq, model.N
-        J = sp.csc_matrix((np.ones(model._nnz), model._csc_indices, model._csc_indptr), shape=(N, N))
+        keep = model.structural_nonzeros().astype(float)  # always-zero entries do not count
+        J = sp.csc_matrix((keep, model._csc_indices.copy(), model._csc_indptr.copy()), shape=(N, N))
+        J.eliminate_zeros()
         H = J[:nq, :nq]
         C = J[nq:, :nq]
-        A = (abs(H) + abs(C.T) @ abs(C) + sp.eye(nq)).tocsr()
-        perm = reverse_cuthill_mckee(A, symmetric_mode=True).astype(np.int64)
+        A = (abs(H) + abs(C.T) @ abs(C) + sp.eye(nq)).tocoo()
+        order = level_order(model)
+        perm = order[order < nq].astype(np.int64)
         iperm = np.empty(nq, dtype=np.int64)
         iperm[perm] = np.arange(nq)
-        Ac = A.tocoo()
-        self.kd = int(np.max(np.abs(iperm[Ac.row] - iperm[Ac.col])))
+        self.kd = int(np.max(np.abs(iperm[A.row] - iperm[A.col])))
         self.iperm = iperm
         self.nq = nq
 
@@ -104,7 +106,7 @@ def _assemble(data, indptr, indices, nq, D, iperm, kd):
                 if abs(v) > ref:
                     ref = abs(v)
                 pi = iperm[i]
-                if pi >= pj:
+                if pi >= pj and pi - pj <= kd:  # outside: entries that are always zero
                     bh[pj, pi - pj] += v
     N = indptr.shape[0] - 1
     for c in range(nq, N):
@@ -128,7 +130,7 @@ def _assemble(data, indptr, indices, nq, D, iperm, kd):
                 if jj >= nq:
                     continue
                 pl = iperm[jj]
-                if pl <= pi:
+                if pl <= pi and pi - pl <= kd:
                     bp[pl, pi - pl] += w * vi * data[l] * D[jj]
     return bh, bp, ref
 
