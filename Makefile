@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # Keep ROS 2 discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 
-.PHONY: all venv demo demo-offline test bench clean
+.PHONY: all venv demo demo-offline test bench readme-speed clean
 
 all: test
 
@@ -29,8 +29,13 @@ demo-offline: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
 
+# prints every case (median, p99, ratio to today's figure, scaling table); writes bench/speed_table.md
 bench: $(STAMP)
 	$(VENV)/bin/python bench/run_bench.py
+
+# puts bench/speed_table.md (from the last `make bench`) into README.md between its markers
+readme-speed:
+	$(VENV)/bin/python bench/update_readme.py
 
 clean:
 	rm -rf $(VENV)

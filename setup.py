@@ -41,6 +41,7 @@ setup(
         'scipy',
         'PyYAML',
         'matplotlib',
+        'numba',  # compiled evaluation and stability kernels (core/kernels.py, core/stability.py)
     ],
     extras_require={'test': ['pytest', 'hypothesis']},
     python_requires='>=3.10',

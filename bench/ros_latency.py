@@ -18,8 +18,11 @@ import time
 import numpy as np
 
 
-def main(n_targets=150, robot="one_segment", quiet=False):
-    """Measure; print (unless ``quiet``) and return median, p99 and counts."""
+def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
+    """Measure; print (unless ``quiet``) and return median, p99 and counts.
+
+    ``pythonpath``: run the node from another checkout (the benchmark's baseline).
+    """
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 101)))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     import rclpy
@@ -29,20 +32,38 @@ def main(n_targets=150, robot="one_segment", quiet=False):
     from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
     from bellow_ancf_ros.nodes.ros_util import command_qos
 
+    env = dict(os.environ)
+    if pythonpath:
+        env["PYTHONPATH"] = os.path.abspath(pythonpath)
     node_proc = subprocess.Popen(
-        [sys.executable, "-m", "bellow_ancf_ros.nodes.inverse_kinetostatic_node", "--ros-args",
-         "-p", f"robot_config:={robot}", "-p", "max_rate_hz:=1000.0"],
-        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        [
+            sys.executable,
+            "-m",
+            "bellow_ancf_ros.nodes.inverse_kinetostatic_node",
+            "--ros-args",
+            "-p",
+            f"robot_config:={robot}",
+            "-p",
+            "max_rate_hz:=1000.0",
+        ],
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
     )
     rclpy.init()
     node = rclpy.create_node("latency_bench")
     got = []
-    node.create_subscription(Float64MultiArray, "pressure_command", lambda m: got.append(time.perf_counter()),
-                             command_qos())
+    node.create_subscription(
+        Float64MultiArray,
+        "pressure_command",
+        lambda m: got.append(time.perf_counter()),
+        command_qos(),
+    )
     pub = node.create_publisher(PoseStamped, "target_pose", command_qos())
     try:
         deadline = time.monotonic() + 30
-        while (pub.get_subscription_count() == 0 or node.count_publishers("pressure_command") == 0):
+        while pub.get_subscription_count() == 0 or node.count_publishers("pressure_command") == 0:
             rclpy.spin_once(node, timeout_sec=0.05)
             if time.monotonic() > deadline or node_proc.poll() is not None:
                 raise RuntimeError("inverse_kinetostatic_node did not come up")
@@ -67,11 +88,17 @@ def main(n_targets=150, robot="one_segment", quiet=False):
             if got and k >= 10:  # the first answers include discovery and warm-up
                 lat.append(got[0] - t0)
         lat = np.array(lat)
-        out = {"median_s": float(np.median(lat)), "p99_s": float(np.percentile(lat, 99)),
-               "answered": len(lat), "sent": n_targets}
+        out = {
+            "median_s": float(np.median(lat)),
+            "p99_s": float(np.percentile(lat, 99)),
+            "answered": len(lat),
+            "sent": n_targets,
+        }
         if not quiet:
-            print(f"{'end-to-end target_pose -> pressure_command (' + robot + ', separate processes)':<78} "
-                  f"{out['median_s'] * 1e3:7.2f}ms {out['p99_s'] * 1e3:7.2f}ms")
+            print(
+                f"{'end-to-end target_pose -> pressure_command (' + robot + ', processes)':<78} "
+                f"{out['median_s'] * 1e3:7.2f}ms {out['p99_s'] * 1e3:7.2f}ms"
+            )
             print(f"   ({len(lat)} of {n_targets} targets answered)")
     finally:
         node.destroy_node()

@@ -26,8 +26,11 @@ def test_evaluation_equals_recorded(k):
     model = mb.model_for(*mb.EVAL_CASES[k])
     x, lam = mb.eval_state(model, 100 + k)
     ev = model.evaluate(x, lam, 0.8, 0.07, jacobian=True, lam_derivative=True)
-    for key, new in (("residual", ev.residual), ("jacobian", ev.jacobian.toarray()),
-                     ("dres_dlam", ev.dres_dlam)):
+    for key, new in (
+        ("residual", ev.residual),
+        ("jacobian", ev.jacobian.toarray()),
+        ("dres_dlam", ev.dres_dlam),
+    ):
         old = BASE[f"eval{k}_{key}"]
         np.testing.assert_allclose(new, old, rtol=0, atol=1e-11 * np.abs(old).max(), err_msg=key)
 
@@ -63,9 +66,13 @@ def test_inverse_fuzz_equals_recorded(k):
     for i, target in enumerate(BASE[f"inv{k}_targets"]):
         prev = solve_inverse(model, target, z[i] if multi else None, warm_start=prev)
         assert prev.status == BASE[f"inv{k}_status"][i]
-        np.testing.assert_allclose(prev.forward.position, BASE[f"inv{k}_position"][i], rtol=0, atol=POS_TOL)
+        np.testing.assert_allclose(
+            prev.forward.position, BASE[f"inv{k}_position"][i], rtol=0, atol=POS_TOL
+        )
         # pressures: the same answer up to the solver tolerance (1e-8 of the robot length)
-        np.testing.assert_allclose(prev.pressures_pa, BASE[f"inv{k}_pressures"][i], rtol=0, atol=1e-2)
+        np.testing.assert_allclose(
+            prev.pressures_pa, BASE[f"inv{k}_pressures"][i], rtol=0, atol=1e-2
+        )
 
 
 def test_unstable_fuzz_equals_recorded():

@@ -38,9 +38,16 @@ def test_banded_cholesky_matches_numpy_and_detects_indefinite():
     assert not stability.banded_cholesky(ab2)
 
 
-CASES = [("one_segment", 6, 0.0), ("one_segment", 4, 0.3), ("one_segment", 12, 0.1),
-         ("two_segment", 6, 0.0), ("two_segment", 3, 0.12), ("two_segment", 6, 0.15),
-         ("two_segment", 6, 0.25), ("two_segment", 3, 0.4)]
+CASES = [
+    ("one_segment", 6, 0.0),
+    ("one_segment", 4, 0.3),
+    ("one_segment", 12, 0.1),
+    ("two_segment", 6, 0.0),
+    ("two_segment", 3, 0.12),
+    ("two_segment", 6, 0.15),
+    ("two_segment", 6, 0.25),
+    ("two_segment", 3, 0.4),
+]
 
 
 @pytest.mark.parametrize("name,n,payload", CASES)
@@ -72,5 +79,7 @@ def test_stable_default_answers_are_proved_by_the_banded_test(one, two):
 
 
 def test_banded_pattern_bandwidth_does_not_grow_with_elements():
-    kd = [stability.BandedPattern(RobotModel(load_robot("two_segment"), n)).kd for n in (6, 12, 24)]
+    kd = [
+        stability.BandedPattern(RobotModel(load_robot("two_segment"), n)).kd for n in (6, 12, 24)
+    ]
     assert kd[0] == kd[1] == kd[2], kd

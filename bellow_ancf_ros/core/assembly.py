@@ -373,7 +373,8 @@ class RobotModel:
             np.ascontiguousarray(ancf._H2), np.ascontiguousarray(ancf.GAUSS_W),
             self._aed.astype(i64), self._pdofs.astype(i64), self.att_act.astype(i64),
             self.att_free.copy(), np.ascontiguousarray(self.att_c, dtype=float),
-            self.att_h.astype(float), np.ascontiguousarray(self.h_att), np.ascontiguousarray(self.h1_att),
+            self.att_h.astype(float), np.ascontiguousarray(self.h_att),
+            np.ascontiguousarray(self.h1_att),
             self.plate_dofs.astype(i64), self._c_rows.astype(i64), self._c_cols.astype(i64),
             self._coo_map.astype(i64), int(self._nnz),
         )
@@ -401,11 +402,13 @@ class RobotModel:
         if payload:
             Qpoint = Qpoint + (load_scale * payload) * self._q_payload
         res, data, d = kernels.evaluate_kernel(
-            x[:nq], x[nq:], lam, par["le"], par["kt"], par["kb"], par["dle"], par["dkt"], par["dkb"],
+            x[:nq], x[nq:], lam, par["le"], par["kt"], par["kb"],
+            par["dle"], par["dkt"], par["dkb"],
             float(self.cfg.rho0), g, Qpoint, *self._kargs, bool(jacobian), bool(lam_derivative))
         ev = Evaluation(residual=res)
         if jacobian:
-            ev.jacobian = sp.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=(self.N, self.N))
+            ev.jacobian = sp.csc_matrix((data, self._csc_indices, self._csc_indptr),
+                                        shape=(self.N, self.N))
             ev.model = self
         if lam_derivative:
             ev.dres_dlam = d

@@ -1,4 +1,4 @@
-"""Compiled evaluation kernels of the residual (eq. 25), its Jacobian (eq. 27) and dR/dlam (eq. 30).
+"""Compiled kernels: residual (eq. 25), its Jacobian (eq. 27) and dR/dlam (eq. 30).
 
 The same mathematics as :mod:`bellow_ancf_ros.core.ancf` (element forces,
 eqs. 17, 18, five Gauss points) and the constraint rows of
@@ -24,8 +24,28 @@ _PAIRS = np.array([[0, 0], [1, 1], [2, 2], [0, 1], [0, 2], [1, 2]], dtype=np.int
 
 
 @njit(cache=True)
-def _element_part(q, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, g, elem_dofs, elem_act,
-                  H1, H2, GW, res, data, d, want_jac, want_lam):
+def _element_part(
+    q,
+    lam,
+    le_a,
+    kt_a,
+    kb_a,
+    dle_a,
+    dkt_a,
+    dkb_a,
+    rho0,
+    g,
+    elem_dofs,
+    elem_act,
+    H1,
+    H2,
+    GW,
+    res,
+    data,
+    d,
+    want_jac,
+    want_lam,
+):
     """Elastic forces (eq. 18), tangent stiffness, gravity (eq. 16) and their lam-derivatives."""
     E = elem_dofs.shape[0]
     qe = np.empty((4, 3))
@@ -105,9 +125,14 @@ def _element_part(q, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, g, elem_d
                 deps = rx[0] * drx[0] + rx[1] * drx[1] + rx[2] * drx[2]
                 for b in range(4):
                     for i in range(3):
-                        dft[b, i] += (Nx[b] * (w * eps + wle * deps) * rx[i] + dNx[b] * wle * eps * rx[i]
-                                      + Nx[b] * wle * eps * drx[i])
-                        dfb[b, i] += Nxx[b] * w * rxx[i] + dNxx[b] * wle * rxx[i] + Nxx[b] * wle * drxx[i]
+                        dft[b, i] += (
+                            Nx[b] * (w * eps + wle * deps) * rx[i]
+                            + dNx[b] * wle * eps * rx[i]
+                            + Nx[b] * wle * eps * drx[i]
+                        )
+                        dfb[b, i] += (
+                            Nxx[b] * w * rxx[i] + dNxx[b] * wle * rxx[i] + Nxx[b] * wle * drxx[i]
+                        )
         # gravity of the element (eqs. 15, 16), density rho0 / lam
         rho = rho0 / lam[a]
         wg = (le / 2.0, le * le / 12.0, le / 2.0, -le * le / 12.0)
@@ -118,8 +143,12 @@ def _element_part(q, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, g, elem_d
                 k = elem_dofs[e, 3 * b + i]
                 res[k] += kt * ft[b, i] + kb * fb[b, i] - rho * wg[b] * g[i]
                 if want_lam:
-                    d[k, a] += (dkt_a[a] * ft[b, i] + dkb_a[a] * fb[b, i]
-                                + dle_a[a] * (kt * dft[b, i] + kb * dfb[b, i]) - dwl * g[i])
+                    d[k, a] += (
+                        dkt_a[a] * ft[b, i]
+                        + dkb_a[a] * fb[b, i]
+                        + dle_a[a] * (kt * dft[b, i] + kb * dfb[b, i])
+                        - dwl * g[i]
+                    )
         if want_jac:
             base = e * 144
             for r in range(12):
@@ -128,9 +157,31 @@ def _element_part(q, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, g, elem_d
 
 
 @njit(cache=True)
-def _constraint_part(q, alpha, le_a, dle_a, aed, pdofs, att_act, att_free, att_c, att_h, h_att, h1_att,
-                     plate_dofs, c_rows, c_cols, nq, ne_vals, res, data, d, want_jac, want_lam):
-    """Constraint values, their Jacobian (twice: C_q and C_q^T), the Hessian of alpha.C, lam terms."""
+def _constraint_part(
+    q,
+    alpha,
+    le_a,
+    dle_a,
+    aed,
+    pdofs,
+    att_act,
+    att_free,
+    att_c,
+    att_h,
+    h_att,
+    h1_att,
+    plate_dofs,
+    c_rows,
+    c_cols,
+    nq,
+    ne_vals,
+    res,
+    data,
+    d,
+    want_jac,
+    want_lam,
+):
+    """Constraint values, their Jacobian (as C_q and C_q^T), the Hessian of alpha.C, lam terms."""
     G = aed.shape[0]
     P = plate_dofs.shape[0]
     nf = 0
@@ -178,8 +229,12 @@ def _constraint_part(q, alpha, le_a, dle_a, aed, pdofs, att_act, att_free, att_c
                 for i in range(3):
                     d12[k, i] = q[pdofs[gi, 1 + k, i]]
             for i in range(3):
-                X[i] = (q[pdofs[gi, 0, i]] + att_c[gi, 0] * q[pdofs[gi, 1, i]]
-                        + att_c[gi, 1] * q[pdofs[gi, 2, i]] + att_h[gi] * q[pdofs[gi, 3, i]])
+                X[i] = (
+                    q[pdofs[gi, 0, i]]
+                    + att_c[gi, 0] * q[pdofs[gi, 1, i]]
+                    + att_c[gi, 1] * q[pdofs[gi, 2, i]]
+                    + att_h[gi] * q[pdofs[gi, 3, i]]
+                )
         else:
             d12[:] = 0.0
             d12[0, 0] = 1.0
@@ -228,7 +283,11 @@ def _constraint_part(q, alpha, le_a, dle_a, aed, pdofs, att_act, att_free, att_c
             for b in range(4):
                 for i in range(3):
                     t = dN[b] * alpha[5 * gi + i] * dl
-                    t += dNx[b] * (alpha[5 * gi + 3] * d12[0, i] + alpha[5 * gi + 4] * d12[1, i]) * dl
+                    t += (
+                        dNx[b]
+                        * (alpha[5 * gi + 3] * d12[0, i] + alpha[5 * gi + 4] * d12[1, i])
+                        * dl
+                    )
                     d[aed[gi, b, i], act] += t
             if free:
                 for k in range(2):
@@ -282,9 +341,40 @@ def _scatter(coo_map, coo_vals, nnz):
 
 
 @njit(cache=True)
-def evaluate_kernel(q, alpha, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, g, Qpoint,
-                    elem_dofs, elem_act, H1, H2, GW, aed, pdofs, att_act, att_free, att_c, att_h,
-                    h_att, h1_att, plate_dofs, c_rows, c_cols, coo_map, nnz, want_jac, want_lam):
+def evaluate_kernel(
+    q,
+    alpha,
+    lam,
+    le_a,
+    kt_a,
+    kb_a,
+    dle_a,
+    dkt_a,
+    dkb_a,
+    rho0,
+    g,
+    Qpoint,
+    elem_dofs,
+    elem_act,
+    H1,
+    H2,
+    GW,
+    aed,
+    pdofs,
+    att_act,
+    att_free,
+    att_c,
+    att_h,
+    h_att,
+    h1_att,
+    plate_dofs,
+    c_rows,
+    c_cols,
+    coo_map,
+    nnz,
+    want_jac,
+    want_lam,
+):
     """Residual (eq. 25), CSC values of the KKT Jacobian (eq. 27) and dR/dlam (eq. 30).
 
     ``Qpoint`` holds the point forces (eq. 14) already scaled; ``g`` the
@@ -300,15 +390,66 @@ def evaluate_kernel(q, alpha, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, 
     n_coo = coo_map.shape[0]
     vals = np.zeros(n_coo if want_jac else 0)
     d = np.zeros((nq + nc, A) if want_lam else (0, A))
-    _element_part(q, lam, le_a, kt_a, kb_a, dle_a, dkt_a, dkb_a, rho0, g, elem_dofs, elem_act,
-                  H1, H2, GW, res, vals, d, want_jac, want_lam)
-    _constraint_part(q, alpha, le_a, dle_a, aed, pdofs, att_act, att_free, att_c, att_h, h_att, h1_att,
-                     plate_dofs, c_rows, c_cols, nq, ne_vals, res, vals, d, want_jac, want_lam)
+    _element_part(
+        q,
+        lam,
+        le_a,
+        kt_a,
+        kb_a,
+        dle_a,
+        dkt_a,
+        dkb_a,
+        rho0,
+        g,
+        elem_dofs,
+        elem_act,
+        H1,
+        H2,
+        GW,
+        res,
+        vals,
+        d,
+        want_jac,
+        want_lam,
+    )
+    _constraint_part(
+        q,
+        alpha,
+        le_a,
+        dle_a,
+        aed,
+        pdofs,
+        att_act,
+        att_free,
+        att_c,
+        att_h,
+        h_att,
+        h1_att,
+        plate_dofs,
+        c_rows,
+        c_cols,
+        nq,
+        ne_vals,
+        res,
+        vals,
+        d,
+        want_jac,
+        want_lam,
+    )
     data = _scatter(coo_map, vals, nnz) if want_jac else np.zeros(0)
     return res, data, d
 
 
 def warm_up(model):
-    """Compile (or load from the cache) the kernels for ``model``'s argument types."""
+    """Compile (or load from the disk cache) every kernel a solve uses; build the patterns.
+
+    Called when a model is built (node configure), so that no compilation
+    and no pattern analysis happens inside a control loop.
+    """
+    from .linsolve import kkt_solver
+    from .stability import StabilityCheck
+
     x = model.straight_state(np.ones(model.A))
-    model.evaluate(x, np.ones(model.A), 1.0, 0.0, jacobian=True, lam_derivative=True)
+    ev = model.evaluate(x, np.ones(model.A), 1.0, 0.0, jacobian=True, lam_derivative=True)
+    StabilityCheck(ev.jacobian, model).is_positive_definite()
+    kkt_solver(model).solve(ev.jacobian, ev.residual)

@@ -42,6 +42,7 @@ def single_blas_thread():
         from threadpoolctl import ThreadpoolController
     except ImportError:  # optional dependency
         import contextlib
+
         return contextlib.nullcontext()
     if _CONTROLLER is None:
         _CONTROLLER = ThreadpoolController()
@@ -60,12 +61,12 @@ def level_order(model):
     for pl in model.plates:
         if pl["unknown"] >= 0 and pl["fraction"] > 0:
             plate_t[pl["unknown"]] = pl["segment"] + pl["fraction"]
-    t[model.nq_act: model.nq] = np.repeat(plate_t, 12)
-    kind[model.nq_act: model.nq] = 1
+    t[model.nq_act : model.nq] = np.repeat(plate_t, 12)
+    kind[model.nq_act : model.nq] = 1
     att_t = model.seg_of_act[model.att_act] + ((model.att_elem % n) + model.att_xi) / n
-    t[model.nq: model.nq + 5 * model.G] = np.repeat(att_t, 5)
-    t[model.nq + 5 * model.G:] = np.repeat(plate_t, 6)
-    kind[model.nq:] = 2
+    t[model.nq : model.nq + 5 * model.G] = np.repeat(att_t, 5)
+    t[model.nq + 5 * model.G :] = np.repeat(plate_t, 6)
+    kind[model.nq :] = 2
     return np.lexsort((np.arange(model.N), kind, np.round(t, 9)))
 
 
@@ -92,7 +93,7 @@ class BandedKKT:
         self.nnz = model._nnz
 
     def factor(self, J):
-        """Banded LU with partial pivoting of ``J`` (CSC, the model's pattern), or None if singular."""
+        """Banded LU with partial pivoting of ``J`` (CSC, model's pattern); None if singular."""
         if J.nnz != self.nnz:
             raise ValueError("matrix does not have the model's KKT pattern")
         if self.dropped.size and np.any(J.data[self.dropped]):

@@ -38,13 +38,16 @@ __all__ = ["StabilityCheck", "BandedPattern", "banded_cholesky", "single_blas_th
 
 PENALTIES = (10.0, 1e4)
 
+
 class BandedPattern:
-    """Level order (core.linsolve) and bandwidth of ``H + C_q^T C_q`` for one model (built once)."""
+    """Level order (core.linsolve) and bandwidth of ``H + C_q^T C_q`` (built once per model)."""
 
     def __init__(self, model):
         nq, N = model.nq, model.N
         keep = model.structural_nonzeros().astype(float)  # always-zero entries do not count
-        J = sp.csc_matrix((keep, model._csc_indices.copy(), model._csc_indptr.copy()), shape=(N, N))
+        J = sp.csc_matrix(
+            (keep, model._csc_indices.copy(), model._csc_indptr.copy()), shape=(N, N)
+        )
         J.eliminate_zeros()
         H = J[:nq, :nq]
         C = J[nq:, :nq]
@@ -93,7 +96,7 @@ def banded_cholesky(ab):
 
 @njit(cache=True)
 def _assemble(data, indptr, indices, nq, D, iperm, kd):
-    """Banded ``H_s`` and penalty ``C_s^T W C_s`` (rows of ``C_s`` normalised), and ``max|H_s|``."""
+    """Banded ``H_s``, penalty ``C_s^T W C_s`` (rows of ``C_s`` normalised) and ``max|H_s|``."""
     bh = np.zeros((nq, kd + 1))
     bp = np.zeros((nq, kd + 1))
     ref = 0.0
@@ -125,13 +128,13 @@ def _assemble(data, indptr, indices, nq, D, iperm, kd):
                 continue
             vi = data[k] * D[i]
             pi = iperm[i]
-            for l in range(a, b):
-                jj = indices[l]
+            for kk in range(a, b):
+                jj = indices[kk]
                 if jj >= nq:
                     continue
                 pl = iperm[jj]
                 if pl <= pi and pi - pl <= kd:
-                    bp[pl, pi - pl] += w * vi * data[l] * D[jj]
+                    bp[pl, pi - pl] += w * vi * data[kk] * D[jj]
     return bh, bp, ref
 
 
@@ -168,16 +171,25 @@ class StabilityCheck:
         """The exact dense reduced Hessian (built on first use, one BLAS thread)."""
         if self._dense is None:
             with single_blas_thread():
-                self._dense = solver.ReducedHessian(self.jacobian, self.model.nq, self.model.dof_scale)
+                self._dense = solver.ReducedHessian(
+                    self.jacobian, self.model.nq, self.model.dof_scale
+                )
         return self._dense
 
     def is_positive_definite(self, rtol=1e-10):
-        """Smallest reduced eigenvalue above ``rtol * max|H_s|`` (banded proof, else dense test)."""
+        """Smallest reduced eigenvalue above ``rtol * max|H_s|``? (banded proof, else dense)."""
         m = self.model
         J = self.jacobian
         pat = _pattern(m)
-        bh, bp, ref = _assemble(J.data, J.indptr.astype(np.int64), J.indices.astype(np.int64), m.nq,
-                                m.dof_scale, pat.iperm, pat.kd)
+        bh, bp, ref = _assemble(
+            J.data,
+            J.indptr.astype(np.int64),
+            J.indices.astype(np.int64),
+            m.nq,
+            m.dof_scale,
+            pat.iperm,
+            pat.kd,
+        )
         t = _penalised_test(bh, bp, ref, float(rtol), np.array(PENALTIES))
         if t >= 0:
             self.proved_by = PENALTIES[t]
