@@ -222,7 +222,7 @@ def _inverse_chain(impls, models, targets, z, laps=1):
         im.solve_inverse(m, targets[0], None if z is None else z[0])
         for im, m in zip(impls, models)
     ]
-    ok, errs = 0, []
+    ok, errs, proved = 0, [], []
     for _ in range(laps):
         for k in range(len(targets)):
             for i, (im, m) in enumerate(zip(impls, models)):
@@ -235,7 +235,10 @@ def _inverse_chain(impls, models, targets, z, laps=1):
                 times[i].append(dt)
             ok += bool(prev[0].success and prev[0].forward.stable)
             errs.append(prev[0].position_error_m)
-    return times, ok, errs, prev
+            # proved stable by the banded test (the rest: decided by the exact dense test)
+            chk = prev[0].forward._reduced_hessian if prev[0].forward is not None else None
+            proved.append(getattr(chk, "proved_by", None) is not None)
+    return times, ok, errs, prev, int(np.sum(proved))
 
 
 def bench_inverse(impls, name, laps):
@@ -243,13 +246,15 @@ def bench_inverse(impls, name, laps):
     cfg = load_robot(name)
     models = [im.RobotModel(cfg) for im in impls]
     pos, z = circle_path(models[0])
-    times, ok, errs, _ = _inverse_chain(impls, models, pos, z, laps)
+    times, ok, errs, _, proved = _inverse_chain(impls, models, pos, z, laps)
     n = len(times[0])
     return _row(
         f"inverse {name}",
-        f"inverse {name}, warm, 1 mm steps ({ok} of {n} reached and stable)",
+        f"inverse {name}, warm, 1 mm steps ({ok} of {n} reached and stable, "
+        f"{proved} proved by the banded test)",
         times,
-        {"answers": n, "stable_reached": ok, "max_position_error_m": float(np.max(errs))},
+        {"answers": n, "stable_reached": ok, "banded_proofs": proved,
+         "max_position_error_m": float(np.max(errs))},
     )
 
 
@@ -259,7 +264,7 @@ def bench_scaling(impls, m, n, n_targets):
     models = [im.RobotModel(cfg, n) for im in impls]
     multi = m > 1
     pos, z = pressure_walk(models[0], n_targets)
-    times, ok, _, prev = _inverse_chain(impls, models, pos[1:], z[1:] if multi else None)
+    times, ok, _, prev, proved = _inverse_chain(impls, models, pos[1:], z[1:] if multi else None)
     st = [[] for _ in impls]
     for _ in range(5):
         for i, im in enumerate(impls):
@@ -269,7 +274,8 @@ def bench_scaling(impls, m, n, n_targets):
         f"scaling m={m} n={n}",
         f"scaling m={m} n={n}",
         times,
-        {"m": m, "n": n, "unknowns": models[0].N, "stable_reached": ok, "answers": len(times[0])},
+        {"m": m, "n": n, "unknowns": models[0].N, "stable_reached": ok, "answers": len(times[0]),
+         "banded_proofs": proved},
     )
     row["stability_median_s"], row["stability_p99_s"] = _stats(st[0])
     if len(impls) > 1:
@@ -356,7 +362,7 @@ def _print_cells(cells, today):
     print(
         f"{'m':>2} {'n':>3} {'unknowns':>8} {'inverse':>9} {'p99':>9} {'us/unkn':>8} "
         f"{'stability':>9} {'p99':>9} {'today inv':>10} {'today stab':>10} {'speed-up':>8} "
-        f"{'stable':>7}"
+        f"{'stable':>7} {'banded':>7}"
     )
     for c in cells:
         ti, ts = _today_of(c, today), _today_of(c, today, "stability_median_s")
@@ -367,7 +373,8 @@ def _print_cells(cells, today):
             f"{c['m']:>2} {c['n']:>3} {c['unknowns']:>8} {c['median_s'] * 1e3:7.2f}ms "
             f"{c['p99_s'] * 1e3:7.2f}ms {c['median_s'] / c['unknowns'] * 1e6:8.2f} "
             f"{c['stability_median_s'] * 1e3:7.3f}ms {c['stability_p99_s'] * 1e3:7.3f}ms "
-            f"{ti_s:>10} {ts_s:>10} {up:>8} {c['stable_reached']:>3}/{c['answers']}"
+            f"{ti_s:>10} {ts_s:>10} {up:>8} {c['stable_reached']:>3}/{c['answers']} "
+            f"{c['banded_proofs']:>3}/{c['answers']}"
         )
 
 
@@ -435,6 +442,8 @@ def main(argv=None):
     _print_rows(rows, today)
     if cells:
         _print_cells(cells, today)
+    print("stable: answers reached and stable; banded: stability proved by the banded test "
+          "(the others by the exact dense test)")
     print(
         "today: the same case on the code before the rewrite (commit 1f2d442; "
         + ("interleaved in this run" if args.baseline else "bench/today.json")

@@ -312,7 +312,7 @@ def _full_space_newton(model, position, z_axis, payload, warm_fw, lam_ref, lo, h
         if it == max_iter:
             break
         try:
-            sol = ev.solve(np.column_stack([R, ev.dres_dlam]))  # core.linsolve: reused banded LU
+            sol = ev.solve(np.column_stack([R, ev.dres_dlam]))  # banded LU (core.linsolve)
         except np.linalg.LinAlgError:
             return None
         w0, W = sol[:, 0], sol[:, 1:]

@@ -76,7 +76,7 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         if it == max_iter:
             break
         try:
-            dx = -ev.solve(ev.residual)  # banded LU, reused with refinement (core.linsolve)
+            dx = -ev.solve(ev.residual)  # banded LU (core.linsolve)
         except np.linalg.LinAlgError:
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
         if not np.all(np.isfinite(dx)):
@@ -183,7 +183,8 @@ def limit_blas_threads(n=1):
 
     The matrices here are small (a few hundred rows); multithreaded BLAS only
     adds overhead, and on a loaded 2-core machine it can be ten times slower.
-    Entry points (CLI, nodes, benchmarks) call this once.
+    The core's own dense calls limit themselves (``linsolve.single_blas_thread``);
+    this process-wide limit is for callers' own numpy work.
     """
     try:
         from threadpoolctl import threadpool_limits
