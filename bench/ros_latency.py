@@ -32,9 +32,9 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
     from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
     from bellow_ancf_ros.nodes.ros_util import command_qos
 
-    env = dict(os.environ)
-    if pythonpath:
-        env["PYTHONPATH"] = os.path.abspath(pythonpath)
+    env, cwd = dict(os.environ), None
+    if pythonpath:  # the other checkout first on the path (python -m puts the cwd first)
+        env["PYTHONPATH"] = cwd = os.path.abspath(pythonpath)
     node_proc = subprocess.Popen(
         [
             sys.executable,
@@ -50,6 +50,7 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         env=env,
+        cwd=cwd,
     )
     rclpy.init()
     node = rclpy.create_node("latency_bench")
