@@ -446,7 +446,12 @@ def main(argv=None):
           "(the others by the exact dense test)")
     print(
         "today: the same case on the code before the rewrite (commit 1f2d442; "
-        + ("interleaved in this run" if args.baseline else "bench/today.json")
+        + (
+            "interleaved in this run"
+            if args.baseline
+            else "bench/today.json, another run: ratios indicative only; --baseline DIR "
+            "measures them side by side"
+        )
         + "); "
         "speed-up: today / now (> 1 is faster)"
     )

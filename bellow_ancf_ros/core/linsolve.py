@@ -4,7 +4,7 @@ The KKT matrix of a robot is sparse with the coupling of a chain: element
 nodes, plates and multipliers at one height only touch their neighbours.
 Ordered by height along the robot (``level order``: every unknown at its
 material position, segment by segment), it is banded with a bandwidth that
-does not grow with the element or segment count (41 for one segment, 43 for
+does not grow with the element or segment count (43 for one segment and for
 two, of 240 and 480 unknowns with six elements), and LAPACK's banded LU with
 partial pivoting (``dgbtrf``, backward stable like a sparse LU) factorises
 it in time linear in the size, two to three times faster than SuperLU at
@@ -59,7 +59,7 @@ def level_order(model):
     plate.  Within a level: attachment multipliers, actuator nodes,
     orthonormality multipliers, plate coordinates, each actuator by actuator
     (of the orders tried, the one with the smallest bandwidth for one and two
-    segments: 41 and 43 with six elements).
+    segments: 43 for both with six elements).
     """
     n = model.n
     N = model.N
