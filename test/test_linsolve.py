@@ -81,3 +81,15 @@ def test_factorisation_runs_with_one_blas_thread(monkeypatch):
         outside = max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
     assert seen == [1]
     assert outside == 2  # the caller's setting is restored
+
+
+def test_matrix_outside_the_band_falls_back_to_sparse_lu():
+    model = RobotModel(load_robot("two_segment"))
+    x, lam = _state(model, 3)
+    ev = model.evaluate(x, lam)
+    J = ev.jacobian.copy()
+    dropped = np.flatnonzero(~model.structural_nonzeros())
+    J.data[dropped] = 1e-3  # entries the band leaves out
+    ref = spla.splu(J, permc_spec="COLAMD").solve(ev.residual)
+    new = linsolve.kkt_solver(model).solve(J, ev.residual)
+    np.testing.assert_allclose(new, ref, rtol=0, atol=1e-9 * np.abs(ref).max())

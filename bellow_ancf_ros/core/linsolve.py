@@ -166,13 +166,27 @@ class _Factorised:
     def solve(self, b):
         """Solve ``J x = b``; raises ``numpy.linalg.LinAlgError`` when ``J`` is singular."""
         if self.lu is None:
-            self.lu = self.pattern.factor(self.J)
+            try:
+                self.lu = self.pattern.factor(self.J)
+            except ValueError:  # not the model's band (never seen): general sparse LU
+                self.lu = _sparse_lu(self.J)
             if self.lu is None:
                 raise np.linalg.LinAlgError("singular KKT matrix")
         x = self.lu.solve(b)
         if not np.all(np.isfinite(x)):
             raise np.linalg.LinAlgError("singular KKT matrix")
         return x
+
+
+def _sparse_lu(J):
+    """SuperLU factorisation of ``J`` (or None when it is singular)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    try:
+        return spla.splu(sp.csc_matrix(J), permc_spec="COLAMD")
+    except RuntimeError:
+        return None
 
 
 def kkt_solver(model):
