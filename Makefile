@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # Keep ROS 2 discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 
-.PHONY: all venv demo demo-offline demo-calibrate test bench bench-calibrate clean
+.PHONY: all venv demo demo-offline demo-calibrate test bench bench-calibrate readme-speed clean
 
 all: test
 
@@ -34,9 +34,23 @@ demo-offline: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
 
+# prints every case (median, p99, ratio to today's figure, scaling table); writes bench/speed_table.md.
+# "today" = commit $(BASELINE_COMMIT) (before the real-time rewrite), run interleaved in the same
+# process (a copy of it from git); without git, the figures of bench/today.json are quoted.
+BASELINE_COMMIT ?= 1f2d442
 bench: $(STAMP)
-	$(VENV)/bin/python bench/run_bench.py
+	@base=$$(mktemp -d); \
+	if git archive $(BASELINE_COMMIT) 2>/dev/null | tar -x -C $$base 2>/dev/null; then \
+	  $(VENV)/bin/python bench/run_bench.py --baseline $$base; \
+	else \
+	  echo "(no git copy of $(BASELINE_COMMIT): today's figures from bench/today.json)"; \
+	  $(VENV)/bin/python bench/run_bench.py; \
+	fi; rc=$$?; rm -rf $$base; exit $$rc
 	$(VENV)/bin/python bench/fuzz_bench.py
+
+# puts bench/speed_table.md (from the last `make bench`) into README.md between its markers
+readme-speed:
+	$(VENV)/bin/python bench/update_readme.py
 
 # calibration of ~200 samples, one and two segments (target: under a minute)
 bench-calibrate: $(STAMP)

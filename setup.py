@@ -43,6 +43,7 @@ setup(
         'PyYAML',
         'matplotlib',
         'rosbags',
+        'numba',  # compiled evaluation and stability kernels (core/kernels.py, core/stability.py)
     ],
     extras_require={'test': ['pytest', 'hypothesis']},
     python_requires='>=3.10',

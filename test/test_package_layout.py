@@ -98,7 +98,8 @@ def test_ament_index_marker_and_package_xml(colcon_install):
     assert root.findtext('name') == PKG
     assert root.find('export').findtext('build_type') == 'ament_python'
     deps = {e.text for e in root.findall('exec_depend')}
-    for dep in MESSAGE_DEPENDENCIES + ('python3-numpy', 'python3-scipy', 'python3-yaml'):
+    core_deps = ('python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-numba')
+    for dep in MESSAGE_DEPENDENCIES + core_deps:
         assert dep in deps, dep
 
 

@@ -40,8 +40,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
-from . import ancf
+from . import ancf, kernels, linsolve
 from .config import RobotConfig, check_element_count
 from .stage1 import Stage1
 
@@ -63,6 +64,19 @@ class Evaluation:
     residual: np.ndarray
     jacobian: sp.csc_matrix | None = None
     dres_dlam: np.ndarray | None = None  # (N, A) partial derivative w.r.t. stretches
+    model: object = None  # the RobotModel whose KKT solver serves ``solve`` (core.linsolve)
+
+    def solve(self, b):
+        """Solve ``J x = b`` with the Jacobian (banded LU, reused along a path; core.linsolve).
+
+        Raises ``numpy.linalg.LinAlgError`` when the Jacobian is singular.
+        """
+        if self.model is not None:
+            return linsolve.kkt_solver(self.model).solve(self.jacobian, b)
+        try:  # a Jacobian without the model's pattern (e.g. the cantilever rig)
+            return spla.splu(sp.csc_matrix(self.jacobian), permc_spec="COLAMD").solve(b)
+        except RuntimeError as exc:
+            raise np.linalg.LinAlgError(str(exc)) from exc
 
 
 class RobotModel:
@@ -88,6 +102,8 @@ class RobotModel:
         self.stage1 = Stage1.from_config(cfg)
         self._build_layout()
         self._build_pattern()
+        self._build_kernel_args()
+        kernels.warm_up(self)
 
     # ------------------------------------------------------------------ layout
     def _build_layout(self):
@@ -231,7 +247,7 @@ class RobotModel:
         # (1) element stiffness
         rows.append(np.repeat(ed, 12, axis=1).ravel())
         cols.append(np.tile(ed, (1, 12)).ravel())
-        # constraint Jacobian blocks, in the order values are produced in _constraints
+        # constraint Jacobian blocks, in the order kernels.evaluate_kernel produces their values
         crow, ccol = [], []
         crow.append(np.broadcast_to(r0[:, None, None] + np.arange(3)[None, None, :], (G, 4, 3)).ravel())
         ccol.append(aed.ravel())  # (a) position rows / element dofs
@@ -270,25 +286,56 @@ class RobotModel:
         self._csc_indices = (uniq % self.N).astype(np.int32)
         ucols = uniq // self.N
         self._csc_indptr = np.searchsorted(ucols, np.arange(self.N + 1)).astype(np.int32)
+        # shared by every Jacobian: read-only, so that no in-place sparse operation can alter them
+        self._csc_indices.flags.writeable = False
+        self._csc_indptr.flags.writeable = False
         self._aed = aed
         self._pdofs = pdofs
+
+    def structural_nonzeros(self):
+        """Mask of the CSC pattern's entries that can be non-zero (built once, cached).
+
+        The pattern holds every element dof of an attachment's element; when
+        the attachment sits on a node the other node's weights are exactly zero
+        (``h(0) = [1, 0, 0, 0]``).  Two evaluations at random states with
+        random multipliers mark the entries that are exactly zero in both.
+        """
+        mask = getattr(self, "_structural_nonzeros", None)
+        if mask is None:
+            rng = np.random.default_rng(12345)
+            mask = np.zeros(self._nnz, bool)
+            for _ in range(2):
+                lam = rng.uniform(0.9, 1.1, self.A)
+                x = self.straight_state(lam)
+                x += 1e-2 * rng.standard_normal(self.N)
+                mask |= self.evaluate(x, lam, 1.0, 0.1, jacobian=True).jacobian.data != 0.0
+            self._structural_nonzeros = mask
+        return mask
 
     # -------------------------------------------------------------- parameters
     def element_parameters(self, lam):
         """Per-actuator ``le, k_t, k_b`` and their derivatives w.r.t. ``lam`` (eqs. 2, 4)."""
         cfg = self.cfg
         lam = np.asarray(lam, dtype=float)
+        key = lam.tobytes()
+        cached = getattr(self, "_par_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]  # Newton iterations at fixed stretches ask again and again
         k = self.stage1.k(lam)
         dk = self.stage1.dk(lam)
         le = lam * cfg.l0 / self.n
         kt = k * cfg.l0
         kb = cfg.d_a**2 * cfg.l0 * lam * k / 8.0
-        return {
+        par = {
             "le": le, "kt": kt, "kb": kb,
             "dle": np.full_like(lam, cfg.l0 / self.n),
             "dkt": dk * cfg.l0,
             "dkb": cfg.d_a**2 * cfg.l0 * (k + lam * dk) / 8.0,
         }
+        for v in par.values():
+            v.flags.writeable = False  # shared by the cache
+        self._par_cache = (key, par)
+        return par
 
     # ------------------------------------------------------------------ loads
     def external_forces(self, lam, load_scale=1.0, payload=0.0):
@@ -322,110 +369,52 @@ class RobotModel:
         return Q, dQ
 
     # ------------------------------------------------------------- evaluation
-    def _constraints(self, q, alpha, le, want_lam=False, dle=None):
-        """Constraint values, Jacobian values (COO order), Hessian values, lam terms."""
-        G, P = self.G, self.P
-        free = self.att_free
-        qe = q[self._aed]  # (G, 4, 3)
-        le_g = le[self.att_act]
-        f0, df0 = ancf._le_powers(le_g, 0)
-        f1, df1 = ancf._le_powers(le_g, 1)
-        N, Nx = self.h_att * f0, self.h1_att * f1
-        r = np.einsum("ga,gai->gi", N, qe)
-        rx = np.einsum("ga,gai->gi", Nx, qe)
-        frame = q[self._pdofs]  # (G, 4, 3): p, d1, d2, d3 (garbage where fixed)
-        d12 = frame[:, 1:3].copy()
-        d12[~free] = np.eye(3)[:2]
-        X = self.att_c.copy()
-        Xf = frame[free, 0] + self.att_c[free, 0:1] * frame[free, 1] + self.att_c[free, 1:2] * frame[free, 2]
-        Xf += self.att_h[free, None] * frame[free, 3]
-        X[free] = Xf
-        C = np.empty(self.nc)
-        catt = C[: 5 * G].reshape(G, 5)
-        catt[:, :3] = r - X
-        catt[:, 3:] = np.einsum("gki,gi->gk", d12, rx)
-        pd = q[self.plate_dofs].reshape(P, 4, 3)
-        D = pd[:, 1:]
-        for m, (i, j) in enumerate(_PAIRS):
-            C[5 * G + m :: 6][:P] = np.einsum("pi,pi->p", D[:, i], D[:, j]) - (1.0 if i == j else 0.0)
-        nf = free.sum()
-        vals = [
-            np.broadcast_to(N[:, :, None], (G, 4, 3)).ravel(),
-            np.broadcast_to(
-                -np.stack([np.ones(nf), self.att_c[free, 0], self.att_c[free, 1], self.att_h[free]], axis=1)[:, :, None],
-                (nf, 4, 3),
-            ).ravel(),
-            (Nx[:, None, :, None] * d12[:, :, None, :]).ravel(),
-            np.broadcast_to(rx[free][:, None, :], (nf, 2, 3)).ravel(),
-        ]
-        ov = np.empty((P, 6, 2, 3))
-        for m, (i, j) in enumerate(_PAIRS):
-            ov[:, m, 0] = D[:, j]
-            ov[:, m, 1] = D[:, i]
-        vals.append(ov.ravel())
-        cvals = np.concatenate(vals)
-        aatt = alpha[: 5 * G].reshape(G, 5)
-        apar = aatt[:, 3:]
-        hv = np.broadcast_to((apar[free][:, :, None] * Nx[free][:, None, :])[:, :, :, None], (nf, 2, 4, 3)).ravel()
-        aort = alpha[5 * G :].reshape(P, 6)
-        ho = np.broadcast_to(aort[:, :, None], (P, 6, 3)).ravel()
-        hvals = np.concatenate([hv, hv, ho, ho])
-        out = {"C": C, "cvals": cvals, "hvals": hvals}
-        if want_lam:
-            # d/dlam of C and of C_q^T alpha (eq. 30), per attachment -> actuator column
-            dN, dNx = self.h_att * df0, self.h1_att * df1
-            dl = dle[self.att_act][:, None]
-            dr = np.einsum("ga,gai->gi", dN, qe) * dl
-            drx = np.einsum("ga,gai->gi", dNx, qe) * dl
-            dC = np.zeros((self.nc, self.A))
-            rows = 5 * np.arange(G)
-            for i in range(3):
-                dC[rows + i, self.att_act] = dr[:, i]
-            dpar = np.einsum("gki,gi->gk", d12, drx)
-            dC[rows + 3, self.att_act] = dpar[:, 0]
-            dC[rows + 4, self.att_act] = dpar[:, 1]
-            dCa = np.zeros((self.nq, self.A))
-            apos = aatt[:, :3]
-            contrib = dN[:, :, None] * apos[:, None, :] * dl[:, :, None]  # (G, 4, 3)
-            contrib += dNx[:, :, None] * np.einsum("gk,gki->gi", apar, d12)[:, None, :] * dl[:, :, None]
-            np.add.at(dCa, (self._aed.reshape(G, 12), np.repeat(self.att_act, 12).reshape(G, 12)),
-                      contrib.reshape(G, 12))
-            dd = apar[free][:, :, None] * drx[free][:, None, :]  # (nf, 2, 3)
-            pdf = self._pdofs[free][:, 1:3]
-            np.add.at(dCa, (pdf.reshape(-1), np.repeat(self.att_act[free], 6)), dd.reshape(-1))
-            out["dC"] = dC
-            out["dCa"] = dCa
-        return out
+    def _build_kernel_args(self):
+        """Static arrays of the compiled evaluation kernel and the unit point forces (eq. 14)."""
+        i64 = np.int64
+        self._kargs = (
+            self.elem_dofs.astype(i64), self.elem_act.astype(i64), np.ascontiguousarray(ancf._H1),
+            np.ascontiguousarray(ancf._H2), np.ascontiguousarray(ancf.GAUSS_W),
+            self._aed.astype(i64), self._pdofs.astype(i64), self.att_act.astype(i64),
+            self.att_free.copy(), np.ascontiguousarray(self.att_c, dtype=float),
+            self.att_h.astype(float), np.ascontiguousarray(self.h_att),
+            np.ascontiguousarray(self.h1_att),
+            self.plate_dofs.astype(i64), self._c_rows.astype(i64), self._c_cols.astype(i64),
+            self._coo_map.astype(i64), int(self._nnz),
+        )
+        Qm = np.zeros(self.nq)  # plate, connector masses per unit gravity
+        for u, h, m in self.point_masses:
+            Qm[self.plate_dofs[u, 0:3]] += m * self.gravity
+            Qm[self.plate_dofs[u, 9:12]] += h * m * self.gravity
+        Qp = np.zeros(self.nq)  # payload of 1 kg per unit gravity
+        Qp[self.plate_dofs[self.ee_plate, 0:3]] += self.gravity
+        Qp[self.plate_dofs[self.ee_plate, 9:12]] += self.cfg.tool_length * self.gravity
+        self._q_masses, self._q_payload = Qm, Qp
 
     def evaluate(self, x, lam, load_scale=1.0, payload=0.0, jacobian=True, lam_derivative=False):
-        """Residual of eq. (25) at ``x = [q, alpha]``; Jacobian eq. (27); ``dR/dlam`` (eq. 30)."""
+        """Residual of eq. (25) at ``x = [q, alpha]``; Jacobian eq. (27); ``dR/dlam`` (eq. 30).
+
+        Computed by the compiled kernel :func:`kernels.evaluate_kernel`; the
+        Jacobian's values go straight into the fixed CSC pattern.
+        """
         nq = self.nq
-        q, alpha = x[:nq], x[nq:]
+        x = np.ascontiguousarray(x, dtype=float)
+        lam = np.ascontiguousarray(lam, dtype=float)
         par = self.element_parameters(lam)
-        ea = self.elem_act
-        le_e, kt_e, kb_e = par["le"][ea], par["kt"][ea], par["kb"][ea]
-        qe = q[self.elem_dofs].reshape(self.E, 4, 3)
-        ef = ancf.element_forces(qe, le_e, kt_e, kb_e, stiffness=jacobian, length_derivative=lam_derivative)
-        fe = kt_e[:, None, None] * ef["ft"] + kb_e[:, None, None] * ef["fb"]
-        Rq = np.bincount(self.elem_dofs.ravel(), weights=fe.ravel(), minlength=nq)
-        Q, dQ = self.external_forces(lam, load_scale, payload)
-        Rq -= Q
-        con = self._constraints(q, alpha, par["le"], want_lam=lam_derivative, dle=par["dle"])
-        Rq += np.bincount(self._c_cols, weights=con["cvals"] * alpha[self._c_rows], minlength=nq)
-        res = np.concatenate([Rq, con["C"]])
+        g = self.gravity * load_scale
+        Qpoint = load_scale * self._q_masses
+        if payload:
+            Qpoint = Qpoint + (load_scale * payload) * self._q_payload
+        res, data, d = kernels.evaluate_kernel(
+            x[:nq], x[nq:], lam, par["le"], par["kt"], par["kb"],
+            par["dle"], par["dkt"], par["dkb"],
+            float(self.cfg.rho0), g, Qpoint, *self._kargs, bool(jacobian), bool(lam_derivative))
         ev = Evaluation(residual=res)
         if jacobian:
-            data = np.concatenate([ef["K"].ravel(), con["cvals"], con["cvals"], con["hvals"]])
-            csc = np.bincount(self._coo_map, weights=data, minlength=self._nnz)
-            ev.jacobian = sp.csc_matrix((csc, self._csc_indices, self._csc_indptr), shape=(self.N, self.N))
+            ev.jacobian = sp.csc_matrix((data, self._csc_indices, self._csc_indptr),
+                                        shape=(self.N, self.N))
+            ev.model = self
         if lam_derivative:
-            d = np.zeros((self.N, self.A))
-            dfe = (par["dkt"][ea][:, None, None] * ef["ft"] + par["dkb"][ea][:, None, None] * ef["fb"]
-                   + par["dle"][ea][:, None, None] * (kt_e[:, None, None] * ef["dft"] + kb_e[:, None, None] * ef["dfb"]))
-            np.add.at(d, (self.elem_dofs.ravel(), np.repeat(ea, 12)), dfe.ravel())
-            d[:nq] -= dQ
-            d[:nq] += con["dCa"]
-            d[nq:] = con["dC"]
             ev.dres_dlam = d
         return ev
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
-from . import solver
+from . import linsolve, solver
 from .assembly import RobotModel
+from .stability import StabilityCheck
 
 __all__ = ["ForwardResult", "solve_forward", "check_pressures", "UNSTABLE"]
 
@@ -53,9 +53,9 @@ class ForwardResult:
 
     @property
     def lu(self):
-        """Sparse LU factorisation of the Jacobian (eq. 27) at the solution, made on first use."""
+        """Solver with the Jacobian (eq. 27) at the solution (``.solve(b)``; core.linsolve)."""
         if self._lu is None and self.jacobian is not None:
-            self._lu = spla.splu(self.jacobian, permc_spec="COLAMD")
+            self._lu = linsolve.kkt_solver(self.model).bound(self.jacobian)
         return self._lu
 
     @property
@@ -209,7 +209,7 @@ def assess_stability(result: ForwardResult):
     Stable: the Hessian of the Lagrangian is positive definite on the
     constraint tangent space (smallest eigenvalue above a relative 1e-10).
     """
-    red = solver.ReducedHessian(result.jacobian, result.model.nq, result.model.dof_scale)
+    red = StabilityCheck(result.jacobian, result.model)  # banded proof, dense test as fallback
     result._reduced_hessian = red
     result.stable = red.is_positive_definite(_STABILITY_RTOL)
     if not result.stable:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from . import solver
 from .forward import ForwardResult, solve_forward
@@ -372,10 +371,9 @@ def full_space_newton(
         if it == max_iter:
             break
         try:
-            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
-        except RuntimeError:
+            sol = ev.solve(np.column_stack([R, ev.dres_dlam]))  # banded LU (core.linsolve)
+        except np.linalg.LinAlgError:
             return None
-        sol = lu.solve(np.column_stack([R, ev.dres_dlam]))
         w0, W = sol[:, 0], sol[:, 1:]
         dlam = stretch_step(w0, W)
         if dlam is None:

@@ -21,7 +21,6 @@ import time
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 __all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads",
            "deadline_after", "expired"]
@@ -105,10 +104,9 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         if expired(deadline):
             return NewtonResult(x, False, TIME_BUDGET, MESSAGES[TIME_BUDGET], it, norm, hist)
         try:
-            lu = spla.splu(ev.jacobian, permc_spec="COLAMD")
-        except RuntimeError:
+            dx = -ev.solve(ev.residual)  # banded LU (core.linsolve)
+        except np.linalg.LinAlgError:
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
-        dx = -lu.solve(ev.residual)
         if not np.all(np.isfinite(dx)):
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
         merit = np.dot(r, r)
@@ -227,7 +225,8 @@ def limit_blas_threads(n=1):
 
     The matrices here are small (a few hundred rows); multithreaded BLAS only
     adds overhead, and on a loaded 2-core machine it can be ten times slower.
-    Entry points (CLI, nodes, benchmarks) call this once.
+    The core's own dense calls limit themselves (``linsolve.single_blas_thread``);
+    this process-wide limit is for callers' own numpy work.
     """
     try:
         from threadpoolctl import threadpool_limits
