@@ -2,10 +2,14 @@
 
 Subcommands::
 
-    bellow-ancf forward [--config C] --pressures-kpa P1 P2 ... [--payload-kg M] [--elements N] [--json]
-    bellow-ancf forward [--config C] --pressures-csv FILE [--payload-kg M] [--elements N] --json
-    bellow-ancf inverse [--config C] --position X Y Z [--z-axis ZX ZY ZZ] [--payload-kg M] [--elements N] [--json]
-    bellow-ancf inverse [--config C] --targets-csv FILE [--payload-kg M] [--elements N] --json
+    bellow-ancf forward [--config C] --pressures-kpa P1 P2 ... [--payload-kg M]
+                        [--elements N] [--json]
+    bellow-ancf forward [--config C] --pressures-csv FILE [--payload-kg M]
+                        [--elements N] --json
+    bellow-ancf inverse [--config C] --position X Y Z [--z-axis ZX ZY ZZ]
+                        [--payload-kg M] [--elements N] [--json]
+    bellow-ancf inverse [--config C] --targets-csv FILE [--payload-kg M]
+                        [--elements N] --json
 
 This interface is a contract other programs script against:
 
@@ -121,7 +125,8 @@ def _protect_negative_numbers(argv):
 def _payload(text: str) -> float:
     value = _finite_float(text)
     if value < 0:
-        raise argparse.ArgumentTypeError(f'payload must be a non-negative mass in kg, got {text!r}')
+        raise argparse.ArgumentTypeError(
+            f'payload must be a non-negative mass in kg, got {text!r}')
     return value
 
 
@@ -218,7 +223,8 @@ def _yes_no(value) -> str:
 def _robot_line(model: RobotModel) -> str:
     cfg = model.cfg
     return (f'robot          {cfg.name}: {cfg.n_segments} segment(s), {model.A} actuators, '
-            f'{model.n} elements per actuator, limits [{cfg.p_min / 1e3:g}, {cfg.p_max / 1e3:g}] kPa')
+            f'{model.n} elements per actuator, '
+            f'limits [{cfg.p_min / 1e3:g}, {cfg.p_max / 1e3:g}] kPa')
 
 
 def _forward_summary(model: RobotModel, d: dict, seconds: float) -> list[str]:
@@ -284,7 +290,8 @@ class _CsvRows:
                 # undecodable bytes become U+FFFD: that row is then reported as not numeric
                 self._stream = open(path, newline='', encoding='utf-8-sig', errors='replace')
             except OSError as exc:
-                raise UsageError(f'{option} {path}: cannot open file: {exc.strerror or exc}') from None
+                raise UsageError(f'{option} {path}: cannot open file: '
+                                 f'{exc.strerror or exc}') from None
         self._reader = csv.reader(self._stream)
         try:
             header = next(self._reader, None)
@@ -406,8 +413,9 @@ def _forward_batch(args, model: RobotModel) -> int:
     rows = _CsvRows(args.pressures_csv, '--pressures-csv')
     if len(rows.header) != model.A:
         rows.close()
-        raise UsageError(f'--pressures-csv {rows.label}, line 1: the header has {len(rows.header)} '
-                         f'columns, expected {model.A} (one pressure in kPa per actuator)')
+        raise UsageError(f'--pressures-csv {rows.label}, line 1: the header has '
+                         f'{len(rows.header)} columns, expected {model.A} '
+                         '(one pressure in kPa per actuator)')
     names = rows.header
 
     def parse_row(cells):
@@ -416,7 +424,8 @@ def _forward_batch(args, model: RobotModel) -> int:
         return _check_pressures_kpa(model, _row_numbers(cells, names))
 
     def solve_row(pressures, previous):
-        return _solve(solve_forward, model, pressures, payload_kg=args.payload_kg, warm_start=previous)
+        return _solve(solve_forward, model, pressures, payload_kg=args.payload_kg,
+                      warm_start=previous)
 
     return _run_batch(rows, parse_row, solve_row, lambda fw: fw.to_dict())
 
@@ -459,8 +468,8 @@ def _inverse_dict(inv) -> dict:
 def _inverse_batch(args, model: RobotModel) -> int:
     _require_json(args, '--targets-csv')
     if args.z_axis is not None:
-        raise UsageError('--targets-csv takes the target z-axes from the file (columns zx, zy, zz): '
-                         'drop --z-axis')
+        raise UsageError('--targets-csv takes the target z-axes from the file '
+                         '(columns zx, zy, zz): drop --z-axis')
     rows = _CsvRows(args.targets_csv, '--targets-csv')
     header = [name.lower() for name in rows.header]
     multi = model.cfg.n_segments >= 2
@@ -475,9 +484,10 @@ def _inverse_batch(args, model: RobotModel) -> int:
     wanted = INVERSE_POSITION_COLUMNS + (INVERSE_AXIS_COLUMNS if multi else ())
     missing = [name for name in wanted if name not in header]
     if missing:
-        problems.append('missing column(s) ' + ', '.join(missing)
-                        + (' (a robot with two or more segments needs the target z-axis zx, zy, zz)'
-                           if multi and set(missing) & set(INVERSE_AXIS_COLUMNS) else ''))
+        note = ''
+        if multi and set(missing) & set(INVERSE_AXIS_COLUMNS):
+            note = ' (a robot with two or more segments needs the target z-axis zx, zy, zz)'
+        problems.append('missing column(s) ' + ', '.join(missing) + note)
     if problems:
         rows.close()
         raise UsageError(f'--targets-csv {rows.label}, line 1: ' + '; '.join(problems)

@@ -249,11 +249,12 @@ def _cmd_identify_stiffness(args):
     status = EXIT_OK
     if args.yaml_out:
         if not stage1_ok:
-            cli._warn(f'--yaml-out not written: the fitted k(lam) is not usable with this robot: {stage1_msg}')
+            cli._warn('--yaml-out not written: the fitted k(lam) is not usable with this robot: '
+                      f'{stage1_msg}')
             status = EXIT_FAILED
         else:
-            _write_robot_yaml(args.yaml_out, cfg.replace(l0=float(l0), stiffness_coeffs=tuple(fit.k_coeffs)),
-                              fit, args.csv)
+            fitted = cfg.replace(l0=float(l0), stiffness_coeffs=tuple(fit.k_coeffs))
+            _write_robot_yaml(args.yaml_out, fitted, fit, args.csv)
     if args.plot:
         _plot_stiffness(fit, args.plot)
     if args.json:
@@ -271,7 +272,8 @@ def _cmd_identify_stiffness(args):
             for j, (a, s) in enumerate(zip(fit.f_coeffs, fit.f_coeffs_stderr))]
     rows += [[f'k{p}', 'N/m', f'{c:.6g}', _fmt(s, '.3g')]
              for p, (c, s) in enumerate(zip(fit.k_coeffs, fit.k_coeffs_stderr))]
-    lines += [''] + _table(['coefficient', 'unit', 'value', 'std. error'], rows, ['<', '<', '>', '>']) + ['']
+    lines += [''] + _table(['coefficient', 'unit', 'value', 'std. error'], rows,
+                           ['<', '<', '>', '>']) + ['']
     lines += [
         f'k(lam)        {d["k_text"]}   [N/m], with l0 = {l0:.6g} m (dl = l0 (lam - 1))',
         f'fit quality   R^2 = {fit.r2:.6f}, RMS residual = {fit.rms_n:.4g} N, '
@@ -289,7 +291,8 @@ def _cmd_identify_stiffness(args):
 def _write_robot_yaml(path, cfg, fit, source):
     text = yaml.safe_dump(cfg.to_dict(), sort_keys=False, default_flow_style=None)
     header = (f'# Robot description written by `bellow-ancf identify stiffness` from {source}.\n'
-              f'# actuator.l0_m and actuator.stiffness_coeffs_n_per_m (k(lam) ascending in lam, N/m)\n'
+              '# actuator.l0_m and actuator.stiffness_coeffs_n_per_m '
+              '(k(lam) ascending in lam, N/m)\n'
               f'# come from the fit F(dl) = {ident.poly_text([0.0] + list(fit.f_coeffs), "dl")}\n'
               f'# (R^2 = {fit.r2:.6f}, RMS = {fit.rms_n:.4g} N); the rest is robot {cfg.name}.\n')
     with _open_out(path, '--yaml-out') as fh:
@@ -327,7 +330,8 @@ def _cmd_identify_deff(args):
         length, source = _column(data, args.csv, [('length_mm', 1e-3), ('length_m', 1.0)],
                                  'actuation force (force_n) or length')
         cfg = _config(args)
-        f = ident.actuation_force_from_length(length, cfg.stiffness_coeffs, cfg.l0, args.gravity_share_n)
+        f = ident.actuation_force_from_length(length, cfg.stiffness_coeffs, cfg.l0,
+                                              args.gravity_share_n)
     fit = _solve(ident.fit_deff, p, f, confidence=args.confidence)
     d = fit.to_dict()
     d.update(csv=args.csv, force_source=source)
@@ -340,10 +344,10 @@ def _cmd_identify_deff(args):
     lines = [
         f'data          {args.csv}: {fit.n_points} points, {fit.pressure_range_pa[0] / 1e3:g} .. '
         f'{fit.pressure_range_pa[1] / 1e3:g} kPa (force from {source})',
-        f'slope         A_eff = {fit.area_m2 * 1e6:.5g} mm^2 (std. error {fit.area_stderr_m2 * 1e6:.3g} mm^2), '
-        f'intercept {fit.intercept_n:.4g} N',
-        f'D_eff         {fit.d_eff_m * 1e3:.4f} mm, {100 * fit.confidence:g} % confidence interval '
-        f'[{lo * 1e3:.4f}, {hi * 1e3:.4f}] mm',
+        f'slope         A_eff = {fit.area_m2 * 1e6:.5g} mm^2 '
+        f'(std. error {fit.area_stderr_m2 * 1e6:.3g} mm^2), intercept {fit.intercept_n:.4g} N',
+        f'D_eff         {fit.d_eff_m * 1e3:.4f} mm, '
+        f'{100 * fit.confidence:g} % confidence interval [{lo * 1e3:.4f}, {hi * 1e3:.4f}] mm',
         f'fit quality   R^2 = {fit.r2:.6f}, RMS residual = {fit.rms_n:.4g} N',
     ]
     if args.plot:
@@ -377,13 +381,15 @@ def _cmd_identify_da(args):
         _emit_json(d)
         return EXIT_OK if res.converged else EXIT_FAILED
     _print([
-        f'rig           actuator of {cfg.name} clamped horizontally, lam = 1, l0 = {cfg.l0 * 1e3:.4g} mm, '
-        f'rho0 = {cfg.rho0:g} kg/m, end mass {args.tip_mass_kg:g} kg, {res.n_elements} elements',
+        f'rig           actuator of {cfg.name} clamped horizontally, lam = 1, '
+        f'l0 = {cfg.l0 * 1e3:.4g} mm, rho0 = {cfg.rho0:g} kg/m, end mass {args.tip_mass_kg:g} kg, '
+        f'{res.n_elements} elements',
         f'stiffness     k(1) = {res.k1_n_per_m:.5g} N/m, k_t = k(1) l0 = {res.kt_n:.5g} N, '
         f'k_b = D_a^2 l0 k(1)/8 = {res.kb_n_m2:.5g} N m^2',
         f'D_a           {res.D_a_m * 1e3:.4f} mm',
         f'tip drop      measured {res.drop_m * 1e3:.4f} mm, model {res.model_drop_m * 1e3:.6f} mm',
-        f'root finder   brentq on [{res.bracket_m[0] * 1e3:.4g}, {res.bracket_m[1] * 1e3:.4g}] mm, '
+        f'root finder   brentq on '
+        f'[{res.bracket_m[0] * 1e3:.4g}, {res.bracket_m[1] * 1e3:.4g}] mm, '
         f'xtol {res.xtol_m * 1e3:g} mm, rtol {res.rtol:g}, {res.iterations} iterations, '
         f'{res.function_calls} model solves, converged {"yes" if res.converged else "no"}',
     ])
@@ -395,13 +401,15 @@ def _cmd_convergence(args):
     limit_blas_threads()
     cfg = _config(args)
     res = _solve(studies.convergence_study, cfg, counts=range(1, args.max_elements + 1),
-                 reference_n=args.reference, threshold_m=args.tol_mm * 1e-3, payload_kg=args.payload_kg,
-                 repeats=args.repeats, progress=_progress(args, 'convergence'))
+                 reference_n=args.reference, threshold_m=args.tol_mm * 1e-3,
+                 payload_kg=args.payload_kg, repeats=args.repeats,
+                 progress=_progress(args, 'convergence'))
     if args.plot:
         _plot_convergence(res, args.plot)
     if args.json:
         _emit_json(res.to_dict())
         return EXIT_OK
+
     def error_text(r):
         if r.error_m is None:
             return 'refused' if r.refused else 'failed'
@@ -410,12 +418,15 @@ def _cmd_convergence(args):
     rows = [[r.n, 'yes' if r.nodes_on_plates else 'no', error_text(r),
              '-' if r.refused else f'{r.time_s * 1e3:.1f}', '<-' if r.n == res.recommended else '']
             for r in res.rows]
-    lines = [f'robot         {cfg.name}: reference n = {res.reference_n} ({res.reference_time_s * 1e3:.0f} ms), '
-             f'payload {res.payload_kg:g} kg, actuations: {", ".join(res.actuations_pa)}',
+    lines = [f'robot         {cfg.name}: reference n = {res.reference_n} '
+             f'({res.reference_time_s * 1e3:.0f} ms), payload {res.payload_kg:g} kg, '
+             f'actuations: {", ".join(res.actuations_pa)}',
              'error         largest end-effector position error over the actuations', '']
     lines += _table(['n', 'nodes on plates', 'error [mm]', 'time [ms]', ''], rows)
-    lines += ['', f'recommended   n = {res.recommended}: {res.reason}' if res.recommended is not None
-              else f'recommended   none: {res.reason}']
+    if res.recommended is not None:
+        lines += ['', f'recommended   n = {res.recommended}: {res.reason}']
+    else:
+        lines += ['', f'recommended   none: {res.reason}']
     if args.plot:
         lines.append(f'plot          {args.plot}')
     _print(lines)
@@ -426,14 +437,18 @@ def _plot_convergence(res, path):
     fig = _figure(7.5, 4.5)
     ax = fig.add_subplot(1, 1, 1)
     ns = np.array([r.n for r in res.rows])
-    err = np.array([np.nan if r.error_m is None else max(r.error_m, 1e-12) for r in res.rows]) * 1e3
+    err = np.array([np.nan if r.error_m is None else max(r.error_m, 1e-12)
+                    for r in res.rows]) * 1e3
     on = np.array([r.nodes_on_plates for r in res.rows])
     ax.semilogy(ns, err, '-', color='tab:blue')
     ax.semilogy(ns[on], err[on], 'o', color='tab:blue', label='error, nodes on plates')
-    ax.semilogy(ns[~on], err[~on], 'o', mfc='none', color='tab:blue', label='error, plates inside elements')
-    ax.axhline(res.threshold_m * 1e3, ls=':', color='gray', label=f'threshold {res.threshold_m * 1e3:g} mm')
+    ax.semilogy(ns[~on], err[~on], 'o', mfc='none', color='tab:blue',
+                label='error, plates inside elements')
+    ax.axhline(res.threshold_m * 1e3, ls=':', color='gray',
+               label=f'threshold {res.threshold_m * 1e3:g} mm')
     if res.recommended is not None:
-        ax.axvline(res.recommended, ls='--', color='tab:green', label=f'recommended n = {res.recommended}')
+        ax.axvline(res.recommended, ls='--', color='tab:green',
+                   label=f'recommended n = {res.recommended}')
     ax.set_xlabel('elements per actuator n')
     ax.set_ylabel(f'tip error vs n = {res.reference_n} [mm]', color='tab:blue')
     ax.grid(True, alpha=0.3, which='both')
@@ -450,8 +465,8 @@ def _cmd_workspace(args):
     limit_blas_threads()
     cfg = _config(args)
     payloads = args.payload_kg or [0.0]
-    res = _solve(studies.workspace_study, cfg, payloads, n_points=args.points, n_elements=args.elements,
-                 progress=_progress(args, 'workspace'))
+    res = _solve(studies.workspace_study, cfg, payloads, n_points=args.points,
+                 n_elements=args.elements, progress=_progress(args, 'workspace'))
     rows = res['rows']
     if args.csv:
         cols = _actuator_columns(cfg)
@@ -464,7 +479,8 @@ def _cmd_workspace(args):
                            + [f'{v / 1e3:.6g}' for v in r['pressures_pa']]
                            + [f'{v * 1e3:.6f}' for v in r['position_m']]
                            + [f'{v:.8f}' for v in r['z_axis']]
-                           + [int(r['converged']), '' if r['stable'] is None else int(bool(r['stable']))])
+                           + [int(r['converged']),
+                              '' if r['stable'] is None else int(bool(r['stable']))])
     summary = []
     for m in res['payloads_kg']:
         sel = [r for r in rows if r['payload_kg'] == m]
@@ -480,10 +496,11 @@ def _cmd_workspace(args):
     failed = any(s['solved'] < s['points'] for s in summary)
     if args.json:
         _emit_json({'config': cfg.name, 'schemes': res['schemes'], 'n_points': res['n_points'],
-                    'n_elements': res['n_elements'], 'summary': summary, 'csv': args.csv, 'plot': args.plot})
+                    'n_elements': res['n_elements'], 'summary': summary, 'csv': args.csv,
+                    'plot': args.plot})
         return EXIT_FAILED if failed else EXIT_OK
-    lines = [f'robot         {cfg.name}: {len(res["schemes"])} actuation schemes x {res["n_points"]} points, '
-             f'n = {res["n_elements"]} elements', '']
+    lines = [f'robot         {cfg.name}: {len(res["schemes"])} actuation schemes x '
+             f'{res["n_points"]} points, n = {res["n_elements"]} elements', '']
     lines += _table(['payload [kg]', 'solved', 'x [mm]', 'y [mm]', 'z [mm]', 'max radius [mm]'],
                     [[f'{s["payload_kg"]:g}', f'{s["solved"]}/{s["points"]}',
                       f'{s["x_range_m"][0] * 1e3:.2f} .. {s["x_range_m"][1] * 1e3:.2f}',
@@ -512,7 +529,8 @@ def _plot_workspace(res, path):
     colors = _payload_colors(len(res['payloads_kg']))
     for m, col in zip(res['payloads_kg'], colors):
         for k in range(len(res['schemes'])):
-            pts = np.array([r['position_m'] for r in res['rows'] if r['payload_kg'] == m and r['scheme'] == k
+            pts = np.array([r['position_m'] for r in res['rows']
+                            if r['payload_kg'] == m and r['scheme'] == k
                             and r['converged'] and r['stable'] is not False]) * 1e3
             if pts.size == 0:
                 continue
@@ -537,34 +555,39 @@ def _cmd_compare_pcc(args):
     limit_blas_threads()
     cfg = _config(args)
     payloads = args.payload_kg or [0.0, 0.05, 0.1]
-    res = _solve(studies.compare_pcc, cfg, payloads, n_points=args.points, n_elements=args.elements,
-                 gravity=not args.no_gravity, progress=_progress(args, 'compare-pcc'))
+    res = _solve(studies.compare_pcc, cfg, payloads, n_points=args.points,
+                 n_elements=args.elements, gravity=not args.no_gravity,
+                 progress=_progress(args, 'compare-pcc'))
     if args.csv:
         cols = _actuator_columns(cfg)
         with _open_out(args.csv, '--csv') as fh:
             w = csv.writer(fh)
             w.writerow(['payload_kg', 'category', 'scheme_name', 'step'] + cols
-                       + ['ancf_x_mm', 'ancf_y_mm', 'ancf_z_mm', 'pcc_x_mm', 'pcc_y_mm', 'pcc_z_mm',
-                          'diff_mm', 'angle_deg', 'converged'])
+                       + ['ancf_x_mm', 'ancf_y_mm', 'ancf_z_mm',
+                          'pcc_x_mm', 'pcc_y_mm', 'pcc_z_mm', 'diff_mm', 'angle_deg', 'converged'])
             for r in res['rows']:
                 w.writerow([f'{r["payload_kg"]:g}', r['category'], r['scheme_name'], r['step']]
                            + [f'{v / 1e3:.6g}' for v in r['pressures_pa']]
-                           + [f'{v * 1e3:.6f}' for v in r['ancf_m']] + [f'{v * 1e3:.6f}' for v in r['pcc_m']]
+                           + [f'{v * 1e3:.6f}' for v in r['ancf_m']]
+                           + [f'{v * 1e3:.6f}' for v in r['pcc_m']]
                            + [f'{r["diff_m"] * 1e3:.6f}', f'{math.degrees(r["angle_rad"]):.6f}',
                               int(r['converged'])])
     if args.plot:
         _plot_pcc(res, args.plot)
     if args.json:
-        _emit_json({k: v for k, v in res.items() if k != 'rows'} | {'csv': args.csv, 'plot': args.plot})
+        _emit_json({k: v for k, v in res.items() if k != 'rows'}
+                   | {'csv': args.csv, 'plot': args.plot})
         return EXIT_OK
-    lines = [f'robot         {cfg.name}: ANCF (gravity {"on" if res["gravity"] else "off"}, payload at the tip, '
+    gravity = 'on' if res['gravity'] else 'off'
+    lines = [f'robot         {cfg.name}: ANCF (gravity {gravity}, payload at the tip, '
              f'n = {res["n_elements"]}) vs PCC (kinematic: no gravity, no payload)',
-             'difference    |p_ANCF - p_PCC| of the end effector; dz = z_ANCF - z_PCC; angle between the z-axes', '']
-    lines += _table(['payload [kg]', 'actuations', 'points', 'RMS [mm]', 'max [mm]', 'mean dz [mm]',
-                     'max angle [deg]'],
-                    [[f'{s["payload_kg"]:g}', s['category'], s['points'], f'{s["rms_m"] * 1e3:.3f}',
-                      f'{s["max_m"] * 1e3:.3f}', f'{s["mean_dz_m"] * 1e3:+.3f}',
-                      f'{math.degrees(s["max_angle_rad"]):.2f}'] for s in res['summary']],
+             'difference    |p_ANCF - p_PCC| of the end effector; dz = z_ANCF - z_PCC; '
+             'angle between the z-axes', '']
+    table = [[f'{s["payload_kg"]:g}', s['category'], s['points'], f'{s["rms_m"] * 1e3:.3f}',
+              f'{s["max_m"] * 1e3:.3f}', f'{s["mean_dz_m"] * 1e3:+.3f}',
+              f'{math.degrees(s["max_angle_rad"]):.2f}'] for s in res['summary']]
+    lines += _table(['payload [kg]', 'actuations', 'points', 'RMS [mm]', 'max [mm]',
+                     'mean dz [mm]', 'max angle [deg]'], table,
                     ['>', '<', '>', '>', '>', '>', '>'])
     if args.csv:
         lines.append(f'csv           {args.csv}')
@@ -585,22 +608,25 @@ def _plot_pcc(res, path):
             names.append(r['scheme_name'])
     first = True
     for name in names:
-        sel = [r for r in rows if r['scheme_name'] == name and r['payload_kg'] == res['payloads_kg'][0]]
+        sel = [r for r in rows
+               if r['scheme_name'] == name and r['payload_kg'] == res['payloads_kg'][0]]
         pts = np.array([r['pcc_m'] for r in sel]) * 1e3
         ax1.plot(pts[:, 0], pts[:, 2], '--', color='k', lw=0.8, label='PCC' if first else None)
         first = False
     for m, col in zip(res['payloads_kg'], colors):
         first = True
         for name in names:
-            sel = [r for r in rows if r['scheme_name'] == name and r['payload_kg'] == m and r['converged']]
+            sel = [r for r in rows
+                   if r['scheme_name'] == name and r['payload_kg'] == m and r['converged']]
             if not sel:
                 continue
             pts = np.array([r['ancf_m'] for r in sel]) * 1e3
-            ax1.plot(pts[:, 0], pts[:, 2], '-', color=col, lw=1, label=f'ANCF {m * 1e3:g} g' if first else None)
+            ax1.plot(pts[:, 0], pts[:, 2], '-', color=col, lw=1,
+                     label=f'ANCF {m * 1e3:g} g' if first else None)
             first = False
         sel = [r for r in rows if r['payload_kg'] == m]
-        ax2.plot(np.arange(len(sel)), [r['diff_m'] * 1e3 for r in sel], '.-', color=col, ms=3, lw=0.6,
-                 label=f'{m * 1e3:g} g')
+        ax2.plot(np.arange(len(sel)), [r['diff_m'] * 1e3 for r in sel], '.-', color=col, ms=3,
+                 lw=0.6, label=f'{m * 1e3:g} g')
     ax1.set_xlabel('x [mm]')
     ax1.set_ylabel('z [mm]')
     ax1.set_title('end effector, side view (x-z)')
@@ -636,7 +662,8 @@ def _cmd_track(args):
     if args.period_s is not None:
         params['period'] = args.period_s
     try:
-        trajectories.trajectory(args.trajectory, [0.0], config=cfg, **params)  # validate the parameters
+        # validate the parameters
+        trajectories.trajectory(args.trajectory, [0.0], config=cfg, **params)
     except ValueError as exc:
         raise UsageError(f'--trajectory {args.trajectory}: {exc}') from None
     res = _solve(studies.tracking_study, model, args.trajectory, n_points=args.points,
@@ -658,15 +685,17 @@ def _cmd_track(args):
         _emit_json(d)
         return EXIT_OK if ok else EXIT_FAILED
     p = res.params
+    centre = ', '.join(f'{c * 1e3:.2f}' for c in p['center'])
     lines = [
         f'robot         {cfg.name}, n = {model.n} elements, payload {args.payload_kg:g} kg, '
         f'feedforward from the {args.controller.upper()} inverse',
         f'trajectory    {args.trajectory}: {st["points"]} points over {p["period"]:g} s, radius '
-        f'{p["radius"] * 1e3:.2f} mm, centre ({", ".join(f"{c * 1e3:.2f}" for c in p["center"])}) mm'
+        f'{p["radius"] * 1e3:.2f} mm, centre ({centre}) mm'
         + (f', bending angle {p["bending_angle_deg"]:g} deg' if 'bending_angle_deg' in p else ''),
         'errors        forward model at the feedforward pressures vs the target', '',
     ]
-    rows = [['position error [mm]', _fmt(st['position_rms_m'] and st['position_rms_m'] * 1e3, '.3e'),
+    rows = [['position error [mm]',
+             _fmt(st['position_rms_m'] and st['position_rms_m'] * 1e3, '.3e'),
              _fmt(st['position_max_m'] and st['position_max_m'] * 1e3, '.3e')]]
     if st['angle_rms_rad'] is not None:
         rows.append(['angle error [deg]', f'{math.degrees(st["angle_rms_rad"]):.3e}',
@@ -676,7 +705,8 @@ def _cmd_track(args):
               f'reachable     {100 * st["reachable_fraction"]:.1f} % of the points '
               f'(successful, stable: {100 * st["success_fraction"]:.1f} %)',
               f'solve time    median {st["solve_time_median_s"] * 1e3:.1f} ms, p99 '
-              f'{st["solve_time_p99_s"] * 1e3:.1f} ms, max {st["solve_time_max_s"] * 1e3:.1f} ms per inverse']
+              f'{st["solve_time_p99_s"] * 1e3:.1f} ms, '
+              f'max {st["solve_time_max_s"] * 1e3:.1f} ms per inverse']
     if args.csv:
         lines.append(f'csv           {args.csv} (time_s, pressures in kPa)')
     if args.plot:
@@ -692,7 +722,8 @@ def _plot_track(res, path):
     ax3 = fig.add_subplot(1, 3, 3)
     T, Pp = res.targets_m * 1e3, res.predicted_m * 1e3
     ax1.plot(T[:, 0], T[:, 1], T[:, 2], '-', color='k', lw=1.5, label='desired')
-    ax1.plot(Pp[:, 0], Pp[:, 1], Pp[:, 2], 'o', color='tab:orange', ms=2.5, label='predicted (forward)')
+    ax1.plot(Pp[:, 0], Pp[:, 1], Pp[:, 2], 'o', color='tab:orange', ms=2.5,
+             label='predicted (forward)')
     ax1.set_xlabel('x [mm]')
     ax1.set_ylabel('y [mm]')
     ax1.set_zlabel('z [mm]')
@@ -725,7 +756,8 @@ def _actuator_columns_cfgless(A):
 # =============================================================== register
 def _add_config(p):
     p.add_argument('--config', default='one_segment', metavar='C',
-                   help='robot file path or shipped robot name (one_segment, two_segment); default: %(default)s')
+                   help='robot file path or shipped robot name (one_segment, two_segment); '
+                        'default: %(default)s')
 
 
 def _add_out(p, json_help='print one JSON object (SI units) instead of the table'):
@@ -748,22 +780,25 @@ def register(subparsers):
 
     p = isub.add_parser(
         'stiffness', help='structural stiffness k(lam) from a tensile/compression test',
-        description='Fit F_e(dl) = a1 dl + ... + aN dl^N (no constant term) to a tensile/compression '
-                    'test and derive k(lam) = F/dl with dl = l0 (lam - 1) (paper V.A). CSV columns: '
-                    'dl_mm (or dl_m), actuator length change, positive in tension; force_n, the measured '
-                    'force [N] of the whole segment (--force-per segment: F_e = F_m/n_a - F_g) or of one '
-                    'actuator (--force-per actuator: F_e = F_m - F_g). Lines starting with # are comments.',
-        epilog='Example: bellow-ancf identify stiffness --csv data/tensile_test_segment.csv --plot k.png')
+        description='Fit F_e(dl) = a1 dl + ... + aN dl^N (no constant term) to a '
+                    'tensile/compression test and derive k(lam) = F/dl with dl = l0 (lam - 1) '
+                    '(paper V.A). CSV columns: dl_mm (or dl_m), actuator length change, positive '
+                    'in tension; force_n, the measured force [N] of the whole segment '
+                    '(--force-per segment: F_e = F_m/n_a - F_g) or of one actuator (--force-per '
+                    'actuator: F_e = F_m - F_g). Lines starting with # are comments.',
+        epilog='Example: bellow-ancf identify stiffness --csv data/tensile_test_segment.csv '
+               '--plot k.png')
     p.add_argument('--csv', required=True, metavar='FILE', help='force-displacement data (CSV)')
     p.add_argument('--order', type=_int_at_least(1), default=2, metavar='N',
-                   help='order of the polynomial F(dl); default: %(default)s (the paper\'s quadratic)')
+                   help="order of the polynomial F(dl); default: %(default)s (the paper's "
+                        'quadratic)')
     p.add_argument('--force-per', choices=('segment', 'actuator'), default='segment',
                    help='whose force the force_n column holds; default: %(default)s')
     p.add_argument('--n-actuators', type=_int_at_least(1), default=None, metavar='N',
                    help="actuators sharing the segment force; default: the robot file's")
     p.add_argument('--gravity-share-n', type=cli._finite_float, default=None, metavar='F',
-                   help='gravity share F_g per actuator [N] to subtract; default: segment: top-plate '
-                        'weight / n_a from the robot file, actuator: 0')
+                   help='gravity share F_g per actuator [N] to subtract; default: segment: '
+                        'top-plate weight / n_a from the robot file, actuator: 0')
     p.add_argument('--l0-m', type=_positive_float, default=None, metavar='L',
                    help="unpressurised actuator length [m]; default: the robot file's l0")
     _add_config(p)
@@ -774,13 +809,15 @@ def register(subparsers):
 
     p = isub.add_parser(
         'deff', help='effective actuation diameter D_eff from force vs pressure',
-        description='Fit the actuation force F_a = pi/4 D_eff^2 P (paper V.B): least-squares line with '
-                    'intercept, D_eff = sqrt(4 slope / pi) with a Student-t confidence interval. CSV '
-                    'columns: pressure_kpa (or pressure_pa) and force_n (actuation force [N]) or '
-                    'length_mm / length_m (measured actuator length; F_a = k(lam)(lam-1) l0 - F_g with '
-                    "the --config robot's k and l0). Lines starting with # are comments.",
+        description='Fit the actuation force F_a = pi/4 D_eff^2 P (paper V.B): least-squares line '
+                    'with intercept, D_eff = sqrt(4 slope / pi) with a Student-t confidence '
+                    'interval. CSV columns: pressure_kpa (or pressure_pa) and force_n (actuation '
+                    'force [N]) or length_mm / length_m (measured actuator length; F_a = '
+                    "k(lam)(lam-1) l0 - F_g with the --config robot's k and l0). Lines starting "
+                    'with # are comments.',
         epilog='Example: bellow-ancf identify deff --csv data/pressure_force.csv --plot deff.png')
-    p.add_argument('--csv', required=True, metavar='FILE', help='pressure vs actuation force data (CSV)')
+    p.add_argument('--csv', required=True, metavar='FILE',
+                   help='pressure vs actuation force data (CSV)')
     p.add_argument('--confidence', type=_fraction, default=0.95, metavar='C',
                    help='confidence level of the interval; default: %(default)s')
     p.add_argument('--gravity-share-n', type=cli._finite_float, default=0.0, metavar='F',
@@ -791,10 +828,11 @@ def register(subparsers):
 
     p = isub.add_parser(
         'da', help='cross-sectional diameter D_a from a cantilever tip drop',
-        description='One actuator clamped horizontally, unactuated (lam = 1), under its own weight '
-                    '(linear density from the robot file) and an end mass (paper V.C): find D_a '
-                    '(k_b = D_a^2 l0 k(1)/8) such that the model\'s tip drop equals the measured drop, '
-                    'with a bracketing root finder (brentq) on the ANCF cantilever.',
+        description='One actuator clamped horizontally, unactuated (lam = 1), under its own '
+                    'weight (linear density from the robot file) and an end mass (paper V.C): '
+                    "find D_a (k_b = D_a^2 l0 k(1)/8) such that the model's tip drop equals the "
+                    'measured drop, with a bracketing root finder (brentq) on the ANCF '
+                    'cantilever.',
         epilog='Example: bellow-ancf identify da --drop-mm 34.35 --tip-mass-kg 0.02397  '
                '(gives D_a = 17.90 mm for the shipped robot)')
     p.add_argument('--drop-mm', type=_positive_float, required=True, metavar='D',
@@ -804,17 +842,19 @@ def register(subparsers):
     p.add_argument('--elements', type=_int_at_least(1), default=20, metavar='N',
                    help='ANCF elements of the cantilever; default: %(default)s (paper)')
     _add_config(p)
-    p.add_argument('--json', action='store_true', help='print one JSON object (key D_a_m, SI units)')
+    p.add_argument('--json', action='store_true',
+                   help='print one JSON object (key D_a_m, SI units)')
     p.set_defaults(func=_cmd_identify_da)
 
     # --------------------------------------------------------- convergence
     p = subparsers.add_parser(
         'convergence', help='tip error and solve time vs element count (paper Fig. 4(d))',
         description='End-effector error of n = 1..N elements per actuator against a converged '
-                    'reference at extreme actuations (largest error over: actuator 1 at p_max and the '
-                    'others at 0 as in the paper; actuator 1 at p_max, others at p_min; actuators 1, 2 '
-                    'at p_max, others at p_min), the median solve time, and the recommended count: the '
-                    'smallest with an error below --tol-mm that puts a node on every plate.')
+                    'reference at extreme actuations (largest error over: actuator 1 at p_max and '
+                    'the others at 0 as in the paper; actuator 1 at p_max, others at p_min; '
+                    'actuators 1, 2 at p_max, others at p_min), the median solve time, and the '
+                    'recommended count: the smallest with an error below --tol-mm that puts a '
+                    'node on every plate.')
     _add_config(p)
     p.add_argument('--max-elements', type=_int_at_least(1), default=12, metavar='N',
                    help='test n = 1..N; default: %(default)s')
@@ -833,11 +873,12 @@ def register(subparsers):
     # ----------------------------------------------------------- workspace
     p = subparsers.add_parser(
         'workspace', help='workspace boundaries of the paper\'s actuation schemes (paper VI.B)',
-        description='Sweep the paper\'s actuation schemes from p_min to p_max with warm-started '
-                    'forward solves, for each payload. One segment: 18 schemes (one actuator swept, the '
-                    'other two at every p_min/p_max combination; two swept, the third at p_min or '
-                    'p_max). Two segments: s11+s21, s11+s22, s11+s21+s22, s11+s22+s23 swept, the others '
-                    'at 0 kPa. Plot: boundary curves in 3-D and top view; CSV: one row per solve.')
+        description="Sweep the paper's actuation schemes from p_min to p_max with warm-started "
+                    'forward solves, for each payload. One segment: 18 schemes (one actuator '
+                    'swept, the other two at every p_min/p_max combination; two swept, the third '
+                    'at p_min or p_max). Two segments: s11+s21, s11+s22, s11+s21+s22, s11+s22+s23 '
+                    'swept, the others at 0 kPa. Plot: boundary curves in 3-D and top view; CSV: '
+                    'one row per solve.')
     _add_config(p)
     p.add_argument('--payload-kg', type=cli._payload, nargs='+', default=[0.0], metavar='M',
                    help='payloads [kg]; default: 0')
@@ -853,9 +894,9 @@ def register(subparsers):
     # --------------------------------------------------------- compare-pcc
     p = subparsers.add_parser(
         'compare-pcc', help='where the PCC model and the ANCF model disagree',
-        description='End-effector positions of the ANCF model (gravity, payload) and the kinematic '
-                    'piecewise-constant-curvature model (same stage 1, no forces) along a pure '
-                    'elongation sweep and the workspace schemes, per payload.')
+        description='End-effector positions of the ANCF model (gravity, payload) and the '
+                    'kinematic piecewise-constant-curvature model (same stage 1, no forces) along '
+                    'a pure elongation sweep and the workspace schemes, per payload.')
     _add_config(p)
     p.add_argument('--payload-kg', type=cli._payload, nargs='+', default=None, metavar='M',
                    help='payloads [kg]; default: 0 0.05 0.1')
@@ -864,7 +905,8 @@ def register(subparsers):
     p.add_argument('--elements', type=_int_at_least(1), default=None, metavar='N',
                    help="ANCF elements per actuator; default: the robot file's")
     p.add_argument('--no-gravity', action='store_true',
-                   help="switch the ANCF model's gravity off (the payload then has no weight either)")
+                   help="switch the ANCF model's gravity off (the payload then has no weight "
+                        'either)')
     p.add_argument('--csv', metavar='FILE', help='write every compared actuation as a CSV row')
     _add_out(p, 'print one JSON summary object instead of the table')
     _add_quiet(p)
@@ -876,11 +918,12 @@ def register(subparsers):
         'track', help='offline feedforward tracking of a trajectory (paper VI.C)',
         description='Run the inverse along a trajectory (warm-started point to point), write the '
                     'pressure sequence (CSV: time_s and one column s<segment>_a<actuator>_kpa per '
-                    'actuator, gauge pressure in kPa; 1 kPa = 1000 Pa) and print tracking statistics '
-                    'from the forward model at those pressures: position and angle error RMS and max, '
-                    'reachable fraction, solve time median and p99. Exit status 1 if a target was '
-                    'not reached.')
-    p.add_argument('--trajectory', required=True, choices=trajectories.TRAJECTORY_NAMES, metavar='NAME',
+                    'actuator, gauge pressure in kPa; 1 kPa = 1000 Pa) and print tracking '
+                    'statistics from the forward model at those pressures: position and angle '
+                    'error RMS and max, reachable fraction, solve time median and p99. Exit '
+                    'status 1 if a target was not reached.')
+    p.add_argument('--trajectory', required=True, choices=trajectories.TRAJECTORY_NAMES,
+                   metavar='NAME',
                    help='one of: ' + ', '.join(trajectories.TRAJECTORY_NAMES))
     _add_config(p)
     p.add_argument('--payload-kg', type=cli._payload, default=0.0, metavar='M',
@@ -898,9 +941,11 @@ def register(subparsers):
     p.add_argument('--period-s', type=_positive_float, default=None, metavar='T',
                    help='period of the trajectory [s] (time column only); default: from the robot')
     p.add_argument('--controller', choices=('ancf', 'pcc'), default='ancf',
-                   help='model whose inverse gives the feedforward pressures (pcc: the paper\'s '
-                        'baseline; the errors are always from the ANCF forward model); default: %(default)s')
-    p.add_argument('--csv', metavar='FILE', help='write the pressure sequence (kPa) to this CSV file')
+                   help="model whose inverse gives the feedforward pressures (pcc: the paper's "
+                        'baseline; the errors are always from the ANCF forward model); default: '
+                        '%(default)s')
+    p.add_argument('--csv', metavar='FILE',
+                   help='write the pressure sequence (kPa) to this CSV file')
     _add_out(p, 'print one JSON object with the statistics (SI units)')
     _add_quiet(p)
     p.set_defaults(func=_cmd_track)
