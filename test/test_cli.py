@@ -9,6 +9,7 @@ import json
 import math
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import types
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros import cli, demo
+from bellow_ancf_ros.cli import solve as cli_solve
 from bellow_ancf_ros.core import solve_forward
 
 REPO = Path(__file__).resolve().parents[1]
@@ -151,7 +153,7 @@ def test_forward_two_segment_config_by_name_and_path(capsys):
 
 
 def test_forward_not_converged_prints_result_and_exits_1(capsys, monkeypatch):
-    real = cli.solve_forward
+    real = cli_solve.solve_forward
 
     def failing(*args, **kwargs):
         fw = real(*args, **kwargs)
@@ -159,7 +161,7 @@ def test_forward_not_converged_prints_result_and_exits_1(capsys, monkeypatch):
         fw.residual_norm = float('nan')
         return fw
 
-    monkeypatch.setattr(cli, 'solve_forward', failing)
+    monkeypatch.setattr(cli_solve, 'solve_forward', failing)
     code, out, _ = run(capsys, 'forward', '--pressures-kpa', 0, 0, 0, '--json')
     assert code == 1
     d = one_json(out)
@@ -442,15 +444,16 @@ def test_json_safe_maps_non_finite_to_null():
         'a': None, 'b': [1.0, None, None], 'c': [0, 1], 'd': True, 'e': [3, None, 'text']}
 
 
-def test_cli_tools_hook_dispatches_extra_subcommand(capsys, monkeypatch):
+def test_command_family_hook_dispatches_extra_subcommand(capsys, monkeypatch):
     def register(subparsers):
         p = subparsers.add_parser('hello', help='test subcommand')
         p.add_argument('--times', type=int, default=1)
         p.set_defaults(func=lambda args: print('hello ' * args.times) or 7)
 
-    fake = types.ModuleType('bellow_ancf_ros.cli_tools')
+    fake = types.ModuleType('bellow_ancf_ros.cli.hello')
     fake.register = register
-    monkeypatch.setitem(sys.modules, 'bellow_ancf_ros.cli_tools', fake)
+    monkeypatch.setitem(sys.modules, 'bellow_ancf_ros.cli.hello', fake)
+    monkeypatch.setattr(cli, 'COMMAND_FAMILIES', cli.COMMAND_FAMILIES + ('hello',))
     code, out, _ = run(capsys, 'hello', '--times', 2)
     assert code == 7 and out.strip() == 'hello hello'
     code, _, err = run(capsys, 'hello', '--times', 'x')
@@ -458,11 +461,13 @@ def test_cli_tools_hook_dispatches_extra_subcommand(capsys, monkeypatch):
     assert_one_line_error(err, '--times')
 
 
-def test_cli_tools_missing_is_fine(capsys, monkeypatch):
-    # import -> ModuleNotFoundError
-    monkeypatch.setitem(sys.modules, 'bellow_ancf_ros.cli_tools', None)
+def test_help_lists_every_family_in_order(capsys):
     code, out, _ = run(capsys, '--help')
-    assert code == 0 and 'forward' in out
+    assert code == 0
+    commands = ['forward', 'inverse', 'identify', 'convergence', 'workspace', 'compare-pcc',
+                'track', 'calibrate']
+    listed = [m.group(1) for m in re.finditer(r'^    (\S+)', out, re.MULTILINE)]
+    assert listed == commands
 
 
 def test_cli_does_not_import_rclpy():

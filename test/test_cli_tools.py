@@ -1,4 +1,6 @@
-"""The identification, study and tracking subcommands of ``bellow-ancf`` (cli_tools.py).
+"""The identification, study and tracking subcommands of ``bellow-ancf``.
+
+``cli/identify.py``, ``cli/studies.py`` and ``cli/track.py``.
 
 Each subcommand runs in-process on the shipped data or a default robot; its
 numbers are checked and its plot must be a valid PNG.

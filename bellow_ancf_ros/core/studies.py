@@ -1,8 +1,8 @@
 """Model studies: element convergence, workspace, PCC comparison, offline tracking.
 
-numpy/scipy only (no ROS, no plotting: the CLI in ``bellow_ancf_ros.cli_tools``
-draws).  Every study takes an optional ``progress(done, total, text)``
-callback for long runs.
+numpy/scipy only (no ROS, no plotting: the CLI in ``bellow_ancf_ros.cli.studies``
+and ``bellow_ancf_ros.cli.track`` draws).  Every study takes an optional
+``progress(done, total, text)`` callback for long runs.
 
 * :func:`convergence_study` (paper V.D, Fig. 4(d)): end-effector error of
   ``n = 1..12`` elements per actuator against a converged reference
