@@ -111,7 +111,8 @@ class _Demo:
             if not _as_expected(inv, expected):
                 self.failures += 1
             ang = '-' if inv.angle_error_rad is None else f'{np.degrees(inv.angle_error_rad):.2e}d'
-            print(f'  {label:<20} {_mm(position):<23}  {_kpa(inv.pressures_pa):<{8 * model.A - 1}}  '
+            width = 8 * model.A - 1
+            print(f'  {label:<20} {_mm(position):<23}  {_kpa(inv.pressures_pa):<{width}}  '
                   f'{"yes" if inv.reachable else "no":>5}  {inv.position_error_m * 1e3:7.2e}mm  '
                   f'{ang:>9}  {_limits(inv.active_limits):<12}  {dt * 1e3:5.0f}ms')
             if not inv.reachable:
@@ -137,7 +138,8 @@ def main(argv=None) -> int:
         ('equal 150/150/150', (150, 150, 150), 0.05),
     ])
     source = (120.0, 20.0, -30.0)
-    fw, _ = demo.run('forward for the inverse target', solve_forward, model, np.asarray(source) * 1e3)
+    fw, _ = demo.run('forward for the inverse target', solve_forward, model,
+                     np.asarray(source) * 1e3)
     cases, expected = [], []
     if fw is not None:
         cases.append(('from forward', fw.position, None))
@@ -145,7 +147,8 @@ def main(argv=None) -> int:
     if full is not None:
         cases.append(('20 mm too high', full.position + [0.0, 0.0, 0.02], None))
         expected.append(False)
-    print(f'\n  inverse targets: the tip of a forward solve at {"/".join(f"{p:g}" for p in source)} kPa '
+    kpa = '/'.join(f'{p:g}' for p in source)
+    print(f'\n  inverse targets: the tip of a forward solve at {kpa} kPa '
           '(reachable), and 20 mm above the tip at full pressure (unreachable)')
     demo.inverse_table(model, cases, expected)
 
@@ -158,8 +161,9 @@ def main(argv=None) -> int:
     ])
     cases = [(f'pose of {label}', f.position, f.z_axis)
              for label, f in zip(('120/-50/-50/..', '40/0/-20/..'), results) if f is not None]
-    print('\n  inverse targets: position and z-axis of the forward solves (the first one lies on the '
-          'workspace\n  boundary: two pressures at p_min).  Six stretches, five target equations: '
+    print('\n  inverse targets: position and z-axis of the forward solves '
+          '(the first one lies on the workspace\n  boundary: two pressures at p_min).  '
+          'Six stretches, five target equations: '
           'the inverse returns\n  the solution closest to mid-range pressures, so it may differ '
           'from the pressures of the forward solve.')
     demo.inverse_table(model, cases, [True] * len(cases))

@@ -210,8 +210,9 @@ def elastica_solution(L, EI, w, P, n_mesh=201, tol=1e-10, max_nodes=200000):
         # keep the initial angle guess within a sensible range
         scale = min(1.0, 1.2 / max(1e-300, np.max(np.abs(th))))
         th, dth = th * scale, dth * scale
-        X = np.concatenate(([0.0], np.cumsum(np.diff(xi) * 0.5 * (np.cos(th[1:]) + np.cos(th[:-1])))))
-        Z = np.concatenate(([0.0], np.cumsum(np.diff(xi) * 0.5 * (np.sin(th[1:]) + np.sin(th[:-1])))))
+        dxi = np.diff(xi) * 0.5
+        X = np.concatenate(([0.0], np.cumsum(dxi * (np.cos(th[1:]) + np.cos(th[:-1])))))
+        Z = np.concatenate(([0.0], np.cumsum(dxi * (np.sin(th[1:]) + np.sin(th[:-1])))))
         return xi, np.vstack((th, dth, X, Z))
 
     return _continuation(lambda lam, g: _elastica_bvp(lam * a, lam * b, g, tol, max_nodes), guess)
@@ -427,7 +428,7 @@ def spec_continuum_tip(L, kt, kb, w, P, method="auto", n_mesh=401, tol=1e-10,
 # helpers for the actual test case
 # --------------------------------------------------------------------------
 def project_case_parameters(lam=1.0, k_lam=576.94, dk=28.9, l0=0.0963, D_a=0.01790,
-                         rho_lin=0.20, g=G_STD):
+                            rho_lin=0.20, g=G_STD):
     """Parameters (L, kt, kb, w) of the project test case (lam = 1).
 
     kt = (576.94 lam + 28.9) l0, kb = D_a^2 l0 lam (576.94 lam + 28.9) / 8,

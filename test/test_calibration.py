@@ -11,7 +11,7 @@ from bellow_ancf_ros.core import parameter_keys as pk
 from bellow_ancf_ros.core.excitation import excitation_sequence, random_pressures
 from bellow_ancf_ros.core.recordings import read_bag, read_csv, write_bag, write_csv
 from bellow_ancf_ros.core.sensitivities import RecordingModel
-from bellow_ancf_ros.cli_calibrate import robot_yaml_text
+from bellow_ancf_ros.cli.calibrate import robot_yaml_text
 
 
 # ------------------------------------------------------------ building blocks

@@ -49,7 +49,8 @@ def test_large_deflection_matches_the_classical_elastica_within_1_percent(beam):
     res = _ancf(beam, beam["m"], 6)
     assert drop / beam["L"] == pytest.approx(0.35, rel=1e-6)
     rel = (res.tip_drop - drop) / drop
-    print(f"tip drop: ANCF n=6 {res.tip_drop * 1e3:.4f} mm, elastica {drop * 1e3:.4f} mm ({100 * rel:+.3f} %)")
+    print(f"tip drop: ANCF n=6 {res.tip_drop * 1e3:.4f} mm, elastica {drop * 1e3:.4f} mm "
+          f"({100 * rel:+.3f} %)")
     assert abs(rel) < 0.01
     assert res.tip[0] == pytest.approx(x_tip, rel=0.01)
     # the model is slightly softer than the inextensible elastica

@@ -9,6 +9,7 @@ import json
 import math
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import types
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros import cli, demo
+from bellow_ancf_ros.cli import solve as cli_solve
 from bellow_ancf_ros.core import solve_forward
 
 REPO = Path(__file__).resolve().parents[1]
@@ -143,14 +145,15 @@ def test_forward_two_segment_config_by_name_and_path(capsys):
     code, out, err = run(capsys, 'forward', '--config', 'two_segment', *argv)
     assert code == 0, err
     by_name = one_json(out)
-    code, out, err = run(capsys, 'forward', '--config', REPO / 'config' / 'two_segment.yaml', *argv)
+    code, out, err = run(capsys, 'forward', '--config', REPO / 'config' / 'two_segment.yaml',
+                         *argv)
     assert code == 0, err
     assert one_json(out)['position_m'] == pytest.approx(by_name['position_m'], abs=1e-12)
     assert by_name['position_m'][0] < -0.02 and len(by_name['stretch']) == 6
 
 
 def test_forward_not_converged_prints_result_and_exits_1(capsys, monkeypatch):
-    real = cli.solve_forward
+    real = cli_solve.solve_forward
 
     def failing(*args, **kwargs):
         fw = real(*args, **kwargs)
@@ -158,7 +161,7 @@ def test_forward_not_converged_prints_result_and_exits_1(capsys, monkeypatch):
         fw.residual_norm = float('nan')
         return fw
 
-    monkeypatch.setattr(cli, 'solve_forward', failing)
+    monkeypatch.setattr(cli_solve, 'solve_forward', failing)
     code, out, _ = run(capsys, 'forward', '--pressures-kpa', 0, 0, 0, '--json')
     assert code == 1
     d = one_json(out)
@@ -167,7 +170,8 @@ def test_forward_not_converged_prints_result_and_exits_1(capsys, monkeypatch):
 
 # ------------------------------------------------------------- CSV replay
 def test_forward_csv_replay_with_malformed_row(capsys, tmp_path):
-    path = write(tmp_path, 'p.csv', 'p1_kpa,p2_kpa,p3_kpa\n150,-50,-50\n140,oops,-50\n100,20,-30\n')
+    path = write(tmp_path, 'p.csv',
+                 'p1_kpa,p2_kpa,p3_kpa\n150,-50,-50\n140,oops,-50\n100,20,-30\n')
     code, out, err = run(capsys, 'forward', '--pressures-csv', path, '--json')
     assert code == 2
     records = json_lines(out)
@@ -327,7 +331,8 @@ def test_inverse_targets_csv_two_segment(capsys, tmp_path, two):
     body = 'x,y,z,zx,zy,zz\n' + ''.join(
         ','.join(repr(float(v)) for v in (*f.position, *f.z_axis)) + '\n' for f in fws)
     path = write(tmp_path, 't.csv', body)
-    code, out, err = run(capsys, 'inverse', '--config', 'two_segment', '--targets-csv', path, '--json')
+    code, out, err = run(capsys, 'inverse', '--config', 'two_segment', '--targets-csv', path,
+                         '--json')
     assert code == 0, err
     records = json_lines(out)
     assert len(records) == 2
@@ -347,28 +352,34 @@ BAD_INPUT = [
      ['/nonexistent/robot.yaml', 'no such robot file']),
     (['forward', '--pressures-kpa', '1', 'abc', '3'], ['--pressures-kpa', "'abc'"]),
     (['forward', '--pressures-kpa', '1', 'nan', '3'], ['--pressures-kpa', 'finite']),
-    (['forward', '--pressures-kpa', '151', '0', '0'], ['pressure 1 = 151 kPa', 'outside the limits']),
-    (['forward', '--pressures-kpa', '0', '-60', '0'], ['pressure 2 = -60 kPa', 'outside the limits']),
+    (['forward', '--pressures-kpa', '151', '0', '0'],
+     ['pressure 1 = 151 kPa', 'outside the limits']),
+    (['forward', '--pressures-kpa', '0', '-60', '0'],
+     ['pressure 2 = -60 kPa', 'outside the limits']),
     (['forward', '--config', 'two_segment', '--pressures-kpa', '0', '0', '0', '0', '0', '121'],
      ['pressure 6 = 121 kPa', '[-50, 120] kPa']),
     (['forward', '--pressures-kpa', '0', '0', '0', '--payload-kg', '-0.1'], ['--payload-kg']),
-    (['forward', '--pressures-kpa', '0', '0', '0', '--payload-kg', 'heavy'], ['--payload-kg', "'heavy'"]),
+    (['forward', '--pressures-kpa', '0', '0', '0', '--payload-kg', 'heavy'],
+     ['--payload-kg', "'heavy'"]),
     (['forward', '--pressures-kpa', '0', '0', '0', '--elements', '0'], ['--elements']),
     (['forward', '--pressures-kpa', '0', '0', '0', '--elements', '2.5'], ['--elements', "'2.5'"]),
-    (['forward', '--pressures-csv', '/nonexistent/p.csv', '--json'], ['/nonexistent/p.csv', 'cannot open']),
+    (['forward', '--pressures-csv', '/nonexistent/p.csv', '--json'],
+     ['/nonexistent/p.csv', 'cannot open']),
     (['forward'], ['--pressures-kpa', '--pressures-csv']),
     ([], ['COMMAND']),
     (['fly'], ["'fly'"]),
     (['inverse', '--config', 'two_segment', '--position', '0', '0', '0.2'], ['z-axis']),
-    (['inverse', '--config', 'two_segment', '--position', '0', '0', '0.2', '--z-axis', '0', '0', '0'],
-     ['z-axis']),
+    (['inverse', '--config', 'two_segment', '--position', '0', '0', '0.2',
+      '--z-axis', '0', '0', '0'], ['z-axis']),
     (['inverse', '--position', '0', 'zero', '0.1'], ['--position', "'zero'"]),
     (['inverse', '--position', '0', '0'], ['--position', 'expected 3']),
-    (['inverse', '--targets-csv', '/nonexistent/t.csv', '--json'], ['/nonexistent/t.csv', 'cannot open']),
+    (['inverse', '--targets-csv', '/nonexistent/t.csv', '--json'],
+     ['/nonexistent/t.csv', 'cannot open']),
 ]
 
 
-@pytest.mark.parametrize('argv, fragments', BAD_INPUT, ids=[' '.join(a) or '(none)' for a, _ in BAD_INPUT])
+@pytest.mark.parametrize('argv, fragments', BAD_INPUT,
+                         ids=[' '.join(a) or '(none)' for a, _ in BAD_INPUT])
 def test_bad_input_exits_2_with_one_line(capsys, argv, fragments):
     code, out, err = run(capsys, *argv)
     assert code == 2
@@ -380,7 +391,8 @@ def test_bad_input_exits_2_with_one_line(capsys, argv, fragments):
     ('forward', '--pressures-csv', '', ['no header']),
     ('forward', '--pressures-csv', '1,2,3\n0,0,0\n', ['line 1', 'header']),
     ('forward', '--pressures-csv', 'a,b\n0,0\n', ['line 1', 'expected 3']),
-    ('inverse', '--targets-csv', 'x,y,depth\n0,0,0.1\n', ['line 1', "'depth'", 'missing column(s) z']),
+    ('inverse', '--targets-csv', 'x,y,depth\n0,0,0.1\n',
+     ['line 1', "'depth'", 'missing column(s) z']),
     ('inverse', '--targets-csv', 'x,y,z,x\n0,0,0.1,0\n', ['line 1', 'duplicated']),
 ])
 def test_bad_csv_header_exits_2(capsys, tmp_path, command, option, body, fragments):
@@ -392,7 +404,8 @@ def test_bad_csv_header_exits_2(capsys, tmp_path, command, option, body, fragmen
 
 def test_two_segment_targets_csv_needs_z_axis_columns(capsys, tmp_path):
     path = write(tmp_path, 't.csv', 'x,y,z\n0,0,0.2\n')
-    code, out, err = run(capsys, 'inverse', '--config', 'two_segment', '--targets-csv', path, '--json')
+    code, out, err = run(capsys, 'inverse', '--config', 'two_segment', '--targets-csv', path,
+                         '--json')
     assert code == 2 and out == ''
     assert_one_line_error(err, 'zx, zy, zz')
 
@@ -405,7 +418,8 @@ def test_batch_requires_json(capsys, tmp_path):
 
 
 def test_bad_robot_file_exits_2_with_one_line(capsys, tmp_path):
-    text = (REPO / 'config' / 'one_segment.yaml').read_text().replace('p_max_kpa: 150.0', 'p_max_kpa: oops')
+    text = (REPO / 'config' / 'one_segment.yaml').read_text()
+    text = text.replace('p_max_kpa: 150.0', 'p_max_kpa: oops')
     path = write(tmp_path, 'robot.yaml', text)
     code, out, err = run(capsys, 'forward', '--config', path, '--pressures-kpa', 0, 0, 0)
     assert code == 2 and out == ''
@@ -430,15 +444,16 @@ def test_json_safe_maps_non_finite_to_null():
         'a': None, 'b': [1.0, None, None], 'c': [0, 1], 'd': True, 'e': [3, None, 'text']}
 
 
-def test_cli_tools_hook_dispatches_extra_subcommand(capsys, monkeypatch):
+def test_command_family_hook_dispatches_extra_subcommand(capsys, monkeypatch):
     def register(subparsers):
         p = subparsers.add_parser('hello', help='test subcommand')
         p.add_argument('--times', type=int, default=1)
         p.set_defaults(func=lambda args: print('hello ' * args.times) or 7)
 
-    fake = types.ModuleType('bellow_ancf_ros.cli_tools')
+    fake = types.ModuleType('bellow_ancf_ros.cli.hello')
     fake.register = register
-    monkeypatch.setitem(sys.modules, 'bellow_ancf_ros.cli_tools', fake)
+    monkeypatch.setitem(sys.modules, 'bellow_ancf_ros.cli.hello', fake)
+    monkeypatch.setattr(cli, 'COMMAND_FAMILIES', cli.COMMAND_FAMILIES + ('hello',))
     code, out, _ = run(capsys, 'hello', '--times', 2)
     assert code == 7 and out.strip() == 'hello hello'
     code, _, err = run(capsys, 'hello', '--times', 'x')
@@ -446,16 +461,20 @@ def test_cli_tools_hook_dispatches_extra_subcommand(capsys, monkeypatch):
     assert_one_line_error(err, '--times')
 
 
-def test_cli_tools_missing_is_fine(capsys, monkeypatch):
-    monkeypatch.setitem(sys.modules, 'bellow_ancf_ros.cli_tools', None)  # import -> ModuleNotFoundError
+def test_help_lists_every_family_in_order(capsys):
     code, out, _ = run(capsys, '--help')
-    assert code == 0 and 'forward' in out
+    assert code == 0
+    commands = ['forward', 'inverse', 'identify', 'convergence', 'workspace', 'compare-pcc',
+                'track', 'calibrate']
+    listed = [m.group(1) for m in re.finditer(r'^    (\S+)', out, re.MULTILINE)]
+    assert listed == commands
 
 
 def test_cli_does_not_import_rclpy():
     code = ('import sys, bellow_ancf_ros.cli; '
             'sys.exit(int(any(m == "rclpy" or m.startswith("rclpy.") for m in sys.modules)))')
-    proc = subprocess.run([sys.executable, '-c', code], cwd=REPO, env=subprocess_env(), timeout=120)
+    proc = subprocess.run([sys.executable, '-c', code], cwd=REPO, env=subprocess_env(),
+                          timeout=120)
     assert proc.returncode == 0
 
 

@@ -100,7 +100,8 @@ def test_stiffness_fit_recovers_the_paper_k_within_the_noise(cfg):
 def test_segment_and_actuator_modes_agree():
     dl = np.linspace(-0.004, 0.02, 25)
     fe = 605.84 * dl + 5991.0 * dl ** 2
-    a = ident.fit_stiffness(dl, 3 * (fe + 0.05), force_per='segment', n_actuators=3, gravity_share_n=0.05)
+    a = ident.fit_stiffness(dl, 3 * (fe + 0.05), force_per='segment', n_actuators=3,
+                            gravity_share_n=0.05)
     b = ident.fit_stiffness(dl, fe, force_per='actuator')
     assert np.allclose(a.k_coeffs, b.k_coeffs, rtol=1e-9)
 
@@ -155,7 +156,8 @@ def test_read_table_reports_the_bad_line(tmp_path):
 # ------------------------------------------------------------------ D_a
 def test_da_from_the_paper_drop_is_17_90_mm(cfg):
     res = ident.identify_da(cfg, 34.35e-3, ident.PAPER_END_MASS_KG)
-    print(f'D_a = {res.D_a_m * 1e3:.5f} mm, {res.iterations} iterations, {res.function_calls} solves')
+    print(f'D_a = {res.D_a_m * 1e3:.5f} mm, {res.iterations} iterations, '
+          f'{res.function_calls} solves')
     assert res.converged
     assert res.D_a_m * 1e3 == pytest.approx(17.90, abs=0.005)
     assert res.model_drop_m == pytest.approx(34.35e-3, abs=1e-8)

@@ -1,4 +1,4 @@
-"""The piecewise-constant-curvature baseline (bellow_ancf_ros/core/pcc.py) against the ANCF model."""
+"""The piecewise-constant-curvature baseline (core/pcc.py) against the ANCF model."""
 
 import math
 
@@ -54,14 +54,17 @@ def test_pure_elongation_without_gravity_agrees_with_ancf(name):
 
 
 def test_rotation_convention_matches_ancf_with_tool_and_theta0(two_cfg):
-    seg2 = two_cfg.segments[1].__class__(**{**two_cfg.segments[1].__dict__, 'theta0': math.radians(40.0)})
-    cfg = two_cfg.replace(gravity=NO_GRAVITY, tool_length=0.012, segments=(two_cfg.segments[0], seg2))
+    seg2 = two_cfg.segments[1].__class__(**{**two_cfg.segments[1].__dict__,
+                                            'theta0': math.radians(40.0)})
+    cfg = two_cfg.replace(gravity=NO_GRAVITY, tool_length=0.012,
+                          segments=(two_cfg.segments[0], seg2))
     P = np.full(6, 60e3)
     fw = solve_forward(RobotModel(cfg), P)
     pc = PccModel(cfg).forward(P)
     assert np.linalg.norm(fw.position - pc.position) < 1e-9
     assert np.allclose(fw.rotation, pc.rotation, atol=1e-9)
-    assert pc.rotation[:, 0] == pytest.approx([math.cos(math.radians(40)), math.sin(math.radians(40)), 0.0])
+    t0 = math.radians(40)
+    assert pc.rotation[:, 0] == pytest.approx([math.cos(t0), math.sin(t0), 0.0])
 
 
 def test_bending_goes_the_same_way_as_ancf_and_is_of_similar_size(one_cfg):

@@ -78,8 +78,11 @@ def test_spec_bvp_satisfies_boundary_conditions():
 
 
 def _hermite_fe_tip(ne, L, kt, kb, w, P, ngauss=6):
-    """Independent check: exact-quadrature cubic-Hermite (gradient-deficient
-    ANCF) discretisation of the spec energy, Newton with FD Hessian."""
+    """Independent check: exact-quadrature cubic-Hermite discretisation.
+
+    Cubic Hermite (gradient-deficient ANCF) elements on the spec energy,
+    Newton with FD Hessian.
+    """
     from scipy.optimize import minimize
 
     gx, gw = np.polynomial.legendre.leggauss(ngauss)

@@ -35,7 +35,7 @@ def k_from_x(coeffs_in_x):
 
 # ------------------------------------------------------------------ reference
 def test_paper_numbers_by_hand(default):
-    """lam at 150 kPa from the quadratic formula, written out by hand.
+    """Lambda at 150 kPa from the quadratic formula, written out by hand.
 
     (pi/4) P D^2 = (C1 lam + C0)(lam - 1) l0
       <=> C1 lam^2 + (C0 - C1) lam - (C0 + F/l0) = 0,   F = (pi/4) P D^2
@@ -224,7 +224,7 @@ def test_refuses_dip_in_the_admissible_range():
 
 
 def test_refuses_saturating_polynomial():
-    """k = 600 - 8000 (lam - 1)^2: P peaks at about 118.6 kPa."""
+    """Refuse k = 600 - 8000 (lam - 1)^2: P peaks at about 118.6 kPa."""
     coeffs = k_from_x([600.0, 0.0, -8000.0])
     with pytest.raises(ValueError, match='not monotonic'):
         Stage1(coeffs, L0, D_EFF, P_MIN, P_MAX)

@@ -1,4 +1,4 @@
-"""Model studies (bellow_ancf_ros/core/studies.py): convergence, workspace, PCC comparison, tracking."""
+"""Model studies (core/studies.py): convergence, workspace, PCC comparison, tracking."""
 
 import numpy as np
 import pytest
@@ -24,7 +24,8 @@ def test_the_papers_18_one_segment_schemes(one_cfg):
         assert all(v in (one_cfg.p_min, one_cfg.p_max) for v in s.fixed.values())
         P = s.pressures(one_cfg, 5)
         assert P.shape == (5, 3)
-        assert np.all(P[:, list(s.swept)][0] == one_cfg.p_min) and np.all(P[:, list(s.swept)][-1] == one_cfg.p_max)
+        swept = P[:, list(s.swept)]
+        assert np.all(swept[0] == one_cfg.p_min) and np.all(swept[-1] == one_cfg.p_max)
 
 
 def test_the_papers_four_two_segment_schemes(two_cfg):
@@ -37,7 +38,8 @@ def test_the_papers_four_two_segment_schemes(two_cfg):
 def test_convergence_recommends_a_multiple_of_three_for_the_default_plates(one_cfg):
     res = studies.convergence_study(one_cfg, counts=range(1, 7), reference_n=24, repeats=1)
     err = {r.n: r.error_m for r in res.rows}
-    print({n: None if e is None else round(e * 1e3, 6) for n, e in err.items()}, res.recommended, res.reason)
+    print({n: None if e is None else round(e * 1e3, 6) for n, e in err.items()},
+          res.recommended, res.reason)
     assert res.recommended is not None and res.recommended % 3 == 0
     assert res.recommended == 3
     assert err[1] is None and err[2] is None  # one or two elements cannot carry two plates
@@ -51,9 +53,10 @@ def test_convergence_recommends_a_multiple_of_three_for_the_default_plates(one_c
 
 
 def test_two_segment_convergence_recommends_six(two_cfg):
+    actuations = {'paper': np.r_[two_cfg.p_max, np.zeros(5)],
+                  'lo': np.r_[two_cfg.p_max, np.full(5, two_cfg.p_min)]}
     res = studies.convergence_study(two_cfg, counts=(3, 4, 6), reference_n=18, repeats=1,
-                                    actuations={'paper': np.r_[two_cfg.p_max, np.zeros(5)],
-                                                'lo': np.r_[two_cfg.p_max, np.full(5, two_cfg.p_min)]})
+                                    actuations=actuations)
     print([(r.n, r.error_m) for r in res.rows])
     assert res.recommended == 6
     assert res.rows[0].error_m > res.threshold_m  # n = 3 is not enough for two segments
@@ -92,7 +95,8 @@ def test_compare_pcc_agrees_without_forces_and_disagrees_under_payload(one_cfg):
 
 
 def test_tracking_one_segment_default_trajectory_is_reachable(one_cfg):
-    res = studies.tracking_study(RobotModel(one_cfg), 'planar_circle', n_points=12, payload_kg=0.05)
+    res = studies.tracking_study(RobotModel(one_cfg), 'planar_circle', n_points=12,
+                                 payload_kg=0.05)
     st = res.stats()
     print(st)
     assert st['reachable_fraction'] == 1.0 and st['success_fraction'] == 1.0

@@ -24,7 +24,7 @@ from bellow_ancf_ros.core.trajectories import (
 
 def test_names():
     assert set(ONE_SEGMENT_TRAJECTORIES) == {'space_spiral', 'space_rose', 'planar_circle',
-                                            'planar_spiral', 'planar_rose'}
+                                             'planar_spiral', 'planar_rose'}
     assert set(MULTI_SEGMENT_TRAJECTORIES) == set(ONE_SEGMENT_TRAJECTORIES) | {'bending_circle'}
     assert TRAJECTORY_NAMES == MULTI_SEGMENT_TRAJECTORIES
     assert PAPER_BENDING_ANGLES_DEG == (0.0, 10.0, 20.0)
@@ -64,15 +64,19 @@ def test_shape_formulas_exact(one):
     cfg = one.cfg
     R, T = 0.01, 10.0
     c = (0.001, -0.002, 0.1)
-    pos, _ = trajectory('planar_rose', [0.0, 1.25, 2.5], cfg, radius=R, period=T, center=c, petals=2)
-    # rho = R cos(2 phi): phi = 0 -> (R, 0); phi = pi/4 -> centre; phi = pi/2 -> rho = -R at angle pi/2
+    pos, _ = trajectory('planar_rose', [0.0, 1.25, 2.5], cfg, radius=R, period=T, center=c,
+                        petals=2)
+    # rho = R cos(2 phi): phi = 0 -> (R, 0); phi = pi/4 -> centre;
+    # phi = pi/2 -> rho = -R at angle pi/2
     np.testing.assert_allclose(pos[0], [c[0] + R, c[1], c[2]], atol=1e-15)
     np.testing.assert_allclose(pos[1], c, atol=1e-15)
     np.testing.assert_allclose(pos[2], [c[0], c[1] - R, c[2]], atol=1e-15)
     pos, _ = trajectory('planar_spiral', [0.0, 5.0], cfg, radius=R, period=T, center=c, turns=3)
     np.testing.assert_allclose(pos[0], c, atol=1e-15)                       # starts at the centre
-    np.testing.assert_allclose(pos[1], [c[0] - R, c[1], c[2]], atol=1e-15)  # rim at half period, 1.5 turns
-    pos, _ = trajectory('space_spiral', [0.0], cfg, radius=R, period=T, center=c, height_amplitude=0.003)
+    # rim at half period, 1.5 turns
+    np.testing.assert_allclose(pos[1], [c[0] - R, c[1], c[2]], atol=1e-15)
+    pos, _ = trajectory('space_spiral', [0.0], cfg, radius=R, period=T, center=c,
+                        height_amplitude=0.003)
     np.testing.assert_allclose(pos[0], [c[0], c[1], c[2] + 0.003], atol=1e-15)
     pos, _ = trajectory('planar_circle', 2.5, cfg, radius=R, period=T, height=0.095)
     np.testing.assert_allclose(pos[0], [0.0, R, 0.095], atol=1e-15)
@@ -166,7 +170,8 @@ def _track(model, pos, z):
         assert np.all(inv.pressures_pa >= cfg.p_min) and np.all(inv.pressures_pa <= cfg.p_max)
         worst_p = max(worst_p, inv.position_error_m)
         worst_a = max(worst_a, inv.angle_error_rad or 0.0)
-        margin = min(margin, inv.pressures_pa.min() - cfg.p_min, cfg.p_max - inv.pressures_pa.max())
+        margin = min(margin, inv.pressures_pa.min() - cfg.p_min,
+                     cfg.p_max - inv.pressures_pa.max())
         warm = inv
     return worst_p, worst_a, margin, bad
 
@@ -184,7 +189,10 @@ PRESSURE_MARGIN = 15e3
 @pytest.mark.parametrize('name', ONE_SEGMENT_TRAJECTORIES)
 @pytest.mark.parametrize('scale', [1.0, 1.15])
 def test_one_segment_defaults_reachable_with_margin(name, scale, one):
-    """Every default trajectory, and a copy 15 % larger (radius and height amplitude), is reachable."""
+    """Every default trajectory, and a copy 15 % larger, is reachable.
+
+    Larger means radius and height amplitude scaled by 1.15.
+    """
     model = one
     cfg = model.cfg
     p = default_parameters(name, cfg)

@@ -55,7 +55,7 @@ class Cantilever:
         gvec = np.array([0.0, 0.0, -g])
         Q = np.zeros(self.nq)
         np.add.at(Q, self.elem_dofs.ravel(), (rho * w[:, :, None] * gvec).ravel())
-        Q[self.nq - 6 : self.nq - 3] += tip_mass * gvec
+        Q[self.nq - 6:self.nq - 3] += tip_mass * gvec
         self.Q = Q
         # constraints: r(0) = 0 (3), r_x(0).e_y = 0, r_x(0).e_z = 0
         Cq = np.zeros((5, self.nq))
@@ -69,7 +69,7 @@ class Cantilever:
         node[:, :3] = 1.0 / F
         node[:, 3:] = 1.0 / (F * length)
         s[: self.nq] = node.ravel()
-        s[self.nq : self.nq + 3] = 1.0 / length
+        s[self.nq:self.nq + 3] = 1.0 / length
         self.scale = s
         self.scale_load = 1.0
 
@@ -81,11 +81,12 @@ class Cantilever:
         return x
 
     def evaluate(self, x, jacobian=True, load_scale=1.0):
-        q, alpha = x[: self.nq], x[self.nq :]
+        q, alpha = x[:self.nq], x[self.nq:]
         n = self.n
         qe = q[self.elem_dofs].reshape(n, 4, 3)
         le = np.full(n, self.le)
-        ef = ancf.element_forces(qe, le, np.full(n, self.kt), np.full(n, self.kb), stiffness=jacobian)
+        ef = ancf.element_forces(qe, le, np.full(n, self.kt), np.full(n, self.kb),
+                                 stiffness=jacobian)
         fe = self.kt * ef["ft"] + self.kb * ef["fb"]
         R = np.bincount(self.elem_dofs.ravel(), weights=fe.ravel(), minlength=self.nq)
         R += self.Cq.T @ alpha - load_scale * self.Q
@@ -98,8 +99,8 @@ class Cantilever:
                 K[np.ix_(idx[e], idx[e])] += ef["K"][e]
             J = np.zeros((self.N, self.N))
             J[: self.nq, : self.nq] = K
-            J[: self.nq, self.nq :] = self.Cq.T
-            J[self.nq :, : self.nq] = self.Cq
+            J[:self.nq, self.nq:] = self.Cq.T
+            J[self.nq:, :self.nq] = self.Cq
             ev.jacobian = sp.csc_matrix(J)
         return ev
 
@@ -109,5 +110,5 @@ class Cantilever:
             lambda t: (lambda x, jacobian=True: self.evaluate(x, jacobian, load_scale=t)),
             self.straight(), self.scale, tol=tol, max_iter=max_iter,
         )
-        tip = res.x[self.nq - 6 : self.nq - 3].copy()
+        tip = res.x[self.nq - 6:self.nq - 3].copy()
         return CantileverResult(res.x, tip, res.converged, res.iterations, res.message)

@@ -285,7 +285,7 @@ class _Checker:
 
     def number(self, m: Mapping, path: str, key: str, *, positive: bool = False,
                nonneg: bool = False) -> float | None:
-        """A finite real number (int accepted, bool refused)."""
+        """Return ``m[key]`` as a finite real number; int accepted, bool refused."""
         v = m.get(key, _MISSING)
         if v is _MISSING:
             return None                       # reported by mapping()
@@ -309,7 +309,7 @@ class _Checker:
         return x
 
     def integer(self, m: Mapping, path: str, key: str, minimum: int, why: str = '') -> int | None:
-        """An integer (no bool, no float) >= ``minimum``."""
+        """Return ``m[key]`` as an integer >= ``minimum``; no bool, no float."""
         v = m.get(key, _MISSING)
         if v is _MISSING:
             return None
@@ -614,8 +614,9 @@ def shipped_robot_names() -> list[str]:
     for d in config_dirs():
         if d.is_dir():
             # ROS parameter files (config/nodes.yaml) share the folder; they are not robots
-            names.update(p.stem for p in d.glob('*.yaml')
-                         if 'ros__parameters' not in p.read_text(encoding='utf-8', errors='replace'))
+            names.update(
+                p.stem for p in d.glob('*.yaml')
+                if 'ros__parameters' not in p.read_text(encoding='utf-8', errors='replace'))
     return sorted(names)
 
 

@@ -143,9 +143,11 @@ def read_table(path: str) -> dict[str, np.ndarray]:
                     [float(c) for c in cells]
                 except ValueError:
                     continue
-                raise ValueError(f'line {line_no}: expected a header row of column names, got numbers')
+                raise ValueError(f'line {line_no}: expected a header row of column names, '
+                                 'got numbers')
             if len(cells) != len(header):
-                raise ValueError(f'line {line_no}: expected {len(header)} fields, got {len(cells)}')
+                raise ValueError(f'line {line_no}: expected {len(header)} fields, '
+                                 f'got {len(cells)}')
             try:
                 values = [float(c) for c in cells]
             except ValueError:
@@ -196,11 +198,15 @@ def force_poly_from_stiffness(k_coeffs: Sequence[float], l0: float) -> np.ndarra
 
 
 def l0_from_paper_fits(k_slope: float = PAPER_K_COEFFS[1], a2: float = PAPER_F_COEFFS[1]) -> float:
-    """``l0`` implied by a quadratic force fit and the slope of ``k``: ``k1/a2`` (576.94/5990.4)."""
+    """``l0`` implied by a quadratic force fit and the slope of ``k``.
+
+    That is ``k1/a2`` (576.94/5990.4).
+    """
     return float(k_slope) / float(a2)
 
 
-def default_gravity_share(cfg: RobotConfig | None, force_per: str = 'segment', g: float = GRAVITY) -> float:
+def default_gravity_share(cfg: RobotConfig | None, force_per: str = 'segment',
+                          g: float = GRAVITY) -> float:
     """Gravity share ``F_g`` per actuator [N] subtracted from a tensile test (paper V.A).
 
     ``segment``: the weight of the first segment's top plate shared by its
@@ -375,7 +381,8 @@ class DeffFit:
 def actuation_force_from_length(length_m, k_coeffs, l0, gravity_share_n=0.0):
     """Actuation force from a measured actuator length: ``k(lam)(lam-1) l0 - F_g`` (paper V.B)."""
     lam = np.asarray(length_m, dtype=float) / l0
-    return npoly.polyval(lam, np.asarray(k_coeffs, dtype=float)) * (lam - 1.0) * l0 - gravity_share_n
+    k = npoly.polyval(lam, np.asarray(k_coeffs, dtype=float))
+    return k * (lam - 1.0) * l0 - gravity_share_n
 
 
 def fit_deff(pressure_pa, force_n, confidence: float = 0.95) -> DeffFit:
@@ -393,8 +400,8 @@ def fit_deff(pressure_pa, force_n, confidence: float = 0.95) -> DeffFit:
     lr = stats.linregress(p, f)
     slope, se = float(lr.slope), float(lr.stderr)
     if not slope > 0:
-        raise ValueError(f'the force does not increase with the pressure (slope {slope:.3g} N/Pa): '
-                         'check the columns and their signs')
+        raise ValueError('the force does not increase with the pressure '
+                         f'(slope {slope:.3g} N/Pa): check the columns and their signs')
     tq = float(stats.t.ppf(0.5 + confidence / 2.0, p.size - 2))
     lo, hi = slope - tq * se, slope + tq * se
 
@@ -427,7 +434,8 @@ def cantilever_tip_drop(cfg: RobotConfig, d_a: float, tip_mass_kg: float, n: int
     kb = d_a ** 2 * cfg.l0 * k1 / 8.0
     res = Cantilever(cfg.l0, k1 * cfg.l0, kb, cfg.rho0, tip_mass_kg, n=n, g=g).solve()
     if not res.converged:
-        raise RuntimeError(f'cantilever equilibrium not found for D_a = {d_a * 1e3:.4g} mm: {res.message}')
+        raise RuntimeError(f'cantilever equilibrium not found for D_a = {d_a * 1e3:.4g} mm: '
+                           f'{res.message}')
     return res.tip_drop
 
 
@@ -478,8 +486,8 @@ def identify_da(cfg: RobotConfig, drop_m: float, tip_mass_kg: float, n: int = 20
     if not (math.isfinite(tip_mass_kg) and tip_mass_kg >= 0):
         raise ValueError(f'the tip mass must be a non-negative mass, got {tip_mass_kg!r} kg')
     if drop_m >= 0.9 * cfg.l0:
-        raise ValueError(f'a drop of {drop_m * 1e3:.4g} mm is not below 90 % of the actuator length '
-                         f'({cfg.l0 * 1e3:.4g} mm): no beam model can identify D_a from it')
+        raise ValueError(f'a drop of {drop_m * 1e3:.4g} mm is not below 90 % of the actuator '
+                         f'length ({cfg.l0 * 1e3:.4g} mm): no beam model can identify D_a from it')
     calls = [0]
 
     def f(d):
@@ -508,7 +516,8 @@ def identify_da(cfg: RobotConfig, drop_m: float, tip_mass_kg: float, n: int = 20
         if flo == 0.0 or fhi == 0.0:
             break
     else:
-        raise ValueError(f'no D_a gives a drop of {drop_m * 1e3:.4g} mm with a {tip_mass_kg:g} kg end mass')
+        raise ValueError(f'no D_a gives a drop of {drop_m * 1e3:.4g} mm with a '
+                         f'{tip_mass_kg:g} kg end mass')
     if flo == 0.0:
         root, it, conv = lo, 0, True
     elif fhi == 0.0:
@@ -529,9 +538,10 @@ def identify_da(cfg: RobotConfig, drop_m: float, tip_mass_kg: float, n: int = 20
 
 def tip_mass_for_da(cfg: RobotConfig, d_a: float = PAPER_D_A, drop_m: float = PAPER_DROP,
                     n: int = 20, g: float = GRAVITY, xtol: float = 1e-9) -> float:
-    """End mass [kg] for which ``D_a`` gives the tip drop ``drop_m`` (the paper's unstated end mass).
+    """End mass [kg] for which ``D_a`` gives the tip drop ``drop_m``.
 
-    The drop increases strictly with the end mass; bracketing root finder.
+    This is the paper's unstated end mass.  The drop increases strictly with
+    the end mass; bracketing root finder.
     """
     def f(m):
         return cantilever_tip_drop(cfg, d_a, m, n=n, g=g) - drop_m

@@ -257,7 +257,7 @@ class Stage1:
 
     # ------------------------------------------------------------- evaluation
     def k(self, lam: Any) -> Any:
-        """Structural stiffness ``k(lam)`` [N/m] (paper eq. 1)."""
+        """Return the structural stiffness at stretch ``lam`` [N/m] (paper eq. 1)."""
         a = np.asarray(lam, dtype=float)
         return _as_output(npoly.polyval(a, self._k), a.ndim == 0)
 

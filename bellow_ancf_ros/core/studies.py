@@ -1,8 +1,8 @@
 """Model studies: element convergence, workspace, PCC comparison, offline tracking.
 
-numpy/scipy only (no ROS, no plotting: the CLI in ``bellow_ancf_ros.cli_tools``
-draws).  Every study takes an optional ``progress(done, total, text)``
-callback for long runs.
+numpy/scipy only (no ROS, no plotting: the CLI in ``bellow_ancf_ros.cli.studies``
+and ``bellow_ancf_ros.cli.track`` draws).  Every study takes an optional
+``progress(done, total, text)`` callback for long runs.
 
 * :func:`convergence_study` (paper V.D, Fig. 4(d)): end-effector error of
   ``n = 1..12`` elements per actuator against a converged reference
@@ -120,7 +120,8 @@ class ConvergenceResult:
             'threshold_m': self.threshold_m,
             'payload_kg': self.payload_kg,
             'actuations_pa': {k: v.tolist() for k, v in self.actuations_pa.items()},
-            'reference_positions_m': {k: v.tolist() for k, v in self.reference_positions_m.items()},
+            'reference_positions_m': {k: v.tolist()
+                                      for k, v in self.reference_positions_m.items()},
             'reference_time_s': self.reference_time_s,
             'rows': [dict(n=r.n, nodes_on_plates=r.nodes_on_plates, error_m=r.error_m,
                           errors_m=r.errors_m, time_s=r.time_s, converged=r.converged,
@@ -172,7 +173,8 @@ def convergence_study(cfg: RobotConfig, counts: Sequence[int] = tuple(range(1, 1
     for key, p in acts.items():
         fw, times = _timed_forward(ref_model, p, payload_kg, 1)
         if not fw.converged:
-            raise RuntimeError(f'the reference solve (n = {reference_n}, {key}) did not converge: {fw.message}')
+            raise RuntimeError(f'the reference solve (n = {reference_n}, {key}) did not '
+                               f'converge: {fw.message}')
         ref_pos[key] = fw.position.copy()
         ref_times += times
     rows = []
@@ -194,7 +196,8 @@ def convergence_study(cfg: RobotConfig, counts: Sequence[int] = tuple(range(1, 1
                 errs[key] = None
                 ok = False
         err = max(errs.values()) if ok else None
-        rows.append(ConvergenceRow(n, nodes_on_plates(cfg, n), err, errs, float(np.median(times)), ok))
+        rows.append(ConvergenceRow(n, nodes_on_plates(cfg, n), err, errs,
+                                   float(np.median(times)), ok))
     progress(total, total, 'done')
     rec, reason = None, ''
     for r in rows:
@@ -218,7 +221,10 @@ def convergence_study(cfg: RobotConfig, counts: Sequence[int] = tuple(range(1, 1
 # ============================================================== workspace
 @dataclass
 class Scheme:
-    """An actuation scheme: ``swept`` actuators go ``p_min -> p_max`` together, the others fixed."""
+    """An actuation scheme.
+
+    The ``swept`` actuators go ``p_min -> p_max`` together, the others stay fixed.
+    """
 
     name: str
     swept: tuple
@@ -314,9 +320,9 @@ def workspace_study(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05,
             progress(done, total, f'payload {m:g} kg, scheme {k + 1}/{len(schemes)}: {sc.name}')
             for step, fw in enumerate(sweep_scheme(model, sc, n_points, m)):
                 rows.append(dict(payload_kg=float(m), scheme=k, scheme_name=sc.name, step=step,
-                                 pressures_pa=fw.pressures_pa.copy(), position_m=fw.position.copy(),
-                                 z_axis=fw.z_axis.copy(), converged=bool(fw.converged),
-                                 stable=fw.stable))
+                                 pressures_pa=fw.pressures_pa.copy(),
+                                 position_m=fw.position.copy(), z_axis=fw.z_axis.copy(),
+                                 converged=bool(fw.converged), stable=fw.stable))
             done += 1
     progress(total, total, 'done')
     return dict(config=cfg.name, payloads_kg=[float(m) for m in payloads_kg],
@@ -365,7 +371,8 @@ def compare_pcc(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05, 0.1
     summary = []
     for m in payloads_kg:
         for cat in ('elongation', 'bending'):
-            sel = [r for r in rows if r['payload_kg'] == float(m) and r['category'] == cat and r['converged']]
+            sel = [r for r in rows
+                   if r['payload_kg'] == float(m) and r['category'] == cat and r['converged']]
             if not sel:
                 continue
             d = np.array([r['diff_m'] for r in sel])
@@ -373,8 +380,9 @@ def compare_pcc(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05, 0.1
                                 rms_m=float(np.sqrt(np.mean(d ** 2))), max_m=float(np.max(d)),
                                 mean_dz_m=float(np.mean([r['dz_m'] for r in sel])),
                                 max_angle_rad=float(np.max([r['angle_rad'] for r in sel]))))
-    return dict(config=cfg.name, gravity=bool(gravity), payloads_kg=[float(m) for m in payloads_kg],
-                n_points=int(n_points), n_elements=model.n, rows=rows, summary=summary)
+    return dict(config=cfg.name, gravity=bool(gravity),
+                payloads_kg=[float(m) for m in payloads_kg], n_points=int(n_points),
+                n_elements=model.n, rows=rows, summary=summary)
 
 
 # =============================================================== tracking
@@ -422,8 +430,8 @@ class TrackResult:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        d = {'config': self.config_name, 'trajectory': self.trajectory, 'payload_kg': self.payload_kg,
-             'controller': self.controller, 'params': self.params}
+        d = {'config': self.config_name, 'trajectory': self.trajectory,
+             'payload_kg': self.payload_kg, 'controller': self.controller, 'params': self.params}
         d.update(self.stats())
         return d
 

@@ -105,7 +105,8 @@ def _config(config: Any) -> RobotConfig:
         return config
     if isinstance(config, (str, os.PathLike)):
         return _load_cached(os.fspath(config))
-    raise TypeError(f'config must be a RobotConfig, a robot name or a path, got {type(config).__name__}')
+    raise TypeError('config must be a RobotConfig, a robot name or a path, '
+                    f'got {type(config).__name__}')
 
 
 def workspace_estimate(config: Any = 'one_segment') -> dict:
@@ -252,9 +253,12 @@ def _merge(name: str, cfg: RobotConfig, params: dict) -> dict:
 
 
 def trajectory_parameters(name: str, config: Any = 'one_segment', **params: Any) -> dict:
-    """The parameters :func:`trajectory` uses for ``name`` with ``params``: the defaults
-    (for the given bending angle) with the overrides applied and ``height`` folded into
-    ``center``.  Raises ``ValueError`` like :func:`trajectory`."""
+    """Return the parameters :func:`trajectory` uses for ``name`` with ``params``.
+
+    These are the defaults (for the given bending angle) with the overrides
+    applied and ``height`` folded into ``center``.  Raises ``ValueError`` like
+    :func:`trajectory`.
+    """
     cfg = _config(config)
     _check_name(name, cfg)
     return _merge(name, cfg, params)

@@ -17,42 +17,24 @@ No ROS import.
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import math
-import sys
 
 import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from . import cli
-from .cli import EXIT_OK, SolverError, UsageError, json_safe
-from .core import ConfigError, load_robot
-from .core import parameter_keys as pk
-from .core.calibration import CalibrationError, CalibrationResult, calibrate
-from .core.recordings import POSE_TOPIC, PRESSURE_TOPIC, RecordingError, read_bag, read_csv
-from .core.solver import limit_blas_threads
+from ..core import ConfigError, load_robot
+from ..core import parameter_keys as pk
+from ..core.calibration import CalibrationError, CalibrationResult, calibrate
+from ..core.recordings import POSE_TOPIC, PRESSURE_TOPIC, RecordingError, read_bag, read_csv
+from ..core.solver import limit_blas_threads
+from .common import EXIT_OK, SolverError, UsageError, emit_json, nonneg_float, warn
 
 __all__ = ['register', 'robot_yaml_text', 'plot_residuals']
 
 
-def _bind(parser) -> None:
-    """Raise the error classes of the ``cli`` module actually running (also as ``__main__``)."""
-    global UsageError, SolverError
-    mod = sys.modules.get(type(parser).__module__)
-    if mod is not None and hasattr(mod, 'UsageError') and hasattr(mod, 'SolverError'):
-        UsageError, SolverError = mod.UsageError, mod.SolverError
-
-
-def _settle(text: str) -> float:
-    value = cli._finite_float(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f'must not be negative, got {text!r}')
-    return value
-
-
-# ------------------------------------------------------------------- output
+# ------------------------------------------------------------ output
 def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source: str) -> str:
     """A complete robot file of the calibrated robot, provenance in comments."""
     d = result.config.to_dict()
@@ -133,7 +115,7 @@ def _table(result: CalibrationResult) -> list[str]:
     return lines
 
 
-# ----------------------------------------------------------------- command
+# ----------------------------------------------------------- command
 def _cmd_calibrate(args) -> int:
     limit_blas_threads()
     try:
@@ -151,7 +133,7 @@ def _cmd_calibrate(args) -> int:
     except (pk.ParameterKeyError, RecordingError) as exc:
         raise UsageError(str(exc)) from None
     for note in rec.notes:
-        cli._warn(f'{rec.source}: {note}')
+        warn(f'{rec.source}: {note}')
     try:
         result = calibrate(cfg, rec, keys)
     except (CalibrationError, ConfigError) as exc:
@@ -161,7 +143,7 @@ def _cmd_calibrate(args) -> int:
     except (RuntimeError, ArithmeticError, np.linalg.LinAlgError) as exc:
         raise SolverError(f'calibration failed: {type(exc).__name__}: {exc}') from exc
     for w in result.warnings:
-        cli._warn(w)
+        warn(w)
     source = args.csv if args.csv is not None else args.bag
     if args.out:
         try:
@@ -179,7 +161,7 @@ def _cmd_calibrate(args) -> int:
     if args.json:
         d = result.to_dict()
         d.update(config=str(cfg.source), data=source, out=args.out, plot=args.plot)
-        print(__import__('json').dumps(json_safe(d), allow_nan=False), flush=True)
+        emit_json(d)
     else:
         lines = _table(result)
         if args.out:
@@ -204,7 +186,6 @@ def register(subparsers) -> None:
                     '(std_msgs/Float64MultiArray) and measured_pose (geometry_msgs/PoseStamped).',
         epilog='Example: bellow-ancf calibrate --config one_segment --bag rec/ --out robot.yaml '
                '--plot residuals.png')
-    _bind(p)
     p.add_argument('--config', required=True, metavar='CFG',
                    help='nominal robot: file path or shipped name (one_segment, two_segment)')
     src = p.add_mutually_exclusive_group(required=True)
@@ -214,7 +195,7 @@ def register(subparsers) -> None:
                    help="robot-file keys to fit instead of the default, e.g. actuator.d_a_mm "
                         "'segments[0].pitch_radius_mm' 'segments[*].top_plate_mass_kg' "
                         'stiffness_scale')
-    p.add_argument('--settle-s', type=_settle, default=0.5, metavar='S',
+    p.add_argument('--settle-s', type=nonneg_float, default=0.5, metavar='S',
                    help='bag: drop poses within this time after a command change; '
                         'default: %(default)s')
     p.add_argument('--pressure-topic', default=PRESSURE_TOPIC, metavar='T',
