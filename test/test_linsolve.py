@@ -62,7 +62,9 @@ def test_singular_matrix_raises():
 
 
 def test_factorisation_runs_with_one_blas_thread(monkeypatch):
-    from threadpoolctl import threadpool_info, threadpool_limits
+    threadpoolctl = pytest.importorskip('threadpoolctl')
+    threadpool_info = threadpoolctl.threadpool_info
+    threadpool_limits = threadpoolctl.threadpool_limits
 
     seen = []
     real = linsolve.lapack.dgbtrf

@@ -9,7 +9,14 @@ checked against a list verified by hand (December 2026):
   launch_ros);
 * system keys: entries of ``rosdep/python.yaml`` in ros/rosdistro with an
   ``ubuntu`` rule (python3-numpy, python3-scipy, python3-yaml,
-  python3-matplotlib, python3-pytest, python3-hypothesis).
+  python3-matplotlib, python3-pytest, python3-hypothesis; python3-numba,
+  added by ros/rosdistro PR #32274, ubuntu rule for every release since PR
+  #36477);
+* pip keys of ``rosdep/python.yaml``: python3-rosbags-pip (ros/rosdistro PR
+  #37795, PyPI ``rosbags``).
+
+``threadpoolctl`` is optional (the core limits BLAS threads with it when it is
+installed) and is not a rosdep dependency.
 
 A new dependency must be added here with how it was verified.
 """
@@ -23,16 +30,20 @@ REPO = Path(__file__).resolve().parents[1]
 
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'ament_index_python', 'geometry_msgs', 'std_msgs',
                 'visualization_msgs', 'diagnostic_msgs', 'lifecycle_msgs', 'launch',
-                'launch_ros', 'ament_flake8', 'ament_pep257'}
+                'launch_ros', 'ament_flake8', 'ament_pep257', 'builtin_interfaces'}
 SYSTEM_KEYS = {'python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-matplotlib',
-               'python3-pytest', 'python3-hypothesis'}
+               'python3-pytest', 'python3-hypothesis', 'python3-numba', 'python3-rosbags-pip'}
 VERIFIED_KEYS = ROS_PACKAGES | SYSTEM_KEYS
 
 #: top-level Python module -> rosdep key
 MODULE_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'pytest': 'python3-pytest',
-               'hypothesis': 'python3-hypothesis'}
+               'hypothesis': 'python3-hypothesis', 'numba': 'python3-numba',
+               'rosbags': 'python3-rosbags-pip'}
 STDLIB_OR_OWN = {'bellow_ancf_ros'}
+#: the test suite's own helper modules (test/, test/data/, bench/)
+LOCAL_TEST_HELPERS = {'conftest', 'reference_beams', 'calibration_data', 'make_solver_baseline',
+                      'update_readme'}
 
 
 def dependencies():
@@ -90,7 +101,7 @@ def test_test_imports_are_test_dependencies():
     tests = list((REPO / 'test').glob('*.py'))
     missing = []
     for m in required_imports(tests):
-        if m in ('conftest', 'reference_beams') or m.startswith('test_'):
+        if m in LOCAL_TEST_HELPERS or m.startswith('test_'):
             continue
         tags = deps.get(key_of(m), set())
         if not tags & {'test_depend', 'exec_depend', 'depend'}:

@@ -36,18 +36,26 @@ from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse  # noqa: 
 from bellow_ancf_ros.nodes import common  # noqa: E402
 from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
+from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher  # noqa: E402
+from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / 'README.md'
 NODES = {'inverse_kinetostatic_node': InverseKinetostaticNode,
          'forward_kinetostatic_node': ForwardKinetostaticNode,
-         'trajectory_publisher': TrajectoryPublisher}
+         'trajectory_publisher': TrajectoryPublisher,
+         'excitation_publisher': ExcitationPublisher,
+         'simulated_robot_node': SimulatedRobotNode}
 #: studies that take 25-45 s on the 2-core machine; only their options are checked here
 SLOW = ('workspace', 'compare-pcc')
+#: commands that read the user's own recording; test/test_cli_calibrate.py runs them on
+#: simulated recordings (CSV and both bag storages); only their options are checked here
+NEEDS_RECORDING = ('calibrate',)
 STARTED = {'inverse_kinetostatic_node': 'active: pressure commands enabled',
            'forward_kinetostatic_node': 'listening on',
-           'trajectory_publisher': 'publishing'}
+           'trajectory_publisher': 'publishing',
+           'simulated_robot_node': 'simulating robot'}
 
 
 def code_lines():
@@ -82,7 +90,7 @@ def test_readme_has_the_examples_this_file_checks():
     assert len(cli_lines()) >= 10
     venv_nodes = [line for line in lines
                   if line.startswith('.venv/bin/python -m bellow_ancf_ros.nodes.')]
-    assert len(venv_nodes) == 3
+    assert len(venv_nodes) >= 3
     assert sum(line.startswith('ros2 run bellow_ancf_ros ') for line in lines) >= 4
     assert any(line.startswith('ros2 topic pub') for line in lines)
     assert any(line.startswith('ros2 param set') for line in lines)
@@ -108,7 +116,7 @@ def test_concrete_cli_examples_run(tmp_path):
     procs = []
     for line in cli_lines():
         args = shlex.split(strip_optional(line))[1:]
-        if not is_concrete(args) or args[0] in SLOW:
+        if not is_concrete(args) or args[0] in SLOW + NEEDS_RECORDING:
             continue
         # relative data paths are the repository's; outputs go to a scratch directory
         args = [str(REPO / a) if a.startswith('data/') else a for a in args]
@@ -148,32 +156,33 @@ def test_venv_node_commands_start_and_stop(tmp_path):
             continue
         args = shlex.split(line)
         module = args[2].rsplit('.', 1)[1]
-        log = tmp_path / f'{module}.log'
+        robot = _given_parameters(args, module).get('robot_config', 'one_segment')
+        log = tmp_path / f'{len(procs)}_{module}.log'
         with open(log, 'w') as out:
-            procs.append((module, log, subprocess.Popen(
+            procs.append((module, robot, log, subprocess.Popen(
                 [sys.executable, *args[1:]], cwd=REPO, env=env, stdout=out,
                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
                 preexec_fn=_default_sigint)))
     try:
         deadline = time.monotonic() + 60.0
-        for module, log, proc in procs:
+        for module, robot, log, proc in procs:
             while STARTED[module] not in log.read_text():
                 assert proc.poll() is None, log.read_text()
                 assert time.monotonic() < deadline, log.read_text()
                 time.sleep(0.05)
-            assert "'two_segment'" in log.read_text()
+            assert f"'{robot}'" in log.read_text(), (robot, log.read_text())
     finally:
-        for _, _, proc in procs:
+        for *_, proc in procs:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGINT)
         codes = []
-        for _, log, proc in procs:
+        for _, _, log, proc in procs:
             try:
                 codes.append(proc.wait(20.0))
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 codes.append(proc.wait(5.0))
-    assert codes == [0] * len(procs), [log.read_text() for _, log, _ in procs]
+    assert codes == [0] * len(procs), [log.read_text() for _, _, log, _ in procs]
 
 
 def _ros2_run_lines():

@@ -182,7 +182,7 @@ BAD_STARTUP = [
     ('inverse_kinetostatic_node', 'pressure_unit:=bar', 'pressure_unit', "'bar'", "'kPa'"),
     ('inverse_kinetostatic_node', 'payload_kg:=1', 'payload_kg', '1', 'floating-point'),
     ('forward_kinetostatic_node', 'robot_config:=nonexistent', 'robot_config', "'nonexistent'",
-     'one_segment, two_segment'),
+     'shipped robots: one_segment, one_segment_mismatched, two_segment'),
     ('forward_kinetostatic_node', 'backbone_points:=1', 'backbone_points', '1', 'from 2 to 200'),
     ('trajectory_publisher', 'trajectory:=figure_eight', 'trajectory', "'figure_eight'",
      'planar_circle'),
