@@ -29,7 +29,7 @@ def splice(readme: str, table: str) -> str:
 def block(readme: str) -> str:
     """The table currently between the markers."""
     a = readme.index(START) + len(START)
-    return readme[a : readme.index(END, a)].strip() + "\n"
+    return readme[a:readme.index(END, a)].strip() + "\n"
 
 
 def main():

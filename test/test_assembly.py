@@ -22,7 +22,8 @@ def _perturbed_state(model, seed):
     lam = rng.uniform(model.stage1.lam_min, model.stage1.lam_max, model.A)
     x = model.straight_state(lam)
     x[: model.nq] += 1e-3 * rng.standard_normal(model.nq)
-    x[model.nq:] = rng.standard_normal(model.nc)  # non-zero multipliers exercise the constraint Hessian
+    # non-zero multipliers exercise the constraint Hessian
+    x[model.nq:] = rng.standard_normal(model.nc)
     return x, lam
 
 
@@ -40,7 +41,8 @@ def test_kkt_jacobian_eq27_matches_finite_differences(name, n, tool):
                      - model.evaluate(x - e, lam, 1.0, 0.07, jacobian=False).residual) / (2 * h)
     err = np.abs(J - Jfd).max() / np.abs(J).max()
     assert err < 1e-7, err
-    np.testing.assert_allclose(J, J.T, atol=1e-12 * np.abs(J).max())  # symmetric saddle-point matrix
+    # symmetric saddle-point matrix
+    np.testing.assert_allclose(J, J.T, atol=1e-12 * np.abs(J).max())
 
 
 @pytest.mark.parametrize("name,n,tool", CASES)
@@ -70,8 +72,10 @@ def test_force_residual_is_potential_gradient_plus_constraint_forces(name, n, to
     for i in range(model.nq):
         e = np.zeros(model.nq)
         e[i] = h
-        grad[i] = (model.potential(q + e, lam, 1.0, 0.07) - model.potential(q - e, lam, 1.0, 0.07)) / (2 * h)
-    np.testing.assert_allclose(res[: model.nq], grad + Cq.T @ alpha, atol=1e-6 * np.abs(grad).max())
+        grad[i] = (model.potential(q + e, lam, 1.0, 0.07)
+                   - model.potential(q - e, lam, 1.0, 0.07)) / (2 * h)
+    np.testing.assert_allclose(res[:model.nq], grad + Cq.T @ alpha,
+                               atol=1e-6 * np.abs(grad).max())
 
 
 @pytest.mark.parametrize("name", ["one_segment", "two_segment"])
@@ -83,7 +87,8 @@ def test_straight_state_satisfies_constraints_and_counts(name):
     assert np.abs(r).max() < 1e-12  # unloaded straight robot at lam = 1 is an exact equilibrium
     n_plates = sum(len(s.plate_fractions) + 1 for s in cfg.segments)  # moving plates
     assert model.P == n_plates
-    assert model.nc == 5 * sum(s.n_actuators * (len(s.plate_fractions) + 2) for s in cfg.segments) + 6 * n_plates
+    attachments = sum(s.n_actuators * (len(s.plate_fractions) + 2) for s in cfg.segments)
+    assert model.nc == 5 * attachments + 6 * n_plates
 
 
 @pytest.mark.parametrize("name", ["one_segment", "two_segment"])

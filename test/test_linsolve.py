@@ -12,7 +12,7 @@ def _state(model, seed):
     lam = rng.uniform(model.stage1.lam_min, model.stage1.lam_max, model.A)
     x = model.straight_state(lam)
     x[: model.nq] += 1e-3 * rng.standard_normal(model.nq)
-    x[model.nq :] = rng.standard_normal(model.nc)
+    x[model.nq:] = rng.standard_normal(model.nc)
     return x, lam
 
 

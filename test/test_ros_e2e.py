@@ -422,8 +422,8 @@ def test_ros_wiring_check_short_run_two_segments(tmp_path):
     domain = random.choice([d for d in range(102) if d != busy])
     env = dict(os.environ)
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
-    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.ros_wiring_check', '--duration', '3',
-                          '--period', '3', '--rate', '10', '--plot', str(plot),
+    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.ros_wiring_check',
+                          '--duration', '3', '--period', '3', '--rate', '10', '--plot', str(plot),
                           '--domain-id', str(domain)],
                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120,
                          stdin=subprocess.DEVNULL)

@@ -51,7 +51,8 @@ def hermite(xi, derivative=0):
     """
     xi = np.asarray(xi, dtype=float)
     if derivative == 0:
-        h = [1 - 3 * xi**2 + 2 * xi**3, xi - 2 * xi**2 + xi**3, 3 * xi**2 - 2 * xi**3, -(xi**2) + xi**3]
+        h = [1 - 3 * xi**2 + 2 * xi**3, xi - 2 * xi**2 + xi**3,
+             3 * xi**2 - 2 * xi**3, -(xi**2) + xi**3]
     elif derivative == 1:
         h = [-6 * xi + 6 * xi**2, 1 - 4 * xi + 3 * xi**2, 6 * xi - 6 * xi**2, -2 * xi + 3 * xi**2]
     elif derivative == 2:
@@ -153,7 +154,8 @@ def element_forces(qe, le, kt, kb, stiffness=True, length_derivative=False):
     out = {"ft": _wsum(Nx, wle * eps, rx), "fb": _wsum(Nxx, wle, rxx)}
     if stiffness:
         E = qe.shape[0]
-        # tensile: kt * sum_g w le Nx_a Nx_b (rx_i rx_j + eps delta_ij); bending: kb Nxx_a Nxx_b delta_ij
+        # tensile: kt * sum_g w le Nx_a Nx_b (rx_i rx_j + eps delta_ij);
+        # bending: kb Nxx_a Nxx_b delta_ij
         M = (Nx[:, :, :, None] * rx[:, :, None, :]).reshape(E, -1, 12)
         K = (M * (wle * kt[:, None])[:, :, None]).transpose(0, 2, 1) @ M
         S = (Nx * (wle * eps * kt[:, None])[:, :, None]).transpose(0, 2, 1) @ Nx

@@ -117,7 +117,8 @@ class RobotModel:
         self.seg_of_act = np.array(seg_of_act)
         self.act_angle = np.array(ang)
         radius = np.array([cfg.segments[j].pitch_radius for j in seg_of_act])
-        self.act_offset = np.stack([radius * np.cos(ang), radius * np.sin(ang), np.zeros(A)], axis=1)
+        self.act_offset = np.stack([radius * np.cos(ang), radius * np.sin(ang), np.zeros(A)],
+                                   axis=1)
 
         self.n_nodes = n + 1
         self.nq_act = A * self.n_nodes * 6
@@ -189,7 +190,8 @@ class RobotModel:
         self.ee_plate = plates[self.seg_plates[-1][-1]]["unknown"]
         self.ee_theta = cfg.segments[-1].theta0
         self.gravity = np.asarray(cfg.gravity, dtype=float)
-        self.length_scale = sum(cfg.l0 for _ in cfg.segments) + sum(s.connector_height for s in cfg.segments)
+        self.length_scale = (sum(cfg.l0 for _ in cfg.segments)
+                             + sum(s.connector_height for s in cfg.segments))
         self._build_scales()
 
     def _locate(self, s):
@@ -219,11 +221,11 @@ class RobotModel:
         s[: self.nq_act] = act.ravel()
         pl = np.full((self.P, 12), 1.0 / (F * L))
         pl[:, :3] = 1.0 / F
-        s[self.nq_act : self.nq] = pl.ravel()
+        s[self.nq_act:self.nq] = pl.ravel()
         c = np.ones((self.G, 5))
         c[:, :3] = 1.0 / L
-        s[self.nq : self.nq + 5 * self.G] = c.ravel()
-        s[self.nq + 5 * self.G :] = 1.0
+        s[self.nq:self.nq + 5 * self.G] = c.ravel()
+        s[self.nq + 5 * self.G:] = 1.0
         self.residual_scale = s
         # coordinate scale: positions by the robot length, gradients/axes as they are
         pos = np.zeros((self.A, self.n_nodes, 6), bool)
@@ -249,13 +251,15 @@ class RobotModel:
         cols.append(np.tile(ed, (1, 12)).ravel())
         # constraint Jacobian blocks, in the order kernels.evaluate_kernel produces their values
         crow, ccol = [], []
-        crow.append(np.broadcast_to(r0[:, None, None] + np.arange(3)[None, None, :], (G, 4, 3)).ravel())
+        xyz = np.arange(3)[None, None, :]
+        crow.append(np.broadcast_to(r0[:, None, None] + xyz, (G, 4, 3)).ravel())
         ccol.append(aed.ravel())  # (a) position rows / element dofs
-        crow.append(np.broadcast_to(r0[free, None, None] + np.arange(3)[None, None, :], (free.sum(), 4, 3)).ravel())
+        crow.append(np.broadcast_to(r0[free, None, None] + xyz, (free.sum(), 4, 3)).ravel())
         ccol.append(pdofs[free].ravel())  # (b) position rows / frame dofs
         prow = r0[:, None] + 3 + np.arange(2)[None, :]  # (G, 2)
         crow.append(np.broadcast_to(prow[:, :, None, None], (G, 2, 4, 3)).ravel())
-        ccol.append(np.broadcast_to(aed[:, None], (G, 2, 4, 3)).ravel())  # (c) parallel rows / element dofs
+        # (c) parallel rows / element dofs
+        ccol.append(np.broadcast_to(aed[:, None], (G, 2, 4, 3)).ravel())
         crow.append(np.broadcast_to(prow[free][:, :, None], (free.sum(), 2, 3)).ravel())
         ccol.append(pdofs[free][:, 1:3].ravel())  # (d) parallel rows / d1, d2
         orow = 5 * G + 6 * np.arange(P)[:, None] + np.arange(6)[None, :]  # (P, 6)
@@ -355,7 +359,8 @@ class RobotModel:
         w, dw = ancf.gravity_weights(le_e)  # (E, 4)
         qg = (rho_e[:, None] * w)[:, :, None] * g[None, None, :]
         np.add.at(Q, self.elem_dofs.ravel(), qg.ravel())
-        dwl = (-rho_e / lam[self.elem_act])[:, None] * w + (rho_e * par["dle"][self.elem_act])[:, None] * dw
+        dwl = ((-rho_e / lam[self.elem_act])[:, None] * w
+               + (rho_e * par["dle"][self.elem_act])[:, None] * dw)
         dqg = (dwl[:, :, None] * g[None, None, :]).reshape(self.E, 12)
         np.add.at(dQ, (self.elem_dofs.ravel(), np.repeat(self.elem_act, 12)), dqg.ravel())
         for u, h, m in self.point_masses:
@@ -437,7 +442,7 @@ class RobotModel:
         lam = np.asarray(lam, dtype=float)
         q = np.zeros(self.nq)
         act = q[: self.nq_act].reshape(self.A, self.n_nodes, 6)
-        pl = q[self.nq_act :].reshape(self.P, 12)
+        pl = q[self.nq_act:].reshape(self.P, 12)
         z0 = 0.0
         frac = np.arange(self.n_nodes) / self.n
         for j, seg in enumerate(self.cfg.segments):

@@ -75,15 +75,15 @@ def level_order(model):
     for pl in model.plates:
         if pl["unknown"] >= 0 and pl["fraction"] > 0:
             plate_t[pl["unknown"]] = pl["segment"] * gap + pl["fraction"]
-    t[model.nq_act : model.nq] = np.repeat(plate_t, 12)
-    rank[model.nq_act : model.nq] = 3
+    t[model.nq_act:model.nq] = np.repeat(plate_t, 12)
+    rank[model.nq_act:model.nq] = 3
     att = slice(model.nq, model.nq + 5 * model.G)
     att_t = model.seg_of_act[model.att_act] * gap + ((model.att_elem % n) + model.att_xi) / n
     t[att] = np.repeat(att_t, 5)
     rank[att] = 0
     act[att] = np.repeat(model.att_act, 5)
-    t[model.nq + 5 * model.G :] = np.repeat(plate_t, 6)
-    rank[model.nq + 5 * model.G :] = 2
+    t[model.nq + 5 * model.G:] = np.repeat(plate_t, 6)
+    rank[model.nq + 5 * model.G:] = 2
     return np.lexsort((np.arange(N), act, rank, np.round(t, 9)))
 
 
