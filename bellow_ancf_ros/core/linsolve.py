@@ -179,7 +179,7 @@ class _Factorised:
 
 
 def _sparse_lu(J):
-    """SuperLU factorisation of ``J`` (or None when it is singular)."""
+    """Factorise ``J`` with SuperLU (or return None when it is singular)."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
