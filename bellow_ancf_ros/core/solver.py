@@ -75,6 +75,8 @@ class NewtonResult:
     residual_norm: float  # scaled infinity norm
     history: list = field(default_factory=list)
     jacobian: object = None  # Jacobian at x (when converged; factorised by whoever needs it)
+    # continuation that ran out of budget: (t, x, next step, cut Newton iterate), see continuation
+    reached: tuple | None = None
 
 
 def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7,
@@ -129,16 +131,22 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
 
 
 def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 / 1024,
-                 iteration_budget=None, deadline=None):
+                 iteration_budget=None, deadline=None, first_step=1.0, first_guess=None):
     """Follow ``make_fun(t)`` from ``t = 0`` (solved by ``x_start``) to ``t = 1``.
 
     First tries the full step; on failure halves the increment, and doubles it
     again after successes.  Returns the :class:`NewtonResult` at ``t = 1``
     (``iterations`` counts all Newton iterations), or the failure.  At most
     ``iteration_budget`` Newton iterations in all (status ``ITERATION_BUDGET``)
-    and nothing past ``deadline`` (status ``TIME_BUDGET``).
+    and nothing past ``deadline`` (status ``TIME_BUDGET``); a result that ran
+    out of budget keeps its last converged point in ``reached = (t, x)`` (an
+    exact solution of ``make_fun(t)``) and the step it would try next,
+    ``reached = (t, x, dt, x_cut)`` (``x_cut``: the Newton iterate of the
+    step to ``t + dt`` that was cut short, or None), so that a later call can
+    continue (``first_step``, and ``first_guess``: the Newton start of the
+    first step instead of ``x_start``).
     """
-    t, dt, x = 0.0, 1.0, np.array(x_start, dtype=float)
+    t, dt, x = 0.0, float(first_step), np.array(x_start, dtype=float)
     total = 0
     hist = []
     while True:
@@ -146,10 +154,12 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
         if (left is not None and left <= 0) or expired(deadline):
             code = TIME_BUDGET if expired(deadline) else ITERATION_BUDGET
             return NewtonResult(x, False, code, f"{MESSAGES[code]} at load fraction {t:.4g} "
-                                f"({total} Newton iterations)", total, np.inf, hist)
+                                f"({total} Newton iterations)", total, np.inf, hist,
+                                reached=(t, x, dt, None))
         tn = min(1.0, t + dt)
         its = max_iter if left is None else min(max_iter, left)
-        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=its, deadline=deadline)
+        guess, first_guess = (x if first_guess is None else first_guess), None
+        res = newton(make_fun(tn), guess, scale, tol=tol, max_iter=its, deadline=deadline)
         total += res.iterations
         if res.converged:
             t, x = tn, res.x
@@ -161,6 +171,7 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
             dt = min(2.0 * dt, 1.0 - t)
         elif res.status == TIME_BUDGET:
             res.iterations = total
+            res.reached = (t, x, dt, res.x)  # this step goes on from its Newton iterate
             res.message = (f"{MESSAGES[TIME_BUDGET]} at load fraction {t:.4g} "
                            f"({total} Newton iterations)")
             return res
