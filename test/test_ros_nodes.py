@@ -518,9 +518,47 @@ def test_bad_orientation_refused_two_segment(h, two):
     np.testing.assert_allclose(msg.data, first.data, atol=1.0)
 
 
+@pytest.mark.parametrize('robot', ['one_segment', 'two_segment'])
+def test_small_budget_far_target_converges_through_continuation_slices(h, one, two, robot):
+    """A high max_rate_hz (5 ms budget) and ONE far target: the slices end at the answer.
+
+    Each budget slice publishes the best in-limit pressures so far and the
+    next one continues from it, so the last command reproduces the target.
+    """
+    model = one if robot == 'one_segment' else two
+    node, pub, _ = setup_inverse(h, robot_config=robot, max_rate_hz=1000.0)
+    assert node._time_budget() == pytest.approx(0.005)
+    kpa = [150, -50, -50] if model.A == 3 else [100, -50, -50, 100, -50, -50]
+    p_target = np.array(kpa, dtype=float) * 1e3
+    fw = solve_forward(model, p_target)
+    q = common.quaternion_from_rotation(fw.rotation)
+    pub.publish(target_msg(fw.position, q))
+    wait_for(lambda: node.stats['solved'] >= 1 and node._worker.idle()
+             and node.stats['published'] == h.count('pressure_command')
+             and h.count('commanded_pose') == node.stats['published'],
+             what='the slices for the target to end')
+    assert node.stats['over_budget'] >= 1, node.stats   # it did take continuation slices
+    assert node.stats['published'] == node.stats['over_budget'] + 1
+    with h.lock:
+        commands = [np.array(m.data) for _, m in h.msgs['pressure_command']]
+    for c in commands:
+        assert_safe(c, model.cfg)
+    np.testing.assert_allclose(commands[-1], p_target, atol=1.0)   # Pa
+    pos, quat = pose_of(h.last('commanded_pose'))
+    np.testing.assert_allclose(pos, fw.position, atol=1e-7)
+    if model.A > 3:
+        assert common.angle_between(common.z_axis_from_quaternion(quat), fw.z_axis) < 1e-6
+    ok = [s for s in diag_statuses(h, 'inverse') if s.message == 'target reached']
+    assert ok and kv(ok[-1])['reachable'] == 'true'
+
+
 def test_unreachable_target_best_fit_within_limits_warns(h, one):
     node, pub, _ = setup_inverse(h)
-    msg = send_and_wait_command(h, pub, target_msg([0.05, 0.0, 0.09]))   # far outside
+    pub.publish(target_msg([0.05, 0.0, 0.09]))   # far outside
+    # (the best answer so far goes out after every budget slice; the last one is the answer)
+    wait_for(lambda: node.stats['unreachable'] >= 1, what='the answer after its budget slices')
+    wait_for(lambda: h.count('pressure_command') == node.stats['published'], what='last command')
+    msg = h.last('pressure_command')
     assert_safe(msg.data, one.cfg)
     assert any(v in (one.cfg.p_min, one.cfg.p_max) for v in msg.data)
     wait_for(lambda: any(s.level == DiagnosticStatus.WARN and kv(s).get('reachable') == 'false'

@@ -151,7 +151,7 @@ class ResumeState:
 
 
 def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, deadline=None):
-    """Solve eq. (25) for given stretches from ``warm``, an equilibrium ``(x, lam, scale, payload)``.
+    """Solve eq. (25) for given stretches from ``warm = (x, lam, scale, payload)``, an equilibrium.
 
     ``warm`` may also be a :class:`ResumeState`: then the interrupted
     continuation goes on (its direct attempt had failed or was cut short; an

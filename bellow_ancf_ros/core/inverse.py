@@ -112,6 +112,8 @@ class InverseResult:
     # warm-started from this result, continues from (None otherwise)
     resume: ForwardResult | None = dataclasses.field(default=None, repr=False)
     resume_stage: int = dataclasses.field(default=0, repr=False)  # where it continues (_EXACT..)
+    # (stretches, ForwardResult) of a forward solve cut short, continued if evaluated again
+    resume_cut: tuple | None = dataclasses.field(default=None, repr=False)
 
     @property
     def converged(self):
@@ -291,6 +293,8 @@ def solve_inverse(
                 obj.seed(warm_fw)  # the resume point comes with its sensitivities
                 if prev_best.converged and prev_best.payload_kg == payload:
                     obj.offer(prev_best.stretch, prev_best)  # never worse than the last slice
+                if warm_start.resume_cut is not None:  # a forward solve it had begun
+                    obj.pending[warm_start.resume_cut[0].tobytes()] = warm_start.resume_cut[1]
         # 0) fast path: full-space Newton from a warm start (interior solutions only)
         fw = None
         obj.stage = stage
@@ -338,6 +342,7 @@ def solve_inverse(
         res = _budget_result(model, obj, exc.code, budget, iters, position, z_axis, warm_fw, done)
         res.resume = _resume_point(model, obj, warm_fw)
         res.resume_stage = obj.stage
+        res.resume_cut = obj.cut
         if obj.stage == _RETRY and obj.resume is None:
             res.resume_stage = _RETRY_COLD  # the cold retry has not got anywhere yet
         return res

@@ -169,6 +169,8 @@ class Objective:
         self.best = None  # (cost, lam, ForwardResult)
         self.resume = None  # (lam, ForwardResult, dx/dlam) of the last accepted iterate
         self._last_dx = None
+        self.cut = None  # (lam, ForwardResult) of a forward solve the budget cut short
+        self.pending = {}  # stretches -> cut ForwardResult of an earlier call, to continue
 
     def offer(self, lam, fw):
         """Record a converged forward result as a candidate answer; return its objective."""
@@ -209,12 +211,14 @@ class Objective:
                 m,
                 p,
                 self.payload,
-                warm_start=self.warm,
+                warm_start=self.pending.pop(np.asarray(lam, dtype=float).tobytes(), self.warm),
                 check_stability=False,
                 tol=self.tol,
                 time_budget_s=self.budget.remaining_s(),
             )
         if fw.status == TIME_BUDGET:
+            if fw.resume_state is not None and self.warm is not None:
+                self.cut = (np.array(lam, dtype=float), fw)  # the next call goes on with it
             raise OutOfBudget(TIME_BUDGET)
         fw.stretch = np.array(lam, dtype=float)  # exact stretches (pressure round trip aside)
         return fw
