@@ -32,6 +32,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/python bench/run_bench.py
 	$(VENV)/bin/python bench/fuzz_bench.py
+	$(VENV)/bin/python bench/budget_bench.py
 
 clean:
 	rm -rf $(VENV)

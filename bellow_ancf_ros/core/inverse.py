@@ -39,7 +39,21 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
 * Budgets: every stage has an iteration limit, the whole solve a limit on
   forward solves (``max_forward_solves``) and optionally a wall-clock budget
   (``time_budget_s``).  When a budget runs out the best pressures found so
-  far come back with status ``TIME_BUDGET`` / ``ITERATION_BUDGET``.
+  far come back with status ``TIME_BUDGET`` / ``ITERATION_BUDGET``, and the
+  result carries the solve's progress: ``resume`` (the last accepted iterate,
+  an exact equilibrium with its sensitivities), ``resume_stage`` (exact
+  iteration, its retry from the cold start, or the search for the best
+  answer in the limits) and ``resume_cut`` (a forward solve the budget cut
+  short, continued where it stopped).  Passed back as ``warm_start`` for the
+  same target, the next call continues there instead of starting over, so
+  repeated budgeted calls ("slices") end at the answer of one unbudgeted
+  solve.  The deadline is checked before every Newton iteration (forward
+  solves, continuation steps, the full-space Newton method) and every
+  forward solve (least squares, corners); past it comes one stability check
+  of the answer.  So that every slice makes progress, a warm-started call
+  may go on past its deadline until it has a new accepted iterate, at most
+  ``Budget.GRACE_BUDGETS`` (4) budgets longer.  Cold forward solves cut
+  short keep their continuation for the next call (``cold_solution``).
 """
 
 from __future__ import annotations
@@ -242,6 +256,14 @@ def solve_inverse(
         the best pressures found so far come back (finite, in limits, with
         their true errors; ``forward`` None if there were none yet) with
         status ``TIME_BUDGET`` or ``ITERATION_BUDGET`` and ``success`` false.
+        Such a result passed back as ``warm_start`` (same target) continues
+        the solve where it stopped (see the module docstring, "Budgets"): call
+        again until the status is not a budget status.  The time may exceed
+        the budget until the call has made progress (at most
+        ``Budget.GRACE_BUDGETS`` budgets more), plus one Newton iteration and
+        one stability check.  With ``max_forward_solves`` alone slices are
+        deterministic; a warm start that is not such a result needs 2 forward
+        solves per call to make progress.
     """
     budget = Budget(time_budget_s, max_forward_solves)
     cfg = model.cfg
