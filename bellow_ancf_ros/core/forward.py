@@ -214,6 +214,7 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
     return res, resume
 
 
+@solver.single_threaded_blas_when_budgeted
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
                   check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
                   iteration_budget=500) -> ForwardResult:
@@ -243,7 +244,8 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
         solve stops with ``converged`` false and ``status`` ``solver.TIME_BUDGET``
         (the stability check, about a millisecond, is not cut short).  The
         deadline is checked before every Newton iteration, so the overshoot is
-        at most one iteration (one factorisation and its line search).
+        at most one iteration (one factorisation and its line search).  With a
+        wall-clock budget BLAS runs on one thread (``solver.single_threaded_blas``).
     """
     deadline = solver.deadline_after(time_budget_s)
     p = check_pressures(model, pressures)
