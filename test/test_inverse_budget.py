@@ -153,7 +153,8 @@ def test_budgeted_solves_run_blas_on_one_thread():
     threadpoolctl = pytest.importorskip("threadpoolctl")
 
     def blas_threads():
-        return {i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
+        info = threadpoolctl.threadpool_info()
+        return {i["num_threads"] for i in info if i["user_api"] == "blas"}
 
     seen = []
 
