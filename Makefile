@@ -47,6 +47,7 @@ bench: $(STAMP)
 	  $(VENV)/bin/python bench/run_bench.py; \
 	fi; rc=$$?; rm -rf $$base; exit $$rc
 	$(VENV)/bin/python bench/fuzz_bench.py
+	$(VENV)/bin/python bench/budget_bench.py
 
 # puts bench/speed_table.md (from the last `make bench`) into README.md between its markers
 readme-speed:

@@ -202,10 +202,24 @@ def setup_inverse(h, **params):
     return node, pub, cmd
 
 
+def _settled(h, topic, n0, p0):
+    """The inverse nodes are idle and every command they published since ``p0`` has arrived."""
+    invs = [n for n in h.nodes if isinstance(n, InverseKinetostaticNode)]
+    return (all(n._worker is None or n._worker.idle() for n in invs)
+            and h.count(topic) - n0 >= sum(n.stats['published'] for n in invs) - p0)
+
+
 def send_and_wait_command(h, pub, msg, topic='pressure_command'):
-    n0 = h.count(topic)
+    """Publish ``msg``; return the last message on ``topic`` it leads to.
+
+    A solve that runs out of its budget (a loaded machine) publishes the best
+    pressures so far and goes on in the next slice: wait for the last slice.
+    """
+    invs = [n for n in h.nodes if isinstance(n, InverseKinetostaticNode)]
+    n0, p0 = h.count(topic), sum(n.stats['published'] for n in invs)
     pub.publish(msg)
     wait_for(lambda: h.count(topic) > n0, what=f'new message on {topic}')
+    wait_for(lambda: _settled(h, topic, n0, p0), what=f'the last budget slice on {topic}')
     return h.last(topic)
 
 
@@ -466,6 +480,7 @@ def test_bad_targets_refused_one_segment(h, one):
     node, pub, _ = setup_inverse(h)
     good = solve_forward(one, [20e3, 70e3, 0.0]).position
     first = send_and_wait_command(h, pub, target_msg(good))
+    n_first = h.count('pressure_command')
     bad_inputs = [
         ('nan position', target_msg([math.nan, 0.0, 0.1])),
         ('inf position', target_msg([0.0, math.inf, 0.1])),
@@ -480,7 +495,7 @@ def test_bad_targets_refused_one_segment(h, one):
                  what=f'WARN diagnostics for {what}')
     assert 'frame' in node.last_refusal_reason
     # nothing new was published, the node is still active and serves a good target
-    assert h.count('pressure_command') == 1
+    assert h.count('pressure_command') == n_first
     assert list(h.last('pressure_command').data) == list(first.data)
     assert node.is_active
     # the orientation is ignored for one segment: a zero quaternion is fine
@@ -494,6 +509,7 @@ def test_bad_orientation_refused_two_segment(h, two):
     fw = solve_forward(two, [30e3, 20e3, 10e3, 40e3, 0.0, 5e3])
     q = common.quaternion_from_rotation(fw.rotation)
     first = send_and_wait_command(h, pub, target_msg(fw.position, q))
+    n_first = h.count('pressure_command')
     assert_safe(first.data, two.cfg)
     # the command reaches the target pose (position and z-axis)
     wait_for(lambda: h.count('commanded_pose') >= 1)
@@ -512,15 +528,53 @@ def test_bad_orientation_refused_two_segment(h, two):
     assert 'quaternion' in node.last_refusal_reason
     wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'quaternion' in s.message
                          for s in diag_statuses(h, 'inverse')), what='WARN diagnostics')
-    assert h.count('pressure_command') == 1
+    assert h.count('pressure_command') == n_first
     # a non-unit (but normalisable) quaternion is normalised and accepted
     msg = send_and_wait_command(h, pub, target_msg(fw.position, 3.0 * q))
     np.testing.assert_allclose(msg.data, first.data, atol=1.0)
 
 
+@pytest.mark.parametrize('robot', ['one_segment', 'two_segment'])
+def test_small_budget_far_target_converges_through_continuation_slices(h, one, two, robot):
+    """A high max_rate_hz (5 ms budget) and ONE far target: the slices end at the answer.
+
+    Each budget slice publishes the best in-limit pressures so far and the
+    next one continues from it, so the last command reproduces the target.
+    """
+    model = one if robot == 'one_segment' else two
+    node, pub, _ = setup_inverse(h, robot_config=robot, max_rate_hz=1000.0)
+    assert node._time_budget() == pytest.approx(0.005)
+    kpa = [150, -50, -50] if model.A == 3 else [100, -50, -50, 100, -50, -50]
+    p_target = np.array(kpa, dtype=float) * 1e3
+    fw = solve_forward(model, p_target)
+    q = common.quaternion_from_rotation(fw.rotation)
+    pub.publish(target_msg(fw.position, q))
+    wait_for(lambda: node.stats['solved'] >= 1 and node._worker.idle()
+             and node.stats['published'] == h.count('pressure_command')
+             and h.count('commanded_pose') == node.stats['published'],
+             what='the slices for the target to end')
+    assert node.stats['over_budget'] >= 1, node.stats   # it did take continuation slices
+    assert node.stats['published'] == node.stats['over_budget'] + 1
+    with h.lock:
+        commands = [np.array(m.data) for _, m in h.msgs['pressure_command']]
+    for c in commands:
+        assert_safe(c, model.cfg)
+    np.testing.assert_allclose(commands[-1], p_target, atol=1.0)   # Pa
+    pos, quat = pose_of(h.last('commanded_pose'))
+    np.testing.assert_allclose(pos, fw.position, atol=1e-7)
+    if model.A > 3:
+        assert common.angle_between(common.z_axis_from_quaternion(quat), fw.z_axis) < 1e-6
+    ok = [s for s in diag_statuses(h, 'inverse') if s.message == 'target reached']
+    assert ok and kv(ok[-1])['reachable'] == 'true'
+
+
 def test_unreachable_target_best_fit_within_limits_warns(h, one):
     node, pub, _ = setup_inverse(h)
-    msg = send_and_wait_command(h, pub, target_msg([0.05, 0.0, 0.09]))   # far outside
+    pub.publish(target_msg([0.05, 0.0, 0.09]))   # far outside
+    # (the best answer so far goes out after every budget slice; the last one is the answer)
+    wait_for(lambda: node.stats['unreachable'] >= 1, what='the answer after its budget slices')
+    wait_for(lambda: h.count('pressure_command') == node.stats['published'], what='last command')
+    msg = h.last('pressure_command')
     assert_safe(msg.data, one.cfg)
     assert any(v in (one.cfg.p_min, one.cfg.p_max) for v in msg.data)
     wait_for(lambda: any(s.level == DiagnosticStatus.WARN and kv(s).get('reachable') == 'false'
@@ -550,6 +604,7 @@ def test_solver_failures_publish_nothing_and_report_error(h, one, monkeypatch):
     node, pub, _ = setup_inverse(h)
     good = solve_forward(one, [10e3, 10e3, 80e3])
     first = send_and_wait_command(h, pub, target_msg(good.position))
+    n_first = h.count('pressure_command')
     real = inv_mod.solve_inverse
     unstable = solve_forward(one, [10e3, 10e3, 80e3])
     unstable.stable = False
@@ -574,7 +629,7 @@ def test_solver_failures_publish_nothing_and_report_error(h, one, monkeypatch):
                              for s in diag_statuses(h, 'inverse')) > n_err,
                  what=f'ERROR diagnostics for failure {i}')
     time.sleep(0.1)
-    assert h.count('pressure_command') == 1                  # last good command stands
+    assert h.count('pressure_command') == n_first            # last good command stands
     assert list(h.last('pressure_command').data) == list(first.data)
     assert node.is_active
     monkeypatch.setattr(inv_mod, 'solve_inverse', real)

@@ -15,7 +15,7 @@ from . import linsolve, solver
 from .assembly import RobotModel
 from .stability import StabilityCheck
 
-__all__ = ["ForwardResult", "solve_forward", "check_pressures", "UNSTABLE"]
+__all__ = ["ForwardResult", "ResumeState", "solve_forward", "check_pressures", "UNSTABLE"]
 
 UNSTABLE = 6
 _STABILITY_RTOL = 1e-10
@@ -45,6 +45,8 @@ class ForwardResult:
     _lu: object = field(default=None, repr=False)
     _reduced_hessian: object = field(default=None, repr=False)
     _sensitivity: object = field(default=None, repr=False)  # dx/dlam near x (inverse predictor)
+    # a solve that ran out of budget: where it stopped (a warm start continues it)
+    resume_state: ResumeState | None = field(default=None, repr=False)
 
     @property
     def min_eigenvalue(self) -> float | None:
@@ -124,39 +126,95 @@ def check_pressures(model: RobotModel, pressures, limit_tol=1e-9):
     return np.clip(p, cfg.p_min, cfg.p_max)
 
 
+@dataclass
+class ResumeState:
+    """Where a forward solve that ran out of budget stopped, for the next call to go on.
+
+    ``x`` is an exact equilibrium at ``(stretch, load_scale, payload)`` (the
+    last one of its continuation, or its start); ``step`` the continuation
+    step to try next from there; ``guess`` the Newton iterate of the step (or
+    of the direct attempt, ``step`` 1) that was cut short, valid for the
+    final ``target = (stretch, payload)`` only.
+    """
+
+    x: np.ndarray
+    stretch: np.ndarray
+    load_scale: float
+    payload: float
+    step: float = 1.0
+    guess: np.ndarray | None = None
+    target: tuple | None = None
+
+    def start(self):
+        """The equilibrium as the ``(x, lam, load_scale, payload)`` start of a continuation."""
+        return self.x, self.stretch, self.load_scale, self.payload
+
+
 def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, deadline=None):
-    """Solve eq. (25) for given stretches; ``warm = (x, lam, load_scale, payload)`` is an equilibrium."""
+    """Solve eq. (25) for given stretches from ``warm = (x, lam, scale, payload)``, an equilibrium.
+
+    ``warm`` may also be a :class:`ResumeState`: then the interrupted
+    continuation goes on (its direct attempt had failed or was cut short; an
+    interrupted Newton run continues from its iterate when the target is the
+    same).  Returns ``(NewtonResult, ResumeState or None)``: a resume state
+    when a budget ran out.
+    """
     scale = model.residual_scale
 
     def make(lam_t, load_t, pay_t):
         return lambda x, jacobian=True: model.evaluate(x, lam_t, load_t, pay_t, jacobian=jacobian)
 
+    def same_target(rs):
+        return (rs.target is not None and rs.guess is not None and rs.target[1] == payload
+                and np.array_equal(rs.target[0], lam))
+
     first_max = max_iter if iteration_budget is None else min(max_iter, iteration_budget)
-    if warm is None:
-        # cold start: straight guess at the target stretches, then continuation
-        # from the exactly solved unloaded straight robot at lam = 1
-        res = solver.newton(make(lam, 1.0, payload), model.straight_state(lam), scale, tol,
-                            first_max, deadline=deadline)
-        start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
+    first_step, first_iters, guess = 1.0, 0, None
+    if isinstance(warm, ResumeState):
+        start, first_step = warm.start(), warm.step
+        guess = warm.guess if same_target(warm) else None
+        direct = guess is not None and first_step >= 1.0  # a cut direct attempt goes on
     else:
-        res = solver.newton(make(lam, 1.0, payload), warm[0], scale, tol, first_max,
+        direct = True
+        if warm is None:
+            # cold start: straight guess at the target stretches, then continuation
+            # from the exactly solved unloaded straight robot at lam = 1
+            guess = model.straight_state(lam)
+            start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
+        else:
+            guess, start = warm[0], warm
+    if direct:
+        res = solver.newton(make(lam, 1.0, payload), guess, scale, tol, first_max,
                             deadline=deadline)
-        start = warm
-    if res.converged or res.status == solver.TIME_BUDGET:
-        return res
-    first_iters = res.iterations
+        if res.converged:
+            return res, None
+        if res.status == solver.TIME_BUDGET:
+            return res, ResumeState(*start, 1.0, res.x, (lam, payload))
+        first_iters, guess = res.iterations, None
+        if isinstance(warm, ResumeState):
+            first_step = 0.5  # the full step has failed now
     x0, lam0, s0, m0 = start
 
+    def point(t):
+        return lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0 + t * (payload - m0)
+
     def make_t(t):
-        return make(lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0 + t * (payload - m0))
+        return make(*point(t))
 
     left = None if iteration_budget is None else iteration_budget - first_iters
     res = solver.continuation(make_t, x0, scale, tol, max_iter, iteration_budget=left,
-                              deadline=deadline)
+                              deadline=deadline, first_step=first_step, first_guess=guess)
     res.iterations += first_iters
-    return res
+    resume = None
+    if res.reached is not None:  # out of budget: the last equilibrium on the way
+        t, x_t, dt, x_cut = res.reached
+        lam_t, s_t, m_t = point(t)
+        resume = ResumeState(x_t, lam_t, s_t, m_t, min(1.0, dt / (1.0 - t)), x_cut,
+                             (lam, payload))
+    return res, resume
 
 
+@solver.single_threaded_blas_when_budgeted
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
                   check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
                   iteration_budget=500) -> ForwardResult:
@@ -170,7 +228,11 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     payload_kg : mass at the end effector.
     warm_start : ForwardResult, optional
         A previous converged result (e.g. the last sample of a trajectory);
-        the solve starts from it and falls back to continuation from it.
+        the solve starts from it and falls back to continuation from it.  A
+        result that ran out of budget carries the last exact equilibrium of
+        its continuation (``resume_state``): passed as ``warm_start`` (with
+        the same or other pressures) the solve continues from there, so a
+        cold solve can be done in budget slices without losing work.
     check_stability : compute the reduced-Hessian stability test.
     tol : tolerance on the scaled residual (forces relative to the robot's
         bending/weight force scale, constraints relative to its length).
@@ -180,7 +242,10 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
         they run out the result says so (``status`` ``solver.ITERATION_BUDGET``).
     time_budget_s : optional wall-clock budget in seconds; when it runs out the
         solve stops with ``converged`` false and ``status`` ``solver.TIME_BUDGET``
-        (the stability check, about a millisecond, is not cut short).
+        (the stability check, about a millisecond, is not cut short).  The
+        deadline is checked before every Newton iteration, so the overshoot is
+        at most one iteration (one factorisation and its line search).  With a
+        wall-clock budget BLAS runs on one thread (``solver.single_threaded_blas``).
     """
     deadline = solver.deadline_after(time_budget_s)
     p = check_pressures(model, pressures)
@@ -191,12 +256,15 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     warm = None
     if warm_start is not None and warm_start.converged:
         warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.payload_kg)
-    res = _stage2(model, lam, payload, warm, tol, max_iter, int(iteration_budget), deadline)
+    elif warm_start is not None and warm_start.resume_state is not None:
+        warm = warm_start.resume_state  # continue a solve that ran out of budget
+    res, resume = _stage2(model, lam, payload, warm, tol, max_iter, int(iteration_budget),
+                          deadline)
     out = ForwardResult(
         model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
         converged=res.converged, stable=None, status=res.status,
         message=res.message, iterations=res.iterations, residual_norm=res.residual_norm,
-        history=res.history, jacobian=res.jacobian,
+        history=res.history, jacobian=res.jacobian, resume_state=resume,
     )
     if res.converged and check_stability:
         assess_stability(out)

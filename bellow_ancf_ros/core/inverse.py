@@ -39,7 +39,21 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
 * Budgets: every stage has an iteration limit, the whole solve a limit on
   forward solves (``max_forward_solves``) and optionally a wall-clock budget
   (``time_budget_s``).  When a budget runs out the best pressures found so
-  far come back with status ``TIME_BUDGET`` / ``ITERATION_BUDGET``.
+  far come back with status ``TIME_BUDGET`` / ``ITERATION_BUDGET``, and the
+  result carries the solve's progress: ``resume`` (the last accepted iterate,
+  an exact equilibrium with its sensitivities), ``resume_stage`` (exact
+  iteration, its retry from the cold start, or the search for the best
+  answer in the limits) and ``resume_cut`` (a forward solve the budget cut
+  short, continued where it stopped).  Passed back as ``warm_start`` for the
+  same target, the next call continues there instead of starting over, so
+  repeated budgeted calls ("slices") end at the answer of one unbudgeted
+  solve.  The deadline is checked before every Newton iteration (forward
+  solves, continuation steps, the full-space Newton method) and every
+  forward solve (least squares, corners); past it comes one stability check
+  of the answer.  So that every slice makes progress, a warm-started call
+  may go on past its deadline until it has a new accepted iterate, at most
+  ``Budget.GRACE_BUDGETS`` (4) budgets longer.  Cold forward solves cut
+  short keep their continuation for the next call (``cold_solution``).
 """
 
 from __future__ import annotations
@@ -52,11 +66,12 @@ import numpy as np
 from .assembly import RobotModel
 from . import solver
 from .forward import UNSTABLE, ForwardResult, assess_stability, solve_forward
-from .inverse_limits import best_in_limits, corner_solutions
+from .inverse_limits import best_in_limits, corner_solutions, stationary
 from .inverse_newton import (
     Budget,
     Objective,
     OutOfBudget,
+    cold_solution,
     cost,
     full_space_newton,
     iterate,
@@ -85,6 +100,9 @@ ITERATION_BUDGET = solver.ITERATION_BUDGET  # 8
 MAX_TARGET_LENGTHS = 1e3  # targets farther from the base than this many robot lengths are refused
 _RETRY_BELOW = 1e-4  # |O|^2/2 below which a stalled warm start is retried from the cold start
 _SURELY_OUT = 2.0  # targets this many times the largest reach away skip the exact iterations
+# stages a solve that ran out of budget continues in (resume_stage): the exact iteration from
+# the warm start, its retry from the cold start (continued, or not started), the best answer
+_EXACT, _RETRY, _BEST, _RETRY_COLD = 0, 1, 2, 3
 
 
 @dataclass
@@ -104,6 +122,12 @@ class InverseResult:
     iterations: int
     target_position: np.ndarray
     target_z_axis: np.ndarray | None
+    # out of budget: the converged iterate (with its sensitivities) the next call,
+    # warm-started from this result, continues from (None otherwise)
+    resume: ForwardResult | None = dataclasses.field(default=None, repr=False)
+    resume_stage: int = dataclasses.field(default=0, repr=False)  # where it continues (_EXACT..)
+    # (stretches, ForwardResult) of a forward solve cut short, continued if evaluated again
+    resume_cut: tuple | None = dataclasses.field(default=None, repr=False)
 
     @property
     def converged(self):
@@ -176,21 +200,32 @@ def _check_target(model, position, z_axis):
     return position, z_axis / np.linalg.norm(z_axis)
 
 
-def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None) -> bool:
-    """Solve the corners of the pressure box now (cached per model and payload); True when done.
+def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None, tol=1e-10) -> bool:
+    """Solve the corners of the pressure box and the cold start now (cached); True when done.
 
-    The first unreachable target of a payload needs them (2**A forward solves:
-    8 for one segment, 64 for two).  A controller with a tight time budget
-    calls this once at start-up for its payload; otherwise the work is spread
-    over its first calls (progress is kept when a budget runs out).
+    The first unreachable target of a payload needs the corners (2**A forward
+    solves: 8 for one segment, 64 for two), a cold or retried solve the
+    canonical cold start (one cold forward solve; ``tol`` as in
+    :func:`solve_inverse`).  A controller with a tight time budget calls this
+    once at start-up for its payload; otherwise the work is spread over its
+    first calls (progress is kept when a budget runs out).
     """
+    budget = Budget(time_budget_s, 2**model.A + 1)
+    payload = float(payload_kg)
+    st, cfg = model.stage1, model.cfg
+    cold = st.stretch(0.5 * (cfg.p_min + cfg.p_max)) if cfg.n_segments > 1 else 1.0
+    cold = np.clip(np.full(model.A, float(cold)), st.lam_min, st.lam_max)
     try:
-        corner_solutions(model, float(payload_kg), Budget(time_budget_s, 2**model.A))
+        corner_solutions(model, payload, budget)
+        budget.take()
+        fw = cold_solution(model, np.clip(st.pressure(cold), cfg.p_min, cfg.p_max), payload,
+                           tol, budget)
     except OutOfBudget:
         return False
-    return True
+    return bool(fw.converged)
 
 
+@solver.single_threaded_blas_when_budgeted
 def solve_inverse(
     model: RobotModel,
     position,
@@ -222,6 +257,16 @@ def solve_inverse(
         the best pressures found so far come back (finite, in limits, with
         their true errors; ``forward`` None if there were none yet) with
         status ``TIME_BUDGET`` or ``ITERATION_BUDGET`` and ``success`` false.
+        Such a result passed back as ``warm_start`` (same target) continues
+        the solve where it stopped (see the module docstring, "Budgets"): call
+        again until the status is not a budget status.  The time may exceed
+        the budget until the call has made progress (at most
+        ``Budget.GRACE_BUDGETS`` budgets more), plus one Newton iteration and
+        one stability check.  With ``max_forward_solves`` alone slices are
+        deterministic; a warm start that is not such a result needs 2 forward
+        solves per call to make progress.  A call with ``time_budget_s`` runs
+        BLAS on one thread (multithreaded BLAS on these small dense matrices
+        can take hundreds of milliseconds on a loaded machine).
     """
     budget = Budget(time_budget_s, max_forward_solves)
     cfg = model.cfg
@@ -241,13 +286,21 @@ def solve_inverse(
         pe, ae = pose_errors(fw, position, z_axis)
         return pe <= ptol and (ae is None or ae <= atol)
 
-    warm_fw = warm_start.forward if isinstance(warm_start, InverseResult) else warm_start
+    warm_fw, prev_best, stage = warm_start, None, _EXACT
+    if isinstance(warm_start, InverseResult):
+        warm_fw = warm_start.forward
+        if warm_start.resume is not None:  # continue an interrupted solve
+            warm_fw, prev_best = warm_start.resume, warm_start.forward
+            if _same_target(warm_start, position, z_axis, payload):
+                stage = warm_start.resume_stage
     if warm_fw is not None and not warm_fw.converged:
-        warm_fw = None
+        warm_fw, stage = None, _EXACT
     obj = Objective(model, position, z_axis, payload, None, tol, budget)
+    budget.grace = warm_fw is not None  # a warm start gets at least one step of progress
     iters = 0
     try:
         if warm_fw is not None and warm_fw.payload_kg != payload:
+            prev_best, stage = None, _EXACT
             budget.take()
             warm_fw = solve_forward(
                 model,
@@ -261,15 +314,28 @@ def solve_inverse(
         obj.warm = warm_fw
         if warm_fw is not None:
             obj.offer(warm_fw.stretch, warm_fw)
+            if prev_best is not None:
+                obj.seed(warm_fw)  # the resume point comes with its sensitivities
+                if prev_best.converged and prev_best.payload_kg == payload:
+                    obj.offer(prev_best.stretch, prev_best)  # never worse than the last slice
+                if warm_start.resume_cut is not None:  # a forward solve it had begun
+                    obj.pending[warm_start.resume_cut[0].tobytes()] = warm_start.resume_cut[1]
         # 0) fast path: full-space Newton from a warm start (interior solutions only)
         fw = None
-        if warm_fw is not None:
+        obj.stage = stage
+        if warm_fw is not None and stage == _EXACT:
             fw = full_space_newton(
-                model, obj.target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol
+                model, obj.target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol,
+                budget=budget,
             )
-        if fw is not None:
+        if stage != _EXACT:
+            # an interrupted solve continues in the stage it was in
+            lam, fw, reached, iters = _continue(obj, prev_best, warm_fw, lo, hi, lam_ref, multi,
+                                                done, max_iter)
+        elif fw is not None:
             lam, reached, iters = fw.stretch, True, fw.iterations
         elif norm(position) > _SURELY_OUT * _reach(model):
+            obj.stage = _BEST
             # far out of reach: straight to the best answer inside the limits (which would still
             # find and polish an exact solution, were there one)
             lam, fw, reached, iters = _best_answer(obj, [], warm_fw, lo, hi, lam_ref, multi, done,
@@ -283,7 +349,7 @@ def solve_inverse(
             )
             if not reached and warm_fw is not None and (O is None or cost(O) < _RETRY_BELOW):
                 # 1b) a near miss from the warm start: the canonical cold start may reach it
-                obj.warm = None
+                obj.warm, obj.stage, obj.resume = None, _RETRY, None
                 lam_c, fw_c, O_c, _, reached, it_c = iterate(
                     obj, cold, np.ones(model.A, bool), lo, hi, lam_ref, multi, done, max_iter
                 )
@@ -292,12 +358,19 @@ def solve_inverse(
                     lam, fw, O = lam_c, fw_c, O_c  # noqa: E741
             if not reached:
                 # 2) best answer inside the limits from a fixed set of starts
+                obj.stage = _BEST
                 local = [] if O is None else [(lam, fw)]
                 lam, fw, reached, it2 = _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi,
                                                      done, max_iter)
                 iters += it2
     except OutOfBudget as exc:
-        return _budget_result(model, obj, exc.code, budget, iters, position, z_axis, warm_fw, done)
+        res = _budget_result(model, obj, exc.code, budget, iters, position, z_axis, warm_fw, done)
+        res.resume = _resume_point(model, obj, warm_fw)
+        res.resume_stage = obj.stage
+        res.resume_cut = obj.cut
+        if obj.stage == _RETRY and obj.resume is None:
+            res.resume_stage = _RETRY_COLD  # the cold retry has not got anywhere yet
+        return res
 
     if fw is None or not fw.converged:
         return _failed_result(
@@ -318,16 +391,60 @@ def _reach(model):
                 for seg in cfg.segments) + cfg.tool_length)
 
 
-def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter):
+def _continue(obj, prev_best, resume, lo, hi, lam_ref, multi, done, max_iter):
+    """Continue an interrupted solve in its stage ``obj.stage``: ``(lam, fw, reached, its)``.
+
+    ``resume`` is its last accepted iterate (or its warm start), ``prev_best``
+    its best answer so far.  Work done already is not repeated: the retry from
+    the cold start goes on from its iterate, the search for the best answer in
+    the limits from its best answer (without the seeds it had).
+    """
+    model = obj.model
+    local, seeds, iters = [], False, 0
+    if obj.stage in (_RETRY, _RETRY_COLD):
+        start = np.clip(resume.stretch, lo, hi)
+        if obj.stage == _RETRY_COLD:
+            obj.warm = None
+            start = np.clip(lam_ref if multi else np.ones(model.A), lo, hi)
+        obj.stage, obj.resume = _RETRY, None
+        lam, fw, O, _, reached, iters = iterate(
+            obj, start, np.ones(model.A, bool), lo, hi, lam_ref, multi, done, max_iter)
+        if reached:
+            return lam, fw, True, iters
+        obj.stage, seeds = _BEST, True
+        if O is not None:
+            local.append((lam, fw))
+    if prev_best is not None and prev_best.converged and prev_best.payload_kg == obj.payload:
+        if not seeds and stationary(obj, prev_best.stretch, lo, hi, lam_ref, multi):
+            # the search had arrived: its best answer is the answer (a least-squares run
+            # from it would only confirm it)
+            return prev_best.stretch, prev_best, done(prev_best), 0
+        local.append((prev_best.stretch, prev_best))
+    lam, fw, reached, it2 = _best_answer(obj, local, resume, lo, hi, lam_ref, multi, done,
+                                         max_iter, seeds=seeds)
+    return lam, fw, reached, iters + it2
+
+
+def _same_target(prev, position, z_axis, payload):
+    """Whether the InverseResult ``prev`` was for this target and payload."""
+    fw = prev.forward if prev.forward is not None else prev.resume
+    same_axis = (z_axis is None) == (prev.target_z_axis is None) and (
+        z_axis is None or np.array_equal(z_axis, prev.target_z_axis))
+    return (fw is not None and fw.payload_kg == payload and same_axis
+            and np.array_equal(position, prev.target_position))
+
+
+def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter, seeds=True):
     """Best answer inside the limits from the local answer, the warm start, seeds and corners.
 
+    ``seeds`` false: not the vent and mid-range seeds (a continued solve had them already).
     Returns ``(lam, fw, reached, iterations)``; ``fw`` None when no forward solve converged.
     """
     model = obj.model
     candidates = list(local)
     if warm_fw is not None:
         candidates.append((warm_fw.stretch, warm_fw))
-    for seed in (np.ones(model.A), lam_ref):  # vent and mid-range pressures
+    for seed in (np.ones(model.A), lam_ref) if seeds else ():  # vent and mid-range pressures
         seed = np.clip(seed, lo, hi)
         _, fw_s, O_s, _ = obj.evaluate(seed)
         if O_s is not None:
@@ -335,7 +452,9 @@ def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter):
     candidates += corner_solutions(model, obj.payload, obj.budget)
     if not candidates:
         return None, None, False, 0
-    return best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter)
+    # a continued search goes on from its best answer so far only
+    return best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter,
+                          **({} if seeds else {"n_starts": 1}))
 
 
 def _result(model, lam, fw, reached, iters, position, z_axis, status=None, note=""):
@@ -397,6 +516,22 @@ def _failed_result(model, warm_fw, iters, position, z_axis, message, status=FAIL
         target_position=position,
         target_z_axis=z_axis,
     )
+
+
+def _resume_point(model, obj, warm_fw):
+    """The converged iterate a solve that ran out of budget continues from, with sensitivities.
+
+    The last accepted iterate of the running iteration (by its own merit,
+    which for redundant robots includes the distance to ``lam_ref``: not
+    necessarily the best ``|O|``), else the call's own warm start.
+    """
+    if obj.resume is None:
+        return warm_fw
+    lam, fw, dx = obj.resume
+    st, cfg = model.stage1, model.cfg
+    return dataclasses.replace(
+        fw, pressures_pa=np.clip(st.pressure(lam), cfg.p_min, cfg.p_max),
+        stretch=np.array(lam, dtype=float), _sensitivity=-dx)
 
 
 def _budget_result(model, obj, code, budget, iters, position, z_axis, warm_fw, done):

@@ -19,12 +19,13 @@ from . import solver
 from .forward import solve_forward
 from .inverse_newton import OutOfBudget, cost, iterate
 
-__all__ = ["corner_solutions", "best_in_limits"]
+__all__ = ["corner_solutions", "best_in_limits", "stationary"]
 
 TIME_BUDGET = solver.TIME_BUDGET
 _N_STARTS = 2  # least-squares runs for an unreachable target
 _POLISH_BELOW = 1e-8  # |O|^2/2 below which a least-squares answer is polished exactly
 _CORNER_CACHE_PAYLOADS = 4
+_STATIONARY_GTOL = 1e-9  # scaled gradient of a finished least-squares answer (about 1e-3 Pa)
 
 
 _CORNERS = (
@@ -58,11 +59,11 @@ def corner_solutions(model, payload, budget):
     return entry["items"]
 
 
-def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter):
+def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_starts=_N_STARTS):
     """Best stretches inside the limits from a fixed set of starts (see the module docstring).
 
     ``candidates`` are converged ``(lam, ForwardResult)`` pairs; the best
-    ``_N_STARTS`` distinct ones by ``|O|`` start a bound-constrained least-squares
+    ``n_starts`` distinct ones by ``|O|`` start a bound-constrained least-squares
     run each, polished on the face of its active limits.  Returns
     ``(lam, fw, reached, iterations)`` of the best answer seen.
     """
@@ -76,13 +77,15 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter):
     for c, _, lam, fw in scored:
         if all(np.max(np.abs(lam - s[0])) > 1e-6 for s in starts):
             starts.append((lam, fw))
-        if len(starts) == _N_STARTS:
+        if len(starts) == n_starts:
             break
 
     def fun(v):
-        _, _, Ov, _ = obj.evaluate(v)
+        _, fw_v, Ov, _ = obj.evaluate(v)
         if Ov is None:
             raise ForwardFailure()
+        if obj.best[2] is fw_v:
+            obj.advance(v)  # a new best answer: progress, and the point to continue from
         return np.concatenate([Ov, eps * (v - lam_ref)]) if multi else Ov
 
     def jac(v):
@@ -123,6 +126,23 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter):
             return lam, fw, True, iters
     c, lam, fw = obj.best
     return lam, fw, done(fw), iters
+
+
+def stationary(obj, lam, lo, hi, lam_ref, multi, gtol=_STATIONARY_GTOL):
+    """Whether ``lam`` is a first-order point of the least squares of :func:`best_in_limits`.
+
+    The gradient of its cost, scaled as trust-region reflective scales it
+    (by the distance to the bound it points to, Coleman-Li), is below ``gtol``
+    in every component.  Lets an interrupted search stop at its answer
+    without a whole least-squares run in one budget slice.
+    """
+    _, _, O, J = obj.evaluate(lam)
+    if O is None:
+        return False
+    eps = 1e-4 if multi else 0.0
+    g = J.T @ O + eps**2 * (lam - lam_ref)
+    v = np.where(g < 0, hi - lam, np.where(g > 0, lam - lo, 1.0))
+    return bool(np.max(np.abs(g * v)) <= gtol)
 
 
 class ForwardFailure(RuntimeError):

@@ -10,7 +10,9 @@ the pressure limits, the full-space Newton method on ``[lam, q, alpha]``
 
 from __future__ import annotations
 
+import dataclasses
 import time
+import weakref
 
 import numpy as np
 
@@ -27,11 +29,15 @@ __all__ = [
     "pose_errors",
     "iterate",
     "full_space_newton",
+    "cold_solution",
 ]
 
 TIME_BUDGET = solver.TIME_BUDGET
 ITERATION_BUDGET = solver.ITERATION_BUDGET
 _RCOND = 1e-8  # z_ee - z_target has rank 2 in 3 rows: cut the round-off direction
+# cold forward solves (done, or cut short by a budget): model -> {(payload, tol, P): result}
+_COLD = weakref.WeakKeyDictionary()
+_COLD_CACHE_SIZE = 8
 
 
 class OutOfBudget(Exception):
@@ -44,7 +50,15 @@ class OutOfBudget(Exception):
 
 
 class Budget:
-    """Wall-clock deadline and number of forward solves left."""
+    """Wall-clock deadline and number of forward solves left.
+
+    Progress guarantee (so that budget slices converge): while ``grace`` is
+    on, the deadline does not stop the solve; the solve turns it off
+    (:meth:`progress`) as soon as it has a new accepted iterate, and it ends
+    anyway ``GRACE_BUDGETS`` budgets past the deadline (``strict``: ignore it).
+    """
+
+    GRACE_BUDGETS = 4.0
 
     def __init__(self, time_budget_s, max_forward_solves):
         """Set up; see the class docstring."""
@@ -52,20 +66,43 @@ class Budget:
         self.time_budget_s = time_budget_s
         self.max_forward_solves = int(max_forward_solves)
         self.used = 0
+        self.grace = False
+        self._grace_end = (None if self.deadline is None
+                           else self.deadline + self.GRACE_BUDGETS * float(time_budget_s))
+
+    def progress(self):
+        """The solve has made progress: from now on the deadline holds."""
+        self.grace = False
+
+    def current_deadline(self, strict=False):
+        """Deadline in force (``time.perf_counter()``; None: none)."""
+        if self.deadline is None:
+            return None
+        if self.grace and not strict:
+            if time.perf_counter() > self._grace_end:
+                self.grace = False
+            else:
+                return self._grace_end
+        return self.deadline
+
+    def expired(self, strict=False):
+        """Whether the deadline in force has passed."""
+        return solver.expired(self.current_deadline(strict))
 
     def take(self):
         """Account for one forward solve; raise :class:`OutOfBudget` when none is left."""
-        if solver.expired(self.deadline):
+        if self.expired():
             raise OutOfBudget(TIME_BUDGET)
         if self.used >= self.max_forward_solves:
             raise OutOfBudget(ITERATION_BUDGET)
         self.used += 1
 
-    def remaining_s(self):
+    def remaining_s(self, strict=False):
         """Seconds left (None: no wall-clock budget)."""
-        if self.deadline is None:
+        deadline = self.current_deadline(strict)
+        if deadline is None:
             return None
-        return max(self.deadline - time.perf_counter(), 1e-9)
+        return max(deadline - time.perf_counter(), 1e-9)
 
 
 def norm(v):
@@ -115,7 +152,8 @@ class Objective:
     """Objective (eq. 28) as a function of the stretches, with warm-started forward solves.
 
     Remembers the best converged evaluation (lowest ``|O|``) for a solve
-    that runs out of budget.
+    that runs out of budget, and the point an interrupted solve continues
+    from (``resume``: the last accepted iterate, with its sensitivities).
     """
 
     def __init__(self, model, position, z_axis, payload, warm, tol, budget):
@@ -128,6 +166,10 @@ class Objective:
         self.budget = budget
         self.last = None  # (lam, ForwardResult, O, J)
         self.best = None  # (cost, lam, ForwardResult)
+        self.resume = None  # (lam, ForwardResult, dx/dlam) of the last accepted iterate
+        self._last_dx = None
+        self.cut = None  # (lam, ForwardResult) of a forward solve the budget cut short
+        self.pending = {}  # stretches -> cut ForwardResult of an earlier call, to continue
 
     def offer(self, lam, fw):
         """Record a converged forward result as a candidate answer; return its objective."""
@@ -137,20 +179,45 @@ class Objective:
             self.best = (c, np.array(lam, dtype=float), fw)
         return O
 
+    def advance(self, lam):
+        """The iterate at ``lam`` (the last evaluation) is accepted: progress of the solve."""
+        if self.last is None or self.last[2] is None or not np.array_equal(self.last[0], lam):
+            return
+        self.resume = (self.last[0], self.last[1], self._last_dx)
+        self.budget.progress()
+
+    def seed(self, fw):
+        """Use a converged ``fw`` that carries its sensitivities as the evaluation at its stretch.
+
+        Only results of a solve that ran out of budget carry them (``_sensitivity``).
+        """
+        W = fw._sensitivity
+        if W is None or not fw.converged or fw.payload_kg != self.payload:
+            return
+        lam = np.array(fw.stretch, dtype=float)
+        self.warm = fw
+        self._last_dx = -W
+        self.last = (lam, fw, self.offer(lam, fw), self.target.linear(-W))
+
     def _forward(self, lam):
         m = self.model
         p = np.clip(m.stage1.pressure(lam), m.cfg.p_min, m.cfg.p_max)
         self.budget.take()
-        fw = solve_forward(
-            m,
-            p,
-            self.payload,
-            warm_start=self.warm,
-            check_stability=False,
-            tol=self.tol,
-            time_budget_s=self.budget.remaining_s(),
-        )
+        if self.warm is None:
+            fw = cold_solution(m, p, self.payload, self.tol, self.budget)
+        else:
+            fw = solve_forward(
+                m,
+                p,
+                self.payload,
+                warm_start=self.pending.pop(np.asarray(lam, dtype=float).tobytes(), self.warm),
+                check_stability=False,
+                tol=self.tol,
+                time_budget_s=self.budget.remaining_s(),
+            )
         if fw.status == TIME_BUDGET:
+            if fw.resume_state is not None and self.warm is not None:
+                self.cut = (np.array(lam, dtype=float), fw)  # the next call goes on with it
             raise OutOfBudget(TIME_BUDGET)
         fw.stretch = np.array(lam, dtype=float)  # exact stretches (pressure round trip aside)
         return fw
@@ -168,8 +235,31 @@ class Objective:
         self.warm = fw
         ev = m.evaluate(fw.x, lam, 1.0, self.payload, jacobian=False, lam_derivative=True)
         dx = -fw.lu.solve(ev.dres_dlam)  # (N, A) implicit function theorem
+        self._last_dx = dx
         self.last = (lam.copy(), fw, self.offer(lam, fw), self.target.linear(dx))
         return self.last
+
+
+def cold_solution(model, pressures, payload, tol, budget):
+    """Cold-started forward solve (no stability check), cached per model, payload and pressures.
+
+    The inverse solves cold only at its canonical start (the same pressures
+    every time), so the solution is kept (a copy is returned), and a solve
+    cut short by the budget keeps its last equilibrium for the next call
+    (``ForwardResult.resume_state``): cold solves progress across budget slices.
+    """
+    cache = _COLD.setdefault(model, {})
+    key = (float(payload), float(tol), np.asarray(pressures, dtype=float).tobytes())
+    entry = cache.get(key)
+    if entry is not None and entry.converged:
+        return dataclasses.replace(entry)
+    fw = solve_forward(model, pressures, payload, warm_start=entry, check_stability=False,
+                       tol=tol, time_budget_s=budget.remaining_s())
+    if fw.converged or fw.resume_state is not None:
+        while key not in cache and len(cache) >= _COLD_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = fw
+    return dataclasses.replace(fw) if fw.converged else fw
 
 
 def pose_errors(fw, position, z_axis):
@@ -286,11 +376,13 @@ def iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
         else:
             return lam, fw, O, J, False, it + 1
         lam, fw, O, J, merit, Jp, null = lam_try, fw_t, O_t, J_t, merit_t, Jp_t, null_t
+        obj.advance(lam)
     return lam, fw, O, J, False, max_iter
 
 
 def full_space_newton(
-    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8
+    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
+    budget=None,
 ):
     """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30).
 
@@ -303,7 +395,8 @@ def full_space_newton(
     iteration and quadratic convergence: the fast path for warm-started
     targets along a trajectory.  Returns a converged ForwardResult or None
     (then the robust reduced iteration takes over): it never leaves the
-    interior of the pressure box and gives up on any sign of trouble.
+    interior of the pressure box and gives up on any sign of trouble, or when
+    the ``budget``'s deadline has passed (checked before every factorisation).
     """
     x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
     null_norm = [np.inf]
@@ -368,7 +461,7 @@ def full_space_newton(
             )
             if done(fw):
                 return fw
-        if it == max_iter:
+        if it == max_iter or (budget is not None and budget.expired()):
             break
         try:
             sol = ev.solve(np.column_stack([R, ev.dres_dlam]))  # banded LU (core.linsolve)

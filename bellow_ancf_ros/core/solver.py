@@ -15,7 +15,10 @@ space of the constraints, ``Z^T H Z > 0`` with ``C_q Z = 0``.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
+import functools
+import inspect
 import time
 
 import numpy as np
@@ -23,7 +26,8 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 __all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads",
-           "deadline_after", "expired"]
+           "deadline_after", "expired", "single_threaded_blas",
+           "single_threaded_blas_when_budgeted"]
 
 # status codes (like scipy.optimize)
 CONVERGED = 0
@@ -74,6 +78,8 @@ class NewtonResult:
     residual_norm: float  # scaled infinity norm
     history: list = field(default_factory=list)
     jacobian: object = None  # Jacobian at x (when converged; factorised by whoever needs it)
+    # continuation that ran out of budget: (t, x, next step, cut Newton iterate), see continuation
+    reached: tuple | None = None
 
 
 def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7,
@@ -127,16 +133,22 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
 
 
 def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 / 1024,
-                 iteration_budget=None, deadline=None):
+                 iteration_budget=None, deadline=None, first_step=1.0, first_guess=None):
     """Follow ``make_fun(t)`` from ``t = 0`` (solved by ``x_start``) to ``t = 1``.
 
     First tries the full step; on failure halves the increment, and doubles it
     again after successes.  Returns the :class:`NewtonResult` at ``t = 1``
     (``iterations`` counts all Newton iterations), or the failure.  At most
     ``iteration_budget`` Newton iterations in all (status ``ITERATION_BUDGET``)
-    and nothing past ``deadline`` (status ``TIME_BUDGET``).
+    and nothing past ``deadline`` (status ``TIME_BUDGET``); a result that ran
+    out of budget keeps its last converged point in ``reached = (t, x)`` (an
+    exact solution of ``make_fun(t)``) and the step it would try next,
+    ``reached = (t, x, dt, x_cut)`` (``x_cut``: the Newton iterate of the
+    step to ``t + dt`` that was cut short, or None), so that a later call can
+    continue (``first_step``, and ``first_guess``: the Newton start of the
+    first step instead of ``x_start``).
     """
-    t, dt, x = 0.0, 1.0, np.array(x_start, dtype=float)
+    t, dt, x = 0.0, float(first_step), np.array(x_start, dtype=float)
     total = 0
     hist = []
     while True:
@@ -144,10 +156,12 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
         if (left is not None and left <= 0) or expired(deadline):
             code = TIME_BUDGET if expired(deadline) else ITERATION_BUDGET
             return NewtonResult(x, False, code, f"{MESSAGES[code]} at load fraction {t:.4g} "
-                                f"({total} Newton iterations)", total, np.inf, hist)
+                                f"({total} Newton iterations)", total, np.inf, hist,
+                                reached=(t, x, dt, None))
         tn = min(1.0, t + dt)
         its = max_iter if left is None else min(max_iter, left)
-        res = newton(make_fun(tn), x, scale, tol=tol, max_iter=its, deadline=deadline)
+        guess, first_guess = (x if first_guess is None else first_guess), None
+        res = newton(make_fun(tn), guess, scale, tol=tol, max_iter=its, deadline=deadline)
         total += res.iterations
         if res.converged:
             t, x = tn, res.x
@@ -159,6 +173,7 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
             dt = min(2.0 * dt, 1.0 - t)
         elif res.status == TIME_BUDGET:
             res.iterations = total
+            res.reached = (t, x, dt, res.x)  # this step goes on from its Newton iterate
             res.message = (f"{MESSAGES[TIME_BUDGET]} at load fraction {t:.4g} "
                            f"({total} Newton iterations)")
             return res
@@ -218,6 +233,46 @@ class ReducedHessian:
     @property
     def min_eigenvalue(self):
         return float(sla.eigh(self.H, self.B, eigvals_only=True, subset_by_index=[0, 0])[0])
+
+
+_BLAS_CONTROLLER = []  # threadpoolctl controller, made on first use (None: not installed)
+
+
+def single_threaded_blas(active=True):
+    """Context manager: BLAS on one thread inside (for time-budgeted solves; see below).
+
+    A no-op when ``active`` is false or threadpoolctl is not installed.  The
+    controller is made once (a few ms); entering the context costs ~20 us.
+    """
+    if not active:
+        return contextlib.nullcontext()
+    if not _BLAS_CONTROLLER:
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:  # optional dependency
+            _BLAS_CONTROLLER.append(None)
+        else:
+            _BLAS_CONTROLLER.append(ThreadpoolController())
+    controller = _BLAS_CONTROLLER[0]
+    if controller is None:
+        return contextlib.nullcontext()
+    return controller.limit(limits=1, user_api="blas")
+
+
+def single_threaded_blas_when_budgeted(fun):
+    """Decorate a solve: BLAS on one thread while it runs when its ``time_budget_s`` is set."""
+    signature = inspect.signature(fun)
+
+    @functools.wraps(fun)
+    def wrapper(*args, **kwargs):
+        if "time_budget_s" in kwargs:
+            budget = kwargs["time_budget_s"]
+        else:
+            budget = signature.bind(*args, **kwargs).arguments.get("time_budget_s")
+        with single_threaded_blas(budget is not None):
+            return fun(*args, **kwargs)
+
+    return wrapper
 
 
 def limit_blas_threads(n=1):

@@ -50,9 +50,13 @@ Every solve has a wall-clock budget of ``BUDGET_PERIODS / max_rate_hz``
 when it runs out, the best in-limit equilibrium found so far is sent with a
 WARN diagnostic ("solve budget used up"), and the solve continues from it in
 the next slice unless a newer target has arrived (at most
-``MAX_CONTINUATIONS`` slices per target; then the best answer stands).
-The corners of the pressure box, which the first unreachable target needs,
-are solved at configure for the configured payload.
+``MAX_CONTINUATIONS`` slices per target; then the best answer stands).  The
+result of a slice carries the solve's progress (core
+:func:`~bellow_ancf_ros.core.solve_inverse`, "Budgets"), so the slices end
+at the answer one unbudgeted solve would give; a slice may overrun its budget
+until it has made progress (at most four budgets).  The corners of the
+pressure box and the cold start, which the first unreachable target and a
+retried solve need, are solved at configure for the configured payload.
 
 Closed loop
 -----------
