@@ -17,7 +17,8 @@ def test_newton_converges_quadratically(one, two):
     for model in (one, two):
         fw = solve_forward(model, _extreme(model) * 0.3)
         h = np.array(fw.history)
-        print(f"{model.cfg.name}: scaled residual per Newton iteration:", " ".join(f"{v:.1e}" for v in h))
+        print(f"{model.cfg.name}: scaled residual per Newton iteration:",
+              " ".join(f"{v:.1e}" for v in h))
         assert fw.converged and h[-1] < 1e-10
         # in the final phase each residual is at most ~C * previous^2
         tail = h[np.argmax(h < 1e-2):]
@@ -96,7 +97,8 @@ def test_results_report_poses_backbones_and_plates(two):
     assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-10)
     bb = fw.backbones(11)
     assert bb.shape == (6, 11, 3)
-    np.testing.assert_allclose(bb[0, 0], two.act_offset[0], atol=1e-12)  # base attachment is clamped
+    # base attachment is clamped
+    np.testing.assert_allclose(bb[0, 0], two.act_offset[0], atol=1e-12)
     poses = fw.plate_poses()
     assert len(poses) == 8  # base + 2 constraint plates + top, per segment
     # every actuator end sits on its top plate at pitch radius
@@ -105,8 +107,8 @@ def test_results_report_poses_backbones_and_plates(two):
         np.testing.assert_allclose(np.linalg.norm(bb[a, -1] - top[2]), 0.02, atol=1e-10)
     np.testing.assert_allclose(top[2], fw.position, atol=1e-12)
     d = fw.to_dict()
-    for key in ("position_m", "rotation", "z_axis", "stretch", "pressures_pa", "converged", "stable",
-                "status", "message", "iterations", "residual_norm"):
+    for key in ("position_m", "rotation", "z_axis", "stretch", "pressures_pa", "converged",
+                "stable", "status", "message", "iterations", "residual_norm"):
         assert key in d
 
 
@@ -149,7 +151,8 @@ def test_cold_starts_converge_over_the_admissible_actuations_one_segment(one):
 def test_cold_starts_converge_two_segments_extreme_actuations(two):
     lo, hi = two.cfg.p_min, two.cfg.p_max
     rng = np.random.default_rng(3)
-    cases = [rng.choice([lo, hi], 6) for _ in range(10)] + [rng.uniform(lo, hi, 6) for _ in range(5)]
+    cases = ([rng.choice([lo, hi], 6) for _ in range(10)]
+             + [rng.uniform(lo, hi, 6) for _ in range(5)])
     for p in cases:
         for payload in (0.0, 0.1):
             fw = solve_forward(two, p, payload_kg=payload)

@@ -28,7 +28,8 @@ def test_round_trip_one_segment(one):
         prev = inv
 
 
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=10, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(st.floats(0.0, 1.0), min_size=6, max_size=6), st.sampled_from([0.0, 0.05]))
 def test_round_trip_two_segments(two, u, payload):
     lo, hi = two.cfg.p_min, two.cfg.p_max
@@ -50,7 +51,8 @@ def test_unreachable_targets_give_best_in_limit_pressures(one, two):
         inv = solve_inverse(model, pos, z)
         assert not inv.reachable and not inv.success and inv.status == 1, inv.message
         p = inv.pressures_pa
-        assert np.all(np.isfinite(p)) and np.all(p >= model.cfg.p_min) and np.all(p <= model.cfg.p_max)
+        assert np.all(np.isfinite(p))
+        assert np.all(p >= model.cfg.p_min) and np.all(p <= model.cfg.p_max)
         assert inv.active_limits.any()
         assert inv.position_error_m > 1e-3
         assert "unreachable" in inv.message
@@ -66,8 +68,10 @@ def test_unreachable_targets_give_best_in_limit_pressures(one, two):
 
 
 def test_redundant_solution_is_unique_and_smooth_along_a_path(two):
-    """Two segments: the same target gives the same pressures whatever the warm start, and a
-    smooth path of targets gives a smooth path of pressures."""
+    """Two segments: the same target gives the same pressures whatever the warm start.
+
+    A smooth path of targets gives a smooth path of pressures.
+    """
     fw = solve_forward(two, [90e3, -20e3, 10e3, -30e3, 60e3, 0.0])
     p0, z0 = fw.position, fw.z_axis
     # a short arc of targets: rotate the pose about the base z axis in 1-degree steps
@@ -102,7 +106,8 @@ def test_warm_start_is_used(one, monkeypatch):
     warm = solve_inverse(one, target, warm_start=fw)
     n_warm = len(calls)
     calls.clear()
-    warmer = solve_inverse(one, target + [0, 1e-3, 0], warm_start=warm)  # carries its sensitivities
+    # the warm start carries its sensitivities
+    warmer = solve_inverse(one, target + [0, 1e-3, 0], warm_start=warm)
     n_warmer = len(calls)
     assert warm.success and cold.success and warmer.success
     assert n_warmer <= n_warm < n_cold / 3, (n_cold, n_warm, n_warmer)

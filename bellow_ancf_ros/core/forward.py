@@ -50,7 +50,10 @@ class ForwardResult:
 
     @property
     def min_eigenvalue(self) -> float | None:
-        """Smallest eigenvalue of the reduced Hessian (scaled coordinates); None before the check."""
+        """Smallest eigenvalue of the reduced Hessian (scaled coordinates).
+
+        None before the stability check.
+        """
         return None if self._reduced_hessian is None else self._reduced_hessian.min_eigenvalue
 
     @property

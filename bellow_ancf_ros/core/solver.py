@@ -88,8 +88,9 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
 
     ``scale`` multiplies the residual component-wise; convergence when the
     scaled infinity norm drops below ``tol``, or when it stops decreasing
-    below ``floor_tol`` (round-off floor: fine meshes cannot reach ``tol``).  ``history`` holds the scaled
-    residual norm of every iterate (for the quadratic-convergence test).
+    below ``floor_tol`` (round-off floor: fine meshes cannot reach ``tol``).
+    ``history`` holds the scaled residual norm of every iterate (for the
+    quadratic-convergence test).
     At most ``max_iter`` iterations; past ``deadline`` (``time.perf_counter()``)
     it stops with status ``TIME_BUDGET``.
     """
@@ -104,7 +105,8 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         # converged, or stagnating at the round-off floor of a fine discretisation
         # (the Jacobian at the solution is returned; it is factorised only if someone needs it)
         if norm <= tol or (norm <= floor_tol and len(hist) > 1 and norm > 0.25 * hist[-2]):
-            return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist, ev.jacobian)
+            return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist,
+                                ev.jacobian)
         if it == max_iter:
             break
         if expired(deadline):
@@ -182,7 +184,8 @@ def continuation(make_fun, x_start, scale, tol=1e-10, max_iter=25, min_step=1.0 
             if dt < min_step:
                 res.iterations = total
                 res.status = STEP_TOO_SMALL
-                res.message = f"{MESSAGES[STEP_TOO_SMALL]} at load fraction {t:.4g} (last: {res.message})"
+                res.message = (f"{MESSAGES[STEP_TOO_SMALL]} at load fraction {t:.4g} "
+                               f"(last: {res.message})")
                 return res
 
 
@@ -223,7 +226,7 @@ class ReducedHessian:
         self.ref = float(abs(H).max())
 
     def is_positive_definite(self, rtol=1e-10):
-        """Smallest eigenvalue above ``rtol * max|H|``?"""
+        """Return whether the smallest eigenvalue is above ``rtol * max|H|``."""
         try:
             sla.cholesky(self.H - rtol * self.ref * self.B, lower=True)
         except sla.LinAlgError:

@@ -185,7 +185,7 @@ class InverseKinetostaticNode(LifecycleNode):
             read_only=True))
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
                          extra_check=self._configure_time_check)
-        self._feedback = FeedbackLink(self, self._publish_diag)   # parameter feedback (closed loop)
+        self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
         self._active = False
