@@ -1,5 +1,8 @@
 """Test-session settings and fixtures shared by all test modules."""
 
+import os
+import random
+
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot
@@ -32,3 +35,24 @@ def one_cfg():
 def two_cfg():
     """The default two-segment robot description."""
     return load_robot("two_segment")
+
+
+@pytest.fixture(scope='module')
+def ros_context():
+    """Isolated ROS 2 context: random domain id, localhost discovery, set before init."""
+    rclpy = pytest.importorskip('rclpy')
+    from rclpy.context import Context
+
+    domain = random.randint(0, 101)
+    saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v

@@ -1,6 +1,5 @@
 """The excitation publisher with real rclpy: the whole sequence, in order and limits, then vent."""
 
-import os
 import random
 import threading
 import time
@@ -10,7 +9,6 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
-from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -19,24 +17,6 @@ from bellow_ancf_ros.core import load_robot  # noqa: E402
 from bellow_ancf_ros.core.excitation import excitation_sequence  # noqa: E402
 from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
-
-
-@pytest.fixture(scope='module')
-def ros_context():
-    """Isolated ROS 2 context: random domain id, localhost discovery, set before init."""
-    domain = random.randint(0, 101)
-    saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
-    os.environ['ROS_DOMAIN_ID'] = str(domain)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-    for k, v in saved.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
 
 
 def wait_for(pred, timeout=20.0, what='condition'):

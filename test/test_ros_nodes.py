@@ -11,7 +11,6 @@ services (``<node>/change_state``, ``<node>/get_state``,
 
 import itertools
 import math
-import os
 import random
 import threading
 import time
@@ -26,7 +25,6 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
-from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension  # noqa: E402
@@ -46,22 +44,6 @@ _ns_counter = itertools.count()
 
 
 # ------------------------------------------------------------------ fixtures
-@pytest.fixture(scope='module')
-def ros_context():
-    """Isolated ROS 2 context: random domain id, localhost discovery, set before init."""
-    domain = random.randint(0, 101)
-    saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
-    os.environ['ROS_DOMAIN_ID'] = str(domain)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-    for k, v in saved.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
 
 
 def wait_for(pred, timeout=TIMEOUT, what='condition'):
