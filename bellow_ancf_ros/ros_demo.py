@@ -17,7 +17,7 @@ holds the path's first point (lead-in) until the trajectory publisher,
 started with ``start_delay_s`` = ``--lead-in`` (default 2 s) once the lead-in
 targets reach the inverse node, sends its first target; one full period
 (20 s, 25 s) is evaluated; then the trajectory publisher stops and the last
-target is held (``--hold``, default 2.5 s) for the steady-state error.
+target is held (``--hold``, default 4 s) for the steady-state error.
 
 Measured = ``measured_pose`` of the simulated robot (motion capture with
 0.15 mm noise), each sample against the newest target that had arrived
@@ -342,7 +342,7 @@ def _parse(argv):
                     help='PNG output (default: %(default)s)')
     ap.add_argument('--lead-in', type=float, default=2.0,
                     help='[s] the path\'s first point is held at least this long')
-    ap.add_argument('--hold', type=float, default=2.5, help='[s] the last target is held')
+    ap.add_argument('--hold', type=float, default=4.0, help='[s] the last target is held')
     ap.add_argument('--period-scale', type=float, default=1.0,
                     help='scale the trajectory periods (20 s, 25 s) by this (tests: shorter runs)')
     ap.add_argument('--seed', type=int, default=1, help='motion-capture noise seed')
