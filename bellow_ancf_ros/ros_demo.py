@@ -136,7 +136,8 @@ class Run:
         """Hold the path's first point (lead-in), start the trajectory publisher after it.
 
         The lead-in targets come from this process (stamp zero) at 10 Hz until the
-        trajectory publisher's first target (a real stamp) arrives; it waits
+        trajectory publisher's first target (a real stamp) arrives (checked on
+        every lead-in tick, so that no lead-in target follows it); it waits
         ``--lead-in`` seconds after its start-up (``start_delay_s``).
         """
         from geometry_msgs.msg import PoseStamped
@@ -154,7 +155,15 @@ class Run:
         pub = self.rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
         if not wait_until(lambda: pub.get_subscription_count() >= 1, self.args.startup_timeout):
             raise RuntimeError('the inverse node does not subscribe target_pose')
-        self._lead_in = self.rec.node.create_timer(0.1, lambda: pub.publish(first))
+
+        def lead_in() -> None:
+            # stop at once when the trajectory flows: a lead-in target after that would
+            # pull the robot back to the path's first point (latest target wins)
+            if self._first_trajectory_target() is not None:
+                self._lead_in.cancel()
+            else:
+                pub.publish(first)
+        self._lead_in = self.rec.node.create_timer(0.1, lead_in)
         traj = {'robot_config': case.robot, 'trajectory': case.trajectory, 'rate_hz': 10.0,
                 'period_s': case.period_s, 'start_delay_s': self.args.lead_in}
         if case.bending_angle_deg is not None:
