@@ -153,6 +153,7 @@ class Run:
         q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
         first = pose_message(pos[0], q, 'base', self._zero_stamp())
         pub = self.rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
+        self._target_pub = pub
         if not wait_until(lambda: pub.get_subscription_count() >= 1, self.args.startup_timeout):
             raise RuntimeError('the inverse node does not subscribe target_pose')
 
@@ -203,9 +204,19 @@ class Run:
             self._check()
 
     def stop_trajectory(self) -> None:
-        """Stop the trajectory publisher: the last target is held from now on."""
+        """Stop the trajectory publisher: the last target is held from now on.
+
+        The newest target this process recorded is republished at 10 Hz during
+        the hold, so that the inverse node holds the same target as the one the
+        measured poses are compared with (a publisher stopped by a signal may
+        have sent a last sample that only one of the two received).
+        """
         self.procs['trajectory'].stop()
         self.stopped.add('trajectory')
+        with self.rec.lock:
+            _, last = self.rec.msgs['target_pose'][-1]
+        self._hold_timer = self.rec.node.create_timer(
+            0.1, lambda: self._target_pub.publish(last))
         self.times['hold'] = time.monotonic()
         self.times['end'] = self.times['hold'] + self.args.hold
 
@@ -214,6 +225,7 @@ class Run:
         while time.monotonic() < self.times['end']:
             time.sleep(0.05)
             self._check()
+        self._hold_timer.cancel()
 
     def fail(self, exc: Exception) -> None:
         """Report a failed run with the nodes' last log lines."""
