@@ -28,7 +28,7 @@ from test_ros_nodes import (  # noqa: E402
     wait_for,
 )
 
-ros_context, h = _rn.ros_context, _rn.h   # the fixtures (isolated domain, harness)
+h = _rn.h   # the harness fixture (the isolated ROS context comes from conftest)
 
 
 def positions(h, topic, n):
