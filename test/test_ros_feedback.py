@@ -13,7 +13,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
@@ -124,7 +124,13 @@ def test_closed_loop_in_process_reaches_held_target(h, one):
     wait_for(converged, timeout=30.0, what='measured pose within 0.3 mm of the target')
     st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
     assert kv(st)['feedback_state'] == 'integrating' and st.level == DiagnosticStatus.OK
-    assert float(kv(st)['feedback_correction_mm']) > 0.5   # it learned the mismatch
+    # feedforward alone leaves the mismatched robot 2.5 mm off this target; the loop
+    # got within 0.3 mm, so it learned a correction (its size varies from run to run,
+    # 0.3 to 2 mm: see the closed-loop core tests for the converged value)
+    mis = RobotModel(load_robot('one_segment_mismatched'), 12)
+    ff_error = np.linalg.norm(solve_forward(mis, [70e3, 10e3, -30e3]).position - target)
+    assert ff_error > 1e-3
+    assert float(kv(st)['feedback_correction_mm']) > 0.1
     cfg = load_robot('one_segment')
     with h.lock:
         for _, m in h.msgs['pressure_command']:
