@@ -147,24 +147,3 @@ def test_cold_solve_cut_by_the_budget_is_continued_by_the_next_call(two):
     assert len(cached) == 1
     fresh = solve_forward(two, cached[0].pressures_pa, payload, check_stability=False)
     assert norm(cached[0].position - fresh.position) < 1e-9
-
-
-def test_budgeted_solves_run_blas_on_one_thread():
-    threadpoolctl = pytest.importorskip("threadpoolctl")
-
-    def blas_threads():
-        info = threadpoolctl.threadpool_info()
-        return {i["num_threads"] for i in info if i["user_api"] == "blas"}
-
-    seen = []
-
-    @solver.single_threaded_blas_when_budgeted
-    def solve(x, time_budget_s=None):
-        seen.append(blas_threads())
-        return x
-
-    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
-        outside = blas_threads()
-        assert solve(1) == 1 and solve(2, 0.01) == 2 and solve(3, time_budget_s=0.01) == 3
-        assert blas_threads() == outside  # restored
-    assert seen[0] == outside and seen[1] == {1} and seen[2] == {1}

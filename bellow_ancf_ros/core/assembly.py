@@ -189,6 +189,7 @@ class RobotModel:
         self.point_masses = masses
         self.ee_plate = plates[self.seg_plates[-1][-1]]["unknown"]
         self.ee_theta = cfg.segments[-1].theta0
+        self._ee_rot = rotation_z(self.ee_theta)
         self.gravity = np.asarray(cfg.gravity, dtype=float)
         self.length_scale = (sum(cfg.l0 for _ in cfg.segments)
                              + sum(s.connector_height for s in cfg.segments))
@@ -471,7 +472,7 @@ class RobotModel:
     def end_effector(self, q):
         """End-effector position and rotation (docs/model.md section 1)."""
         p, D = self.plate_frame(q, self.ee_plate)
-        return p + self.cfg.tool_length * D[:, 2], D @ rotation_z(self.ee_theta)
+        return p + self.cfg.tool_length * D[:, 2], D @ self._ee_rot
 
     def plate_poses(self, q):
         """List of ``(segment, fraction, position, rotation)`` for every plate, base first."""

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import linsolve, solver
+from .blas import one_thread_call
 from .assembly import RobotModel
 from .stability import StabilityCheck
 
@@ -44,7 +45,11 @@ class ForwardResult:
     jacobian: object = field(default=None, repr=False)
     _lu: object = field(default=None, repr=False)
     _reduced_hessian: object = field(default=None, repr=False)
-    _sensitivity: object = field(default=None, repr=False)  # dx/dlam near x (inverse predictor)
+    # W = -dx/dlam = J^{-1} dR/dlam near x, and (factorisation, its W) from a point near x:
+    # the predictor and the chord steps of the next warm-started inverse solve
+    _sensitivity: object = field(default=None, repr=False)
+    _chord: object = field(default=None, repr=False)
+    _step_maps: object = field(default=None, repr=False)  # inverse_newton._StretchStep of W
     # a solve that ran out of budget: where it stopped (a warm start continues it)
     resume_state: ResumeState | None = field(default=None, repr=False)
 
@@ -217,7 +222,7 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
     return res, resume
 
 
-@solver.single_threaded_blas_when_budgeted
+@one_thread_call
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
                   check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
                   iteration_budget=500) -> ForwardResult:
@@ -247,8 +252,8 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
         solve stops with ``converged`` false and ``status`` ``solver.TIME_BUDGET``
         (the stability check, about a millisecond, is not cut short).  The
         deadline is checked before every Newton iteration, so the overshoot is
-        at most one iteration (one factorisation and its line search).  With a
-        wall-clock budget BLAS runs on one thread (``solver.single_threaded_blas``).
+        at most one iteration (one factorisation and its line search).  BLAS
+        runs on one thread inside (``core.blas``).
     """
     deadline = solver.deadline_after(time_budget_s)
     p = check_pressures(model, pressures)

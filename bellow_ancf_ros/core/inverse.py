@@ -65,6 +65,7 @@ import numpy as np
 
 from .assembly import RobotModel
 from . import solver
+from .blas import one_thread_call
 from .forward import UNSTABLE, ForwardResult, assess_stability, solve_forward
 from .inverse_limits import best_in_limits, corner_solutions, stationary
 from .inverse_newton import (
@@ -225,7 +226,7 @@ def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None, to
     return bool(fw.converged)
 
 
-@solver.single_threaded_blas_when_budgeted
+@one_thread_call
 def solve_inverse(
     model: RobotModel,
     position,
@@ -264,9 +265,9 @@ def solve_inverse(
         ``Budget.GRACE_BUDGETS`` budgets more), plus one Newton iteration and
         one stability check.  With ``max_forward_solves`` alone slices are
         deterministic; a warm start that is not such a result needs 2 forward
-        solves per call to make progress.  A call with ``time_budget_s`` runs
-        BLAS on one thread (multithreaded BLAS on these small dense matrices
-        can take hundreds of milliseconds on a loaded machine).
+        solves per call to make progress.  BLAS runs on one thread inside
+        (``core.blas``: multithreaded BLAS on these small dense matrices can
+        take hundreds of milliseconds on a loaded machine).
     """
     budget = Budget(time_budget_s, max_forward_solves)
     cfg = model.cfg

@@ -11,12 +11,14 @@ the pressure limits, the full-space Newton method on ``[lam, q, alpha]``
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 import weakref
 
 import numpy as np
 
-from . import solver
+from . import linsolve, solver
+from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps
 from .forward import ForwardResult, solve_forward
 
 __all__ = [
@@ -106,8 +108,10 @@ class Budget:
 
 
 def norm(v):
-    """Euclidean norm that cannot overflow."""
-    v = np.asarray(v, dtype=float)
+    """Euclidean norm that cannot overflow (nor underflow)."""
+    v = np.asarray(v, dtype=float).ravel()
+    if v.size <= 8:
+        return math.hypot(*v.tolist())  # scaled internally: no overflow, no underflow
     m = float(np.max(np.abs(v))) if v.size else 0.0
     if m == 0.0 or not np.isfinite(m):
         return m
@@ -264,10 +268,14 @@ def cold_solution(model, pressures, payload, tol, budget):
 
 def pose_errors(fw, position, z_axis):
     """Position error [m] and angle error [rad] (None without a target axis) of ``fw``."""
-    pos_err = norm(fw.position - position)
+    p_ee, rot = fw.model.end_effector(fw.q)
+    pos_err = norm(p_ee - position)
     ang = None
     if z_axis is not None:
-        ang = float(np.arctan2(norm(np.cross(fw.z_axis, z_axis)), np.dot(fw.z_axis, z_axis)))
+        z = rot[:, 2]
+        cross = (z[1] * z_axis[2] - z[2] * z_axis[1], z[2] * z_axis[0] - z[0] * z_axis[2],
+                 z[0] * z_axis[1] - z[1] * z_axis[0])
+        ang = float(np.arctan2(norm(cross), z @ z_axis))
     return pos_err, ang
 
 
@@ -380,97 +388,172 @@ def iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
     return lam, fw, O, J, False, max_iter
 
 
-def full_space_newton(
-    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
-    budget=None,
-):
-    """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30).
+# chord steps (a factorisation from an earlier point, reused): each must cut the residual by
+# this factor at least, and at most this many in a row; then Newton with a new factorisation
+CHORD_RATE = 0.1
+MAX_CHORD = 12
 
-    The bordered Jacobian is eliminated by its Schur complement: with
-    ``J_x`` factorised once per iteration, ``J_x^{-1}[R, dR/dlam]`` gives the
-    reduced objective Jacobian ``J_O`` and the equilibrium correction, the
-    stretch step solves ``J_O dlam = -(O - O_x J_x^{-1} R)`` (minimum-norm
-    plus null-space term for redundant robots, as in the reduced iteration)
-    and ``dx = -J_x^{-1}(R + dR/dlam dlam)``.  One factorisation per
-    iteration and quadratic convergence: the fast path for warm-started
-    targets along a trajectory.  Returns a converged ForwardResult or None
-    (then the robust reduced iteration takes over): it never leaves the
-    interior of the pressure box and gives up on any sign of trouble, or when
-    the ``budget``'s deadline has passed (checked before every factorisation).
+
+class _StretchStep:
+    """The stretch part of the Schur-complement step for one sensitivity matrix ``W``.
+
+    ``J_O = -T W`` (``T``: the objective's linear map, the same for every
+    target of a model) and its (pseudo-)inverse and null-space projector are
+    made once per ``W`` and kept with it (``of``), so that chord steps and
+    predictors with the same ``W`` cost a few matrix-vector products each.
     """
-    x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
-    null_norm = [np.inf]
 
-    def stretch_step(w0, W):
-        """Stretch increment of the Schur-complement Newton step (None: leave the fast path)."""
+    def __init__(self, target, multi, W, lam_ref, lo, hi):
+        """Set up; see the class docstring."""
+        self.W, self.lam_ref, self.lo, self.hi = W, lam_ref, lo, hi
         JO = -target.linear(W)
+        self.inv, self.proj = None, None
+        if np.all(np.isfinite(JO)):
+            if multi:
+                self.inv = np.linalg.pinv(JO, rcond=_RCOND)
+                self.proj = np.eye(W.shape[1]) - self.inv @ JO
+            else:
+                try:
+                    self.inv = np.linalg.inv(JO)
+                except np.linalg.LinAlgError:
+                    pass
+        self.null_norm = np.inf
+
+    @classmethod
+    def of(cls, cache, target, multi, W, lam_ref, lo, hi):
+        """The step map of ``W`` from ``cache`` (a dict kept with ``W``), made on first use."""
+        key = (target.axis, multi)
+        sm = cache.get(key)
+        if sm is None or sm.W is not W:
+            sm = cache[key] = cls(target, multi, W, lam_ref, lo, hi)
+        return sm
+
+    def __call__(self, target, x, lam, w0):
+        """Stretch increment at the state ``x``, ``w0 = J^{-1} R`` (None: leave the fast path)."""
+        if self.inv is None:
+            return None
         Ot = target(x) - target.linear(w0)
-        if multi:
-            Jp = np.linalg.pinv(JO, rcond=_RCOND)
-            null = (np.eye(model.A) - Jp @ JO) @ (lam_ref - lam)
-            d = -Jp @ Ot + null
-            null_norm[0] = float(np.max(np.abs(null)))
+        d = -self.inv @ Ot
+        if self.proj is not None:
+            null = self.proj @ (self.lam_ref - lam)
+            d = d + null
+            self.null_norm = float(np.max(np.abs(null)))
         else:
-            null_norm[0] = 0.0
-            try:
-                d = -np.linalg.solve(JO, Ot)
-            except np.linalg.LinAlgError:
-                return None
+            self.null_norm = 0.0
         if (
             not np.all(np.isfinite(d))
             or np.max(np.abs(d)) > 0.05
-            or np.any(lam + d <= lo)
-            or np.any(lam + d >= hi)
+            or np.any(lam + d <= self.lo)
+            or np.any(lam + d >= self.hi)
         ):
             return None
         return d
 
-    hist, W = [], None
-    pred = warm_fw._sensitivity
-    if pred is not None:
+
+def full_space_newton(
+    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
+    budget=None,
+):
+    """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30), chord first.
+
+    The bordered Jacobian is eliminated by its Schur complement: with
+    ``J_x`` factorised, ``W = J_x^{-1} dR/dlam`` gives the reduced objective
+    Jacobian ``J_O = -T W`` and the equilibrium correction, the stretch step
+    solves ``J_O dlam = -(O - T J_x^{-1} R)`` (minimum-norm plus null-space
+    term for redundant robots, as in the reduced iteration) and
+    ``dx = -J_x^{-1}(R + dR/dlam dlam)``.
+
+    Along a trajectory the factorisation of an earlier answer (carried by the
+    warm start, ``ForwardResult._chord``) is reused first: chord steps, one
+    single-column banded solve each, linear convergence at a rate that grows
+    with the distance to where it was made (about 1e-3 per millimetre).  They
+    must cut the residual by ``CHORD_RATE`` each; when they do not (or after
+    ``MAX_CHORD`` of them) Newton's method takes over with one factorisation
+    per iteration, quadratic, and its last factorisation is the one the next
+    target reuses.  The answer does not depend on the factorisation used:
+    for one segment (as many target equations as stretches) the iteration
+    solves ``R = 0, O = 0`` whatever ``J_x`` approximates it; for redundant
+    robots the null-space condition needs the exact ``W``, so the answer is
+    accepted only after a Newton step (fresh factorisation) whose null-space
+    correction is below 1e-9.
+
+    Returns a converged ForwardResult or None (then the robust reduced
+    iteration takes over): it never leaves the interior of the pressure box
+    and gives up on any sign of trouble, or when the ``budget``'s deadline
+    has passed (checked before every factorisation).
+    """
+    x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
+
+    def step_map(W, cache):
+        return _StretchStep.of(cache, target, multi, W, lam_ref, lo, hi)
+
+    def result(ev, rn, its):
+        return ForwardResult(
+            model=model,
+            pressures_pa=np.clip(model.stage1.pressure(lam), model.cfg.p_min, model.cfg.p_max),
+            stretch=lam.copy(), payload_kg=payload, x=x, converged=True, stable=None,
+            status=solver.CONVERGED, message=solver.MESSAGES[solver.CONVERGED],
+            iterations=its, residual_norm=rn, history=hist, jacobian=ev.jacobian,
+            _sensitivity=W, _chord=chord, _step_maps=maps,
+        )
+
+    hist, sm = [], None
+    chord = warm_fw._chord  # (factorisation, its W) from an earlier answer, or None
+    W = warm_fw._sensitivity
+    maps = warm_fw._step_maps if warm_fw._step_maps is not None else {}  # step maps of W
+    if W is not None:
         # predictor: the warm start is an equilibrium (R ~ 0) and its sensitivities are known
-        W = pred
-        dlam = stretch_step(np.zeros(model.N), W)
+        sm = step_map(W, maps)
+        dlam = sm(target, x, lam, np.zeros(model.N))
         if dlam is None:
             return None
         x = x - W @ dlam
         lam = lam + dlam
-    for it in range(max_iter + 1):
+    n_chord = 0
+    lu = None if chord is None else getattr(chord[0], "lu", None)
+    if isinstance(lu, linsolve.BandedLU):
+        chord_map = step_map(chord[1], maps if chord[1] is W else {})
+        if chord_map.inv is not None:
+            # compiled chord steps (core.chord) with the factorisation of an earlier answer
+            x, lam, status, n_chord, h, rn = chord_steps(
+                model, payload, target, lu, chord[1], chord_map, x, lam, tol, CHORD_RATE,
+                MAX_CHORD)
+            hist += h
+            if status == NONFINITE:
+                return None
+            if status == CHORD_CONVERGED and not multi:
+                fw = result(model.evaluate(x, lam, 1.0, payload, jacobian=True), rn, n_chord)
+                if done(fw):
+                    return fw
+            hist.pop()  # Newton evaluates this iterate again, with its Jacobian
+    exact = False  # the last step used a factorisation made at its own point
+    newton_its = 0
+    while True:
         ev = model.evaluate(x, lam, 1.0, payload, jacobian=True, lam_derivative=True)
-        R = ev.residual
-        rn = float(np.max(np.abs(R * model.residual_scale)))
+        rn = float(np.max(np.abs(ev.residual * model.residual_scale)))
         hist.append(rn)
-        if not np.isfinite(rn) or (it >= 2 and rn > 1e-2):
+        if not np.isfinite(rn):
             return None
-        if rn <= tol and null_norm[0] <= 1e-9:
-            fw = ForwardResult(
-                model=model,
-                pressures_pa=np.clip(model.stage1.pressure(lam), model.cfg.p_min, model.cfg.p_max),
-                stretch=lam.copy(),
-                payload_kg=payload,
-                x=x,
-                converged=True,
-                stable=None,
-                status=solver.CONVERGED,
-                message=solver.MESSAGES[solver.CONVERGED],
-                iterations=it,
-                residual_norm=rn,
-                history=hist,
-                jacobian=ev.jacobian,
-                _sensitivity=W,
-            )
+        if rn <= tol and (not multi or (exact and sm.null_norm <= 1e-9)):
+            fw = result(ev, rn, newton_its + n_chord)
             if done(fw):
                 return fw
-        if it == max_iter or (budget is not None and budget.expired()):
-            break
+        if (newton_its >= 2 and rn > 1e-2) or newton_its >= max_iter:
+            return None
+        if budget is not None and budget.expired():
+            return None
+        factorised = linsolve.kkt_solver(model).bound(ev.jacobian)
         try:
-            sol = ev.solve(np.column_stack([R, ev.dres_dlam]))  # banded LU (core.linsolve)
+            sol = factorised.solve(np.column_stack([ev.residual, ev.dres_dlam]))  # banded LU
         except np.linalg.LinAlgError:
             return None
+        newton_its += 1
         w0, W = sol[:, 0], sol[:, 1:]
-        dlam = stretch_step(w0, W)
+        chord, maps = (factorised, W), {}
+        sm = step_map(W, maps)
+        dlam = sm(target, x, lam, w0)
         if dlam is None:
             return None
         x = x - (w0 + W @ dlam)
         lam = lam + dlam
-    return None
+        exact = True

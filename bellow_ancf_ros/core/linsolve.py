@@ -15,7 +15,7 @@ attachment that sits on a node) stay out of the band.
 measured too: at these sizes the extra multi-column solves cost as much as
 the factorisations they save, so every matrix is factorised.)
 
-BLAS runs on one thread inside these calls (:func:`single_blas_thread`).
+BLAS runs on one thread inside these calls (:mod:`core.blas`).
 """
 
 from __future__ import annotations
@@ -23,30 +23,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg.lapack as lapack
 
-__all__ = ["BandedKKT", "BandedLU", "KKTSolver", "kkt_solver", "single_blas_thread"]
+from .blas import one_thread
 
-
-_CONTROLLER = None
-
-
-def single_blas_thread():
-    """Context manager limiting BLAS to one thread (the core's dense calls are small).
-
-    On a loaded 2-core machine a multithreaded BLAS makes the small dense
-    factorisations here ten to twenty times slower; the core limits itself
-    inside its own calls, so that no caller has to remember.  A no-op
-    without threadpoolctl.
-    """
-    global _CONTROLLER
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # optional dependency
-        import contextlib
-
-        return contextlib.nullcontext()
-    if _CONTROLLER is None:
-        _CONTROLLER = ThreadpoolController()
-    return _CONTROLLER.limit(limits=1, user_api="blas")
+__all__ = ["BandedKKT", "BandedLU", "KKTSolver", "kkt_solver"]
 
 
 def level_order(model):
@@ -117,7 +96,7 @@ class BandedKKT:
             raise ValueError("matrix has non-zeros outside the model's band")
         ab = np.zeros((self.rows, self.N))
         ab.ravel()[self.flat] = J.data[self.keep]
-        with single_blas_thread():
+        with one_thread():
             lub, piv, info = lapack.dgbtrf(ab, self.kl, self.ku, overwrite_ab=1)
         if info != 0 or not np.all(np.isfinite(lub[self.kl + self.ku])):
             return None
@@ -134,7 +113,7 @@ class BandedLU:
         """Solve ``J x = b`` (``b``: vector or matrix of columns)."""
         p = self.p
         bp = np.asarray(b, dtype=float)[p.perm]
-        with single_blas_thread():
+        with one_thread():
             x, info = lapack.dgbtrs(self.lub, p.kl, p.ku, bp, self.piv)
         out = np.empty_like(x)
         out[p.perm] = x

@@ -15,19 +15,17 @@ space of the constraints, ``Z^T H Z > 0`` with ``C_q Z = 0``.
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, field
-import functools
-import inspect
 import time
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from .blas import limit_blas_threads  # noqa: F401 - re-exported for callers
+
 __all__ = ["NewtonResult", "newton", "continuation", "ReducedHessian", "limit_blas_threads",
-           "deadline_after", "expired", "single_threaded_blas",
-           "single_threaded_blas_when_budgeted"]
+           "deadline_after", "expired"]
 
 # status codes (like scipy.optimize)
 CONVERGED = 0
@@ -236,58 +234,3 @@ class ReducedHessian:
     @property
     def min_eigenvalue(self):
         return float(sla.eigh(self.H, self.B, eigvals_only=True, subset_by_index=[0, 0])[0])
-
-
-_BLAS_CONTROLLER = []  # threadpoolctl controller, made on first use (None: not installed)
-
-
-def single_threaded_blas(active=True):
-    """Context manager: BLAS on one thread inside (for time-budgeted solves; see below).
-
-    A no-op when ``active`` is false or threadpoolctl is not installed.  The
-    controller is made once (a few ms); entering the context costs ~20 us.
-    """
-    if not active:
-        return contextlib.nullcontext()
-    if not _BLAS_CONTROLLER:
-        try:
-            from threadpoolctl import ThreadpoolController
-        except ImportError:  # optional dependency
-            _BLAS_CONTROLLER.append(None)
-        else:
-            _BLAS_CONTROLLER.append(ThreadpoolController())
-    controller = _BLAS_CONTROLLER[0]
-    if controller is None:
-        return contextlib.nullcontext()
-    return controller.limit(limits=1, user_api="blas")
-
-
-def single_threaded_blas_when_budgeted(fun):
-    """Decorate a solve: BLAS on one thread while it runs when its ``time_budget_s`` is set."""
-    signature = inspect.signature(fun)
-
-    @functools.wraps(fun)
-    def wrapper(*args, **kwargs):
-        if "time_budget_s" in kwargs:
-            budget = kwargs["time_budget_s"]
-        else:
-            budget = signature.bind(*args, **kwargs).arguments.get("time_budget_s")
-        with single_threaded_blas(budget is not None):
-            return fun(*args, **kwargs)
-
-    return wrapper
-
-
-def limit_blas_threads(n=1):
-    """Limit BLAS to ``n`` threads (if threadpoolctl is installed).
-
-    The matrices here are small (a few hundred rows); multithreaded BLAS only
-    adds overhead, and on a loaded 2-core machine it can be ten times slower.
-    The core's own dense calls limit themselves (``linsolve.single_blas_thread``);
-    this process-wide limit is for callers' own numpy work.
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # optional dependency
-        return None
-    return threadpool_limits(limits=n, user_api="blas")

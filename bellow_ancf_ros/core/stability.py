@@ -18,8 +18,8 @@ by Finsler's lemma some finite ``rho`` succeeds whenever it is.  ``A`` is
 sparse with the coupling of the robot's chain;
 in the level order of :mod:`core.linsolve` (unknowns by height along the
 robot) it is banded with a bandwidth independent of the element and segment counts,
-and its Cholesky factorisation (compiled, no BLAS, one thread) is linear in
-the size.  Two penalties are tried (``rho = 10`` and ``1e4`` times
+and its Cholesky factorisation (LAPACK's banded ``dpbtrf``, BLAS on one
+thread) is linear in the size.  Two penalties are tried (``rho = 10`` and ``1e4`` times
 ``max|H_s|``, rows of ``C_s`` normalised); if both fail, the exact dense test
 decides (unstable equilibria, or a margin within ~1e-8 of buckling), so
 every answer is the dense test's answer or a proof of it.
@@ -28,13 +28,15 @@ every answer is the dense test's answer or a proof of it.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg.lapack as lapack
 import scipy.sparse as sp
 from numba import njit
 
 from . import solver
-from .linsolve import level_order, single_blas_thread
+from .blas import one_thread
+from .linsolve import level_order
 
-__all__ = ["StabilityCheck", "BandedPattern", "banded_cholesky", "single_blas_thread"]
+__all__ = ["StabilityCheck", "BandedPattern", "banded_cholesky"]
 
 PENALTIES = (10.0, 1e4)
 
@@ -59,6 +61,8 @@ class BandedPattern:
         self.kd = int(np.max(np.abs(iperm[A.row] - iperm[A.col])))
         self.iperm = iperm
         self.nq = nq
+        self.csc = (model._csc_indptr, model._csc_indices)  # the model's pattern, and in int64:
+        self.csc64 = (model._csc_indptr.astype(np.int64), model._csc_indices.astype(np.int64))
 
 
 def _pattern(model):
@@ -68,30 +72,19 @@ def _pattern(model):
     return pat
 
 
-@njit(cache=True)
 def banded_cholesky(ab):
     """In-place Cholesky ``A = L L^T`` of a banded SPD matrix; ``ab[j, k] = A[j + k, j]``.
 
-    Returns False as soon as a pivot is not positive (``A`` not positive definite).
+    LAPACK's ``dpbtrf`` (``ab.T`` is its lower band storage), BLAS on one
+    thread.  Returns False when ``A`` is not positive definite (a pivot is
+    not positive); ``ab`` then holds a partial factor.
     """
-    n, w = ab.shape
-    kd = w - 1
-    for j in range(n):
-        d = ab[j, 0]
-        if not d > 0.0:
-            return False
-        d = np.sqrt(d)
-        ab[j, 0] = d
-        m = min(kd, n - 1 - j)
-        for i in range(1, m + 1):
-            ab[j, i] /= d
-        for k in range(1, m + 1):
-            lk = ab[j, k]
-            if lk != 0.0:
-                row = ab[j + k]
-                for i in range(k, m + 1):
-                    row[i - k] -= ab[j, i] * lk
-    return True
+    ab = np.asarray(ab)
+    if not (ab.flags.c_contiguous and ab.dtype == np.float64):
+        raise ValueError("banded_cholesky: a C-contiguous float64 array (factorised in place)")
+    with one_thread():
+        _, info = lapack.dpbtrf(ab.T, lower=1, overwrite_ab=1)
+    return info == 0
 
 
 @njit(cache=True)
@@ -138,15 +131,12 @@ def _assemble(data, indptr, indices, nq, D, iperm, kd):
     return bh, bp, ref
 
 
-@njit(cache=True)
 def _penalised_test(bh, bp, ref, rtol, penalties):
     """Index of the first penalty whose ``A(rho)`` factorises, or -1."""
     shift = rtol * ref
-    for t in range(penalties.shape[0]):
-        rho = penalties[t] * ref
-        ab = bh + rho * bp
-        for j in range(ab.shape[0]):
-            ab[j, 0] -= shift
+    for t, pen in enumerate(penalties):
+        ab = bh + (pen * ref) * bp
+        ab[:, 0] -= shift
         if banded_cholesky(ab):
             return t
     return -1
@@ -170,7 +160,7 @@ class StabilityCheck:
     def dense(self):
         """The exact dense reduced Hessian (built on first use, one BLAS thread)."""
         if self._dense is None:
-            with single_blas_thread():
+            with one_thread():
                 self._dense = solver.ReducedHessian(
                     self.jacobian, self.model.nq, self.model.dof_scale
                 )
@@ -181,24 +171,29 @@ class StabilityCheck:
         m = self.model
         J = self.jacobian
         pat = _pattern(m)
+        if (J.indices.shape == pat.csc[1].shape and np.array_equal(J.indptr, pat.csc[0])
+                and np.array_equal(J.indices, pat.csc[1])):
+            indptr, indices = pat.csc64
+        else:
+            indptr, indices = J.indptr.astype(np.int64), J.indices.astype(np.int64)
         bh, bp, ref = _assemble(
             J.data,
-            J.indptr.astype(np.int64),
-            J.indices.astype(np.int64),
+            indptr,
+            indices,
             m.nq,
             m.dof_scale,
             pat.iperm,
             pat.kd,
         )
-        t = _penalised_test(bh, bp, ref, float(rtol), np.array(PENALTIES))
+        t = _penalised_test(bh, bp, ref, float(rtol), PENALTIES)
         if t >= 0:
             self.proved_by = PENALTIES[t]
             return True
-        with single_blas_thread():
+        with one_thread():
             return self.dense.is_positive_definite(rtol)
 
     @property
     def min_eigenvalue(self):
         """Smallest eigenvalue of the reduced Hessian pencil (scaled coordinates)."""
-        with single_blas_thread():
+        with one_thread():
             return self.dense.min_eigenvalue

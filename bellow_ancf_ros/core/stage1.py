@@ -49,6 +49,18 @@ _EPS = np.finfo(float).eps
 _IMAG_TOL = 1e-6
 
 
+def _horner(a: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    """``sum_i coeffs[i] a**i`` (ascending coefficients), as ``numpy.polynomial.polyval``.
+
+    The same operations in the same order as ``polyval``, without its
+    argument handling: stage 1 is evaluated at every Newton iterate.
+    """
+    out = np.full(a.shape, coeffs[-1]) if a.ndim else coeffs[-1] + 0.0 * a
+    for c in coeffs[-2::-1]:
+        out = out * a + c
+    return out
+
+
 def _as_output(values: np.ndarray, scalar: bool) -> Any:
     """Return a Python float for scalar input, the array otherwise."""
     return float(values) if scalar else values
@@ -259,12 +271,12 @@ class Stage1:
     def k(self, lam: Any) -> Any:
         """Return the structural stiffness at stretch ``lam`` [N/m] (paper eq. 1)."""
         a = np.asarray(lam, dtype=float)
-        return _as_output(npoly.polyval(a, self._k), a.ndim == 0)
+        return _as_output(_horner(a, self._k), a.ndim == 0)
 
     def dk(self, lam: Any) -> Any:
         """``dk/dlam`` [N/m]."""
         a = np.asarray(lam, dtype=float)
-        return _as_output(npoly.polyval(a, self._dk), a.ndim == 0)
+        return _as_output(_horner(a, self._dk), a.ndim == 0)
 
     def pressure(self, lam: Any) -> Any:
         """Gauge pressure [Pa] giving stretch ``lam``: eq. (24) solved for P.
@@ -273,7 +285,7 @@ class Stage1:
         ``lam`` (no branch check).
         """
         a = np.asarray(lam, dtype=float)
-        g = npoly.polyval(a, self._k) * (a - 1.0)
+        g = _horner(a, self._k) * (a - 1.0)
         return _as_output(self._p_per_h * g, a.ndim == 0)
 
     def dpressure(self, lam: Any) -> Any:

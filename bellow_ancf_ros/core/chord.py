@@ -1,0 +1,181 @@
+"""Chord steps of the warm-started inverse solve, compiled (eqs. 25, 28-30).
+
+Along a trajectory, :func:`core.inverse_newton.full_space_newton` first
+reuses the banded LU factorisation of the KKT matrix (eq. 27) made near an
+earlier answer: each chord step is one residual evaluation, one
+single-column banded solve and a few small products, so that the loop of
+such steps runs here, compiled, with no Python call per step.  The step is
+the one of ``full_space_newton`` (Schur complement of the bordered
+Jacobian, with ``J_x`` and ``W = J_x^{-1} dR/dlam`` frozen)::
+
+    w0   = J_x^{-1} R(x, lam)
+    dlam = -J_O^{-1} (O(x) - T w0)   [+ (I - J_O^+ J_O)(lam_ref - lam), redundant]
+    x   <- x - (w0 + W dlam),   lam <- lam + dlam
+
+The loop stops when the residual is below the tolerance, when a step cuts
+it by less than ``rate``, after ``max_steps``, or when a step would leave
+the trust region or the pressure box; the caller goes on with Newton's
+method from there.  :func:`banded_solve` is LAPACK's ``dgbtrs`` (no
+transpose, one right-hand side) for the factors of ``dgbtrf``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .kernels import evaluate_kernel
+
+__all__ = ["banded_solve", "chord_steps", "CONVERGED", "STALLED", "LEFT_BOX", "MAX_STEPS",
+           "NONFINITE"]
+
+CONVERGED, STALLED, LEFT_BOX, MAX_STEPS, NONFINITE = 0, 1, 2, 3, 4
+
+
+@njit(cache=True)
+def banded_solve(lub, piv, kl, ku, b):
+    """Solve ``A x = b`` with the banded LU of scipy's ``dgbtrf`` (``lub``, ``piv``); a copy.
+
+    ``piv`` is 0-based, as scipy's wrapper returns it.
+    """
+    n = b.shape[0]
+    x = b.copy()
+    kd = kl + ku
+    for j in range(n - 1):  # L: row interchanges and unit lower band
+        p = piv[j]
+        if p != j:
+            t = x[p]
+            x[p] = x[j]
+            x[j] = t
+        m = min(kl, n - 1 - j)
+        xj = x[j]
+        if xj != 0.0:
+            for i in range(1, m + 1):
+                x[j + i] -= lub[kd + i, j] * xj
+    for j in range(n - 1, -1, -1):  # U: upper band of width kl + ku
+        xj = x[j] / lub[kd, j]
+        x[j] = xj
+        if xj != 0.0:
+            m = min(kd, j)
+            for i in range(1, m + 1):
+                x[j - i] -= lub[kd - i, j] * xj
+    return x
+
+
+@njit(cache=True)
+def _horner(a, c):
+    out = np.full(a.shape[0], c[c.shape[0] - 1])
+    for k in range(c.shape[0] - 2, -1, -1):
+        out = out * a + c[k]
+    return out
+
+
+@njit(cache=True)
+def _target(v, pd, tool, L, axis, offset):
+    """Objective of eq. (28) at the state ``v`` (``offset`` subtracted; zeros: linear part)."""
+    k = 6 if axis else 3
+    o = np.empty(k)
+    for i in range(3):
+        o[i] = (v[pd[i]] + tool * v[pd[9 + i]]) / L - offset[i]
+        if axis:
+            o[3 + i] = v[pd[9 + i]] - offset[3 + i]
+    return o
+
+
+@njit(cache=True)
+def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_proj, lam_ref,
+                lo, hi, pd, tool, L, axis, offset, scale, kcoef, dkcoef, l0, n_el, d_a, rho0,
+                g, Qpoint, kargs, tol, rate, max_steps):
+    N = x.shape[0]
+    nq = Qpoint.shape[0]
+    hist = np.empty(max_steps + 1)
+    zero = np.zeros(offset.shape[0])
+    n_steps = 0
+    status = MAX_STEPS
+    rn = np.inf
+    while True:
+        k = _horner(lam, kcoef)
+        dk = _horner(lam, dkcoef)
+        le = lam * l0 / n_el
+        kt = k * l0
+        kb = d_a * d_a * l0 * lam * k / 8.0
+        dle = np.full(lam.shape[0], l0 / n_el)
+        dkt = dk * l0
+        dkb = d_a * d_a * l0 * (k + lam * dk) / 8.0
+        res, _, _ = evaluate_kernel(
+            x[:nq], x[nq:], lam, le, kt, kb, dle, dkt, dkb, rho0, g, Qpoint,
+            kargs[0], kargs[1], kargs[2], kargs[3], kargs[4], kargs[5], kargs[6], kargs[7],
+            kargs[8], kargs[9], kargs[10], kargs[11], kargs[12], kargs[13], kargs[14],
+            kargs[15], kargs[16], kargs[17], False, False)
+        rn = 0.0
+        for i in range(N):
+            a = abs(res[i] * scale[i])
+            if not a <= rn:  # also NaN
+                rn = a
+        hist[n_steps] = rn
+        if not np.isfinite(rn):
+            status = NONFINITE
+            break
+        if rn <= tol:
+            status = CONVERGED
+            break
+        if rn > rate * rn_prev:
+            status = STALLED
+            break
+        if n_steps >= max_steps:
+            status = MAX_STEPS
+            break
+        bp = np.empty(N)
+        for i in range(N):
+            bp[i] = res[perm[i]]
+        sol = banded_solve(lub, piv, kl, ku, bp)
+        w0 = np.empty(N)
+        for i in range(N):
+            w0[perm[i]] = sol[i]
+        Ot = _target(x, pd, tool, L, axis, offset) - _target(w0, pd, tool, L, axis, zero)
+        d = -(JOinv @ Ot)
+        if use_proj:
+            d = d + proj @ (lam_ref - lam)
+        bad = False
+        for i in range(d.shape[0]):
+            if not (abs(d[i]) <= 0.05 and lo[i] < lam[i] + d[i] < hi[i]):
+                bad = True
+        if bad:
+            status = LEFT_BOX
+            break
+        x = x - (w0 + W @ d)
+        lam = lam + d
+        rn_prev = rn
+        n_steps += 1
+    return x, lam, status, n_steps, hist[: n_steps + 1], rn
+
+
+def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_steps,
+                rn_prev=np.inf):
+    """Chord steps from ``(x, lam)`` with the factorisation ``lu`` (a ``BandedLU``) and ``W``.
+
+    ``step`` is the ``inverse_newton._StretchStep`` of ``W`` (``J_O``'s
+    inverse, the null-space projector).  Returns ``(x, lam, status, steps,
+    history, rn)``: the last iterate (its residual norm ``rn``, evaluated),
+    why the loop stopped, the steps taken and the residual norms seen.
+    """
+    p = lu.p
+    proj = step.proj
+    use_proj = proj is not None
+    cfg = model.cfg
+    Qpoint = model._q_masses
+    if payload:
+        Qpoint = Qpoint + payload * model._q_payload
+    st = model.stage1
+    out = _chord_loop(
+        np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(lam, dtype=float),
+        float(rn_prev), lu.lub, lu.piv, p.kl, p.ku, p.perm, np.ascontiguousarray(W),
+        np.ascontiguousarray(step.inv), np.ascontiguousarray(proj) if use_proj else
+        np.zeros((model.A, model.A)), use_proj, step.lam_ref, step.lo, step.hi,
+        target.pd.astype(np.int64), float(target.tool), float(target.L), bool(target.axis),
+        target.offset, model.residual_scale, np.asarray(st._k, dtype=float),
+        np.asarray(st._dk, dtype=float), float(cfg.l0), float(model.n), float(cfg.d_a),
+        float(cfg.rho0), model.gravity, Qpoint, model._kargs, float(tol), float(rate),
+        int(max_steps))
+    x, lam, status, steps, hist, rn = out
+    return x, lam, int(status), int(steps), [float(h) for h in hist], float(rn)
