@@ -392,6 +392,9 @@ def iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
 # this factor at least, and at most this many in a row; then Newton with a new factorisation
 CHORD_RATE = 0.1
 MAX_CHORD = 12
+# redundant robots: a refined W (one step with the last factorisation) counts as the W of its
+# iterate when the refinement changed it by less than this (relative); else a new factorisation
+REFINE_TOL = 1e-6
 
 
 class _StretchStep:
@@ -509,26 +512,28 @@ def full_space_newton(
             return None
         x = x - W @ dlam
         lam = lam + dlam
-    n_chord = 0
-    lu = None if chord is None else getattr(chord[0], "lu", None)
-    if isinstance(lu, linsolve.BandedLU):
-        chord_map = step_map(chord[1], maps if chord[1] is W else {})
-        if chord_map.inv is not None:
-            # compiled chord steps (core.chord) with the factorisation of an earlier answer
-            x, lam, status, n_chord, h, rn = chord_steps(
-                model, payload, target, lu, chord[1], chord_map, x, lam, tol, CHORD_RATE,
-                MAX_CHORD)
-            hist += h
-            if status == NONFINITE:
-                return None
-            if status == CHORD_CONVERGED and not multi:
-                fw = result(model.evaluate(x, lam, 1.0, payload, jacobian=True), rn, n_chord)
-                if done(fw):
-                    return fw
-            hist.pop()  # Newton evaluates this iterate again, with its Jacobian
-    exact = False  # the last step used a factorisation made at its own point
-    newton_its = 0
+    n_chord, newton_its, exact, refine = 0, 0, False, False
+    # exact: the last step's W is the one at its own iterate (factorised there, or refined)
     while True:
+        lu = None if chord is None else getattr(chord[0], "lu", None)
+        if not exact or not multi:
+            if isinstance(lu, linsolve.BandedLU):
+                chord_map = step_map(chord[1], maps if chord[1] is W else {})
+                if chord_map.inv is not None:
+                    # compiled chord steps (core.chord) with the factorisation of an earlier point
+                    x, lam, status, steps, h, rn = chord_steps(
+                        model, payload, target, lu, chord[1], chord_map, x, lam, tol,
+                        CHORD_RATE, MAX_CHORD)
+                    hist += h
+                    n_chord += steps
+                    if status == NONFINITE:
+                        return None
+                    if status == CHORD_CONVERGED and not multi:
+                        ev = model.evaluate(x, lam, 1.0, payload, jacobian=True)
+                        fw = result(ev, rn, newton_its + n_chord)
+                        if done(fw):
+                            return fw
+                    hist.pop()  # evaluated again below, with its Jacobian
         ev = model.evaluate(x, lam, 1.0, payload, jacobian=True, lam_derivative=True)
         rn = float(np.max(np.abs(ev.residual * model.residual_scale)))
         hist.append(rn)
@@ -542,6 +547,23 @@ def full_space_newton(
             return None
         if budget is not None and budget.expired():
             return None
+        if refine:
+            # redundant robot after a Newton step: W at this iterate by one refinement with the
+            # last factorisation, accepted when its correction is small (else a new one)
+            sol = chord[0].solve(np.column_stack([ev.residual, ev.dres_dlam - ev.jacobian @ W]))
+            dW = sol[:, 1:]
+            W_new = W + dW
+            if np.max(np.abs(dW)) <= REFINE_TOL * np.max(np.abs(W_new)):
+                w0, W, maps = sol[:, 0], W_new, {}
+                chord = (chord[0], W)
+                sm = step_map(W, maps)
+                dlam = sm(target, x, lam, w0)
+                if dlam is None:
+                    return None
+                x = x - (w0 + W @ dlam)
+                lam = lam + dlam
+                n_chord += 1
+                continue
         factorised = linsolve.kkt_solver(model).bound(ev.jacobian)
         try:
             sol = factorised.solve(np.column_stack([ev.residual, ev.dres_dlam]))  # banded LU
@@ -556,4 +578,4 @@ def full_space_newton(
             return None
         x = x - (w0 + W @ dlam)
         lam = lam + dlam
-        exact = True
+        exact, refine = True, multi

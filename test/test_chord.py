@@ -1,0 +1,123 @@
+"""core.chord: compiled chord steps against LAPACK and against the same steps in Python."""
+
+import numpy as np
+import pytest
+import scipy.linalg.lapack as lapack
+
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse
+from bellow_ancf_ros.core import chord, inverse_newton as invn
+from bellow_ancf_ros.core.inverse_newton import Target, _StretchStep
+
+
+@pytest.mark.parametrize("n, kl, ku", [(1, 0, 0), (7, 2, 1), (60, 5, 9), (240, 43, 43)])
+def test_banded_solve_is_dgbtrs(n, kl, ku):
+    rng = np.random.default_rng(n + kl)
+    A = np.zeros((n, n))
+    for i in range(n):
+        for j in range(max(0, i - kl), min(n, i + ku + 1)):
+            A[i, j] = rng.standard_normal()
+    A[np.arange(n), np.arange(n)] *= 0.1  # small diagonal: partial pivoting swaps rows
+    ab = np.zeros((2 * kl + ku + 1, n))
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n, j + kl + 1)):
+            ab[kl + ku + i - j, j] = A[i, j]
+    lub, piv, info = lapack.dgbtrf(ab, kl, ku)
+    assert info == 0
+    if n > 1:
+        assert np.any(piv != np.arange(n))  # the test exercises row interchanges
+    b = rng.standard_normal(n)
+    ref, info = lapack.dgbtrs(lub, kl, ku, b, piv)
+    got = chord.banded_solve(lub, piv, kl, ku, b)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
+    np.testing.assert_allclose(A @ got, b, atol=1e-9 * np.max(np.abs(b)) * np.linalg.cond(A))
+
+
+def _path_start(name):
+    """A warm answer, the next target 1 mm away, and the state after the predictor."""
+    model = RobotModel(load_robot(name))
+    multi = model.cfg.n_segments > 1
+    p0 = np.full(model.A, 30e3)
+    from bellow_ancf_ros.core import solve_forward
+
+    fw0 = solve_forward(model, p0)
+    z0 = fw0.z_axis if multi else None
+    a = solve_inverse(model, fw0.position, z0)
+    b = solve_inverse(model, fw0.position + [1e-3, 0, 0], z0, warm_start=a)
+    target_pos = fw0.position + [1e-3, 1e-3, 0]
+    return model, multi, b, Target(model, target_pos, z0)
+
+
+@pytest.mark.parametrize("name", ["one_segment", "two_segment"])
+def test_compiled_chord_steps_are_the_python_steps(name):
+    model, multi, warm, target = _path_start(name)
+    fw = warm.forward
+    st = model.stage1
+    lo, hi = np.full(model.A, st.lam_min), np.full(model.A, st.lam_max)
+    lam_ref = np.full(model.A, float(st.stretch(0.5 * (model.cfg.p_min + model.cfg.p_max))))
+    factorised, WF = fw._chord
+    step = _StretchStep(target, multi, WF, lam_ref, lo, hi)
+    x, lam = fw.x.copy(), fw.stretch.copy()
+    d = step(target, x, lam, np.zeros(model.N))  # the predictor of full_space_newton
+    x, lam = x - WF @ d, lam + d
+    # the same steps in Python: evaluate, banded solve, Schur-complement stretch step
+    xp, lp, hist = x.copy(), lam.copy(), []
+    for _ in range(4):
+        r = model.evaluate(xp, lp, 1.0, 0.0, jacobian=False).residual
+        hist.append(np.max(np.abs(r * model.residual_scale)))
+        w0 = factorised.solve(r)
+        d = step(target, xp, lp, w0)
+        xp, lp = xp - (w0 + WF @ d), lp + d
+    xc, lc, status, steps, h, rn = chord.chord_steps(
+        model, 0.0, target, factorised.lu, WF, step, x, lam, tol=0.0, rate=10.0, max_steps=4)
+    assert status == chord.MAX_STEPS and steps == 4
+    np.testing.assert_allclose(h[:4], hist, rtol=1e-6)
+    np.testing.assert_allclose(xc, xp, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lc, lp, rtol=0, atol=1e-14)
+    # linear convergence: each step cuts the residual
+    assert all(h[k + 1] < 0.2 * h[k] for k in range(4))
+
+
+def test_chord_loop_stops_when_a_step_does_not_cut_the_residual_enough():
+    model, multi, warm, target = _path_start("one_segment")
+    fw = warm.forward
+    st = model.stage1
+    lo, hi = np.full(model.A, st.lam_min), np.full(model.A, st.lam_max)
+    factorised, WF = fw._chord
+    step = _StretchStep(target, multi, WF, np.ones(model.A), lo, hi)
+    *_, status, steps, h, rn = chord.chord_steps(
+        model, 0.0, target, factorised.lu, WF, step, fw.x, fw.stretch, tol=0.0, rate=1e-9,
+        max_steps=10)
+    assert status == chord.STALLED and steps == 1 and rn == h[-1] > 1e-9 * h[0]
+
+
+@pytest.mark.parametrize("name", ["one_segment", "two_segment"])
+def test_answers_with_chord_steps_equal_newton_answers(name, monkeypatch):
+    """Along a walk, the chord and refined steps give the answers of Newton's method alone."""
+    model = RobotModel(load_robot(name))
+    multi = model.cfg.n_segments > 1
+    from bellow_ancf_ros.core import solve_forward
+
+    rng = np.random.default_rng(3)
+    p = np.full(model.A, 30e3)
+    targets = []
+    for _ in range(12):
+        p = np.clip(p + rng.normal(0, 1.5e3, model.A), 5e3, 60e3)
+        fw = solve_forward(model, p)
+        targets.append((fw.position, fw.z_axis if multi else None))
+
+    def walk():
+        prev, out = None, []
+        for pos, z in targets:
+            prev = solve_inverse(model, pos, z, warm_start=prev)
+            assert prev.success, prev.message
+            out.append(prev)
+        return out
+
+    fast = walk()
+    assert sum(r.forward.iterations for r in fast) > 0
+    monkeypatch.setattr(invn, "MAX_CHORD", 0)  # no chord steps
+    monkeypatch.setattr(invn, "REFINE_TOL", -1.0)  # no refinement: a factorisation per step
+    newton = walk()
+    for f, n in zip(fast, newton):
+        assert np.linalg.norm(f.forward.position - n.forward.position) < 1e-9
+        np.testing.assert_allclose(f.pressures_pa, n.pressures_pa, rtol=0, atol=1e-3)
