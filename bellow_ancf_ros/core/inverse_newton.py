@@ -393,8 +393,10 @@ def iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
 CHORD_RATE = 0.1
 MAX_CHORD = 12
 # redundant robots: a refined W (one step with the last factorisation) counts as the W of its
-# iterate when the refinement changed it by less than this (relative); else a new factorisation
+# iterate when the refinement changed it by less than REFINE_TOL (relative); up to REFINE_MAX
+# it is used and refined again at the next iterate; beyond, a new factorisation
 REFINE_TOL = 1e-6
+REFINE_MAX = 1e-2
 
 
 class _StretchStep:
@@ -512,7 +514,7 @@ def full_space_newton(
             return None
         x = x - W @ dlam
         lam = lam + dlam
-    n_chord, newton_its, exact, refine = 0, 0, False, False
+    n_chord, newton_its, n_refine, exact, refine = 0, 0, 0, False, False
     # exact: the last step's W is the one at its own iterate (factorised there, or refined)
     while True:
         lu = None if chord is None else getattr(chord[0], "lu", None)
@@ -540,20 +542,24 @@ def full_space_newton(
         if not np.isfinite(rn):
             return None
         if rn <= tol and (not multi or (exact and sm.null_norm <= 1e-9)):
-            fw = result(ev, rn, newton_its + n_chord)
+            fw = result(ev, rn, newton_its + n_chord + n_refine)
             if done(fw):
                 return fw
         if (newton_its >= 2 and rn > 1e-2) or newton_its >= max_iter:
             return None
         if budget is not None and budget.expired():
             return None
-        if refine:
+        if refine and n_refine < max_iter:
             # redundant robot after a Newton step: W at this iterate by one refinement with the
-            # last factorisation, accepted when its correction is small (else a new one)
+            # last factorisation; it counts as this iterate's W when the refinement changed it
+            # by less than REFINE_TOL, is refined again at the next iterate when by less than
+            # REFINE_MAX, else a new factorisation is made
             sol = chord[0].solve(np.column_stack([ev.residual, ev.dres_dlam - ev.jacobian @ W]))
             dW = sol[:, 1:]
             W_new = W + dW
-            if np.max(np.abs(dW)) <= REFINE_TOL * np.max(np.abs(W_new)):
+            change = np.max(np.abs(dW)) / max(np.max(np.abs(W_new)), 1e-300)
+            if change <= REFINE_MAX:
+                n_refine += 1
                 w0, W, maps = sol[:, 0], W_new, {}
                 chord = (chord[0], W)
                 sm = step_map(W, maps)
@@ -562,7 +568,7 @@ def full_space_newton(
                     return None
                 x = x - (w0 + W @ dlam)
                 lam = lam + dlam
-                n_chord += 1
+                exact = change <= REFINE_TOL
                 continue
         factorised = linsolve.kkt_solver(model).bound(ev.jacobian)
         try:
