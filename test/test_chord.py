@@ -5,7 +5,7 @@ import pytest
 import scipy.linalg.lapack as lapack
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse
-from bellow_ancf_ros.core import chord, inverse_newton as invn
+from bellow_ancf_ros.core import chord
 from bellow_ancf_ros.core.inverse_newton import Target, _StretchStep
 
 
@@ -88,36 +88,3 @@ def test_chord_loop_stops_when_a_step_does_not_cut_the_residual_enough():
         model, 0.0, target, factorised.lu, WF, step, fw.x, fw.stretch, tol=0.0, rate=1e-9,
         max_steps=10)
     assert status == chord.STALLED and steps == 1 and rn == h[-1] > 1e-9 * h[0]
-
-
-@pytest.mark.parametrize("name", ["one_segment", "two_segment"])
-def test_answers_with_chord_steps_equal_newton_answers(name, monkeypatch):
-    """Along a walk, the chord and refined steps give the answers of Newton's method alone."""
-    model = RobotModel(load_robot(name))
-    multi = model.cfg.n_segments > 1
-    from bellow_ancf_ros.core import solve_forward
-
-    rng = np.random.default_rng(3)
-    p = np.full(model.A, 30e3)
-    targets = []
-    for _ in range(12):
-        p = np.clip(p + rng.normal(0, 1.5e3, model.A), 5e3, 60e3)
-        fw = solve_forward(model, p)
-        targets.append((fw.position, fw.z_axis if multi else None))
-
-    def walk():
-        prev, out = None, []
-        for pos, z in targets:
-            prev = solve_inverse(model, pos, z, warm_start=prev)
-            assert prev.success, prev.message
-            out.append(prev)
-        return out
-
-    fast = walk()
-    assert sum(r.forward.iterations for r in fast) > 0
-    monkeypatch.setattr(invn, "MAX_CHORD", 0)  # no chord steps
-    monkeypatch.setattr(invn, "REFINE_TOL", -1.0)  # no refinement: a factorisation per step
-    newton = walk()
-    for f, n in zip(fast, newton):
-        assert np.linalg.norm(f.forward.position - n.forward.position) < 1e-9
-        np.testing.assert_allclose(f.pressures_pa, n.pressures_pa, rtol=0, atol=1e-3)

@@ -32,15 +32,17 @@ __all__ = ["banded_solve", "chord_steps", "CONVERGED", "STALLED", "LEFT_BOX", "M
 CONVERGED, STALLED, LEFT_BOX, MAX_STEPS, NONFINITE = 0, 1, 2, 3, 4
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"reassoc", "contract"})
 def banded_solve(lub, piv, kl, ku, b):
     """Solve ``A x = b`` with the banded LU of scipy's ``dgbtrf`` (``lub``, ``piv``); a copy.
 
-    ``piv`` is 0-based, as scipy's wrapper returns it.
+    ``piv`` is 0-based, as scipy's wrapper returns it.  The column sweeps of
+    ``dgbtrs`` (sums reassociated for speed: equal to it to round-off).
     """
     n = b.shape[0]
     x = b.copy()
     kd = kl + ku
+    lubT = lub.T  # column j of the band storage, contiguous (dgbtrf's output is Fortran-ordered)
     for j in range(n - 1):  # L: row interchanges and unit lower band
         p = piv[j]
         if p != j:
@@ -50,15 +52,19 @@ def banded_solve(lub, piv, kl, ku, b):
         m = min(kl, n - 1 - j)
         xj = x[j]
         if xj != 0.0:
-            for i in range(1, m + 1):
-                x[j + i] -= lub[kd + i, j] * xj
+            xs = x[j + 1:j + 1 + m]
+            ls = lubT[j, kd + 1:kd + 1 + m]
+            for i in range(m):
+                xs[i] -= ls[i] * xj
     for j in range(n - 1, -1, -1):  # U: upper band of width kl + ku
-        xj = x[j] / lub[kd, j]
+        xj = x[j] / lubT[j, kd]
         x[j] = xj
         if xj != 0.0:
             m = min(kd, j)
-            for i in range(1, m + 1):
-                x[j - i] -= lub[kd - i, j] * xj
+            xs = x[j - m:j]
+            us = lubT[j, kd - m:kd]
+            for i in range(m):
+                xs[i] -= us[i] * xj
     return x
 
 

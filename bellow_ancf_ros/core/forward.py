@@ -48,8 +48,10 @@ class ForwardResult:
     # W = -dx/dlam = J^{-1} dR/dlam near x, and (factorisation, its W) from a point near x:
     # the predictor and the chord steps of the next warm-started inverse solve
     _sensitivity: object = field(default=None, repr=False)
+    _sensitivity_exact: bool = field(default=False, repr=False)  # W made at x's last iterate
     _chord: object = field(default=None, repr=False)
     _step_maps: object = field(default=None, repr=False)  # inverse_newton._StretchStep of W
+    _path: object = field(default=None, repr=False)  # inverse_newton._second_order's record
     # a solve that ran out of budget: where it stopped (a warm start continues it)
     resume_state: ResumeState | None = field(default=None, repr=False)
 

@@ -532,7 +532,8 @@ def _resume_point(model, obj, warm_fw):
     st, cfg = model.stage1, model.cfg
     return dataclasses.replace(
         fw, pressures_pa=np.clip(st.pressure(lam), cfg.p_min, cfg.p_max),
-        stretch=np.array(lam, dtype=float), _sensitivity=-dx)
+        stretch=np.array(lam, dtype=float), _sensitivity=-dx, _sensitivity_exact=False,
+        _step_maps=None, _path=None)
 
 
 def _budget_result(model, obj, code, budget, iters, position, z_axis, warm_fw, done):

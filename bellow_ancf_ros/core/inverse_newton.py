@@ -455,6 +455,35 @@ class _StretchStep:
         return d
 
 
+def _second_order(path, t_new, W, x, lam, lo, hi):
+    """The linear predictor ``(x, lam)`` plus the last target's correction, scaled (or as is).
+
+    ``path`` (``ForwardResult._path`` of the warm start): its target ``t_w``,
+    the target before ``t_prev`` and what the iteration added to its own
+    linear prediction, made with the sensitivities ``(W_w, fresh_w)``, and
+    whether the warm start's own ``W`` is fresh (made near it, not inherited).
+    Along a path sampled at a steady rate, the targets step alike and the
+    second-order term of the prediction is nearly the same: when the new
+    step ``t_new - t_w`` is within 25 % of the last one and the prediction
+    uses the same ``W`` or a fresh one like the last, the correction is
+    added, scaled by the squared ratio of the steps (a start only: the
+    iteration's answer does not depend on it).
+    """
+    if path is None or path[1] is None or path[2] is None:
+        return x, lam
+    t_w, t_prev, cx, cl, (W_w, fresh_w), fresh = path
+    if not (W_w is W or (fresh_w and fresh)):
+        return x, lam
+    last = norm(t_w - t_prev)
+    if not last > 0 or norm(t_new - t_w - (t_w - t_prev)) > 0.25 * last:
+        return x, lam
+    s = (norm(t_new - t_w) / last) ** 2
+    lam_c = lam + s * cl
+    if np.any(lam_c <= lo) or np.any(lam_c >= hi):
+        return x, lam
+    return x + s * cx, lam_c
+
+
 def full_space_newton(
     model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
     budget=None,
@@ -499,10 +528,13 @@ def full_space_newton(
             stretch=lam.copy(), payload_kg=payload, x=x, converged=True, stable=None,
             status=solver.CONVERGED, message=solver.MESSAGES[solver.CONVERGED],
             iterations=its, residual_norm=rn, history=hist, jacobian=ev.jacobian,
-            _sensitivity=W, _chord=chord, _step_maps=maps,
+            _sensitivity=W, _sensitivity_exact=exact, _chord=chord, _step_maps=maps,
+            _path=(target.offset, t_warm, None if lin is None else x - lin[0],
+                   None if lin is None else lam - lin[1], lin_W, W is not warm_fw._sensitivity),
         )
 
-    hist, sm = [], None
+    hist, sm, lin, lin_W = [], None, None, None
+    t_warm = None if warm_fw._path is None else warm_fw._path[0]
     chord = warm_fw._chord  # (factorisation, its W) from an earlier answer, or None
     W = warm_fw._sensitivity
     maps = warm_fw._step_maps if warm_fw._step_maps is not None else {}  # step maps of W
@@ -514,11 +546,17 @@ def full_space_newton(
             return None
         x = x - W @ dlam
         lam = lam + dlam
-    n_chord, newton_its, n_refine, exact, refine = 0, 0, 0, False, False
-    # exact: the last step's W is the one at its own iterate (factorised there, or refined)
+        lin, lin_W = (x, lam), W
+        x, lam = _second_order(warm_fw._path, target.offset, W, x, lam, lo, hi)
+        lin_W = (W, warm_fw._path is not None and warm_fw._path[5])
+    n_chord, newton_its, n_refine, refine, first = 0, 0, 0, False, True
+    # exact: the last step's W is the one at its own iterate (factorised there, or refined);
+    # the predictor's is when the warm start's was (a held target is accepted at once)
+    exact = multi and sm is not None and bool(warm_fw._sensitivity_exact)
     while True:
         lu = None if chord is None else getattr(chord[0], "lu", None)
-        if not exact or not multi:
+        if first or not exact or not multi:
+            first = False
             if isinstance(lu, linsolve.BandedLU):
                 chord_map = step_map(chord[1], maps if chord[1] is W else {})
                 if chord_map.inv is not None:
@@ -528,6 +566,7 @@ def full_space_newton(
                         CHORD_RATE, MAX_CHORD)
                     hist += h
                     n_chord += steps
+                    exact = exact and steps == 0
                     if status == NONFINITE:
                         return None
                     if status == CHORD_CONVERGED and not multi:

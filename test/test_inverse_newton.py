@@ -1,0 +1,88 @@
+"""core.inverse_newton.full_space_newton: chord, refined and Newton steps give the same answers."""
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core import RobotModel, linsolve, load_robot, solve_forward, solve_inverse
+from bellow_ancf_ros.core import inverse_newton as invn
+
+
+def _walk_targets(model, n, rng, step_pa=1.5e3):
+    multi = model.cfg.n_segments > 1
+    p = np.full(model.A, 30e3)
+    out = []
+    for _ in range(n):
+        p = np.clip(p + rng.normal(0, step_pa, model.A), 5e3, 60e3)
+        fw = solve_forward(model, p)
+        out.append((fw.position, fw.z_axis if multi else None))
+    return out
+
+
+@pytest.mark.parametrize("name", ["one_segment", "two_segment"])
+def test_answers_with_chord_steps_equal_newton_answers(name, monkeypatch):
+    """Along a walk, the chord and refined steps give the answers of Newton's method alone."""
+    model = RobotModel(load_robot(name))
+    targets = _walk_targets(model, 12, np.random.default_rng(3))
+
+    def walk():
+        prev, out = None, []
+        for pos, z in targets:
+            prev = solve_inverse(model, pos, z, warm_start=prev)
+            assert prev.success, prev.message
+            out.append(prev)
+        return out
+
+    fast = walk()
+    assert sum(r.forward.iterations for r in fast) > 0
+    monkeypatch.setattr(invn, "MAX_CHORD", 0)  # no chord steps
+    monkeypatch.setattr(invn, "REFINE_TOL", -1.0)  # no refinement: a factorisation per step
+    newton = walk()
+    for f, n in zip(fast, newton):
+        assert np.linalg.norm(f.forward.position - n.forward.position) < 1e-9
+        np.testing.assert_allclose(f.pressures_pa, n.pressures_pa, rtol=0, atol=1e-3)
+
+
+def _count_factorisations(monkeypatch):
+    calls = []
+    orig = linsolve.BandedKKT.factor
+
+    def factor(self, J):
+        calls.append(1)
+        return orig(self, J)
+
+    monkeypatch.setattr(linsolve.BandedKKT, "factor", factor)
+    return calls
+
+
+def test_a_held_two_segment_target_is_accepted_without_a_factorisation(monkeypatch):
+    model = RobotModel(load_robot("two_segment"))
+    (pos, z), (pos2, z2) = _walk_targets(model, 2, np.random.default_rng(5))
+    a = solve_inverse(model, pos, z)
+    b = solve_inverse(model, pos2, z2, warm_start=a)
+    assert b.success and b.forward._sensitivity_exact
+    calls = _count_factorisations(monkeypatch)
+    held = solve_inverse(model, pos2, z2, warm_start=b)
+    assert held.success and not calls  # the warm start's exact W proves the answer
+    np.testing.assert_allclose(held.pressures_pa, b.pressures_pa, rtol=0, atol=1e-6)
+    # a target that moves still gets its factorisation (the null-space condition is exact)
+    moved = solve_inverse(model, pos2 + [2e-3, 0, 0], z2, warm_start=held)
+    assert moved.success and len(calls) >= 1
+    cold = solve_inverse(model, pos2 + [2e-3, 0, 0], z2)
+    np.testing.assert_allclose(moved.pressures_pa, cold.pressures_pa, rtol=0, atol=1.0)
+
+
+def test_second_order_predictor_starts_closer_along_a_steady_path():
+    model = RobotModel(load_robot("two_segment"))
+    centre = solve_forward(model, np.full(model.A, 30e3))
+    phi = np.linspace(0, 0.3, 7)
+    pos = centre.position + 0.02 * np.stack([np.cos(phi) - 1, np.sin(phi), 0 * phi], axis=1)
+    first = []
+    for use in (True, False):
+        prev = solve_inverse(model, pos[0], centre.z_axis)
+        for k in range(1, len(pos)):
+            if not use:
+                prev.forward._path = None
+            prev = solve_inverse(model, pos[k], centre.z_axis, warm_start=prev)
+            assert prev.success
+        first.append(prev.forward.history[0])
+    assert first[0] < 0.2 * first[1]  # the residual after the predictor
