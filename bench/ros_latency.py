@@ -2,8 +2,9 @@
 
 Starts ``inverse_kinetostatic_node`` as its own process (isolated
 ``ROS_DOMAIN_ID``, localhost discovery), then sends targets one at a time
-(1 mm apart on a circle of the one-segment robot) and times each answer.
-Prints the median and p99 (target: median 2 ms, one segment).
+(1 mm apart on a circle; for two segments with the end-effector z-axis
+tilted 10 degrees and turning with it) and times each answer.  Prints the
+median and p99 (targets: median 2 ms one segment, 4 ms two).
 """
 
 from __future__ import annotations
@@ -18,6 +19,13 @@ import time
 import numpy as np
 
 
+def _tilt(angle, azimuth):
+    """Rotation whose z-axis is tilted by ``angle`` towards the azimuth ``azimuth``."""
+    axis = np.array([-np.sin(azimuth), np.cos(azimuth), 0.0])
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
 def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
     """Measure; print (unless ``quiet``) and return median, p99 and counts.
 
@@ -30,6 +38,7 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
     from std_msgs.msg import Float64MultiArray
 
     from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+    from bellow_ancf_ros.nodes.common import quaternion_from_rotation
     from bellow_ancf_ros.nodes.ros_util import command_qos
 
     env, cwd = dict(os.environ), None
@@ -69,8 +78,9 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
             if time.monotonic() > deadline or node_proc.poll() is not None:
                 raise RuntimeError("inverse_kinetostatic_node did not come up")
         model = RobotModel(load_robot(robot))
-        centre = solve_forward(model, np.full(model.A, 40e3)).position
-        radius = 0.01
+        multi = model.cfg.n_segments > 1
+        centre = solve_forward(model, np.full(model.A, 30e3 if multi else 40e3)).position
+        radius = 0.02 if multi else 0.01
         lat = []
         for k in range(n_targets + 10):
             phi = k * 1e-3 / radius
@@ -79,7 +89,9 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
             msg.pose.position.x = float(centre[0] + radius * np.cos(phi))
             msg.pose.position.y = float(centre[1] + radius * np.sin(phi))
             msg.pose.position.z = float(centre[2])
-            msg.pose.orientation.w = 1.0
+            q = quaternion_from_rotation(_tilt(np.radians(10.0), phi) if multi else np.eye(3))
+            (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+             msg.pose.orientation.w) = (float(v) for v in q)
             got.clear()
             t0 = time.perf_counter()
             pub.publish(msg)
@@ -113,5 +125,5 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
 
 
 if __name__ == "__main__":
-    main()
+    main(robot=sys.argv[1] if len(sys.argv) > 1 else "one_segment")
     sys.exit(0)
