@@ -39,7 +39,7 @@ def test_answers_with_chord_steps_equal_newton_answers(name, monkeypatch):
     newton = walk()
     for f, n in zip(fast, newton):
         assert np.linalg.norm(f.forward.position - n.forward.position) < 1e-9
-        np.testing.assert_allclose(f.pressures_pa, n.pressures_pa, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(f.pressures_pa, n.pressures_pa, rtol=0, atol=1e-4)
 
 
 def _count_factorisations(monkeypatch):
