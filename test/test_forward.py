@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solver
 from bellow_ancf_ros.core.forward import UNSTABLE
 
 
@@ -13,7 +13,8 @@ def _extreme(model):
     return p
 
 
-def test_newton_converges_quadratically(one, two):
+def test_newton_converges_quadratically(one, two, monkeypatch):
+    monkeypatch.setattr(solver, "CHORD_BELOW", 0.0)  # Newton steps only
     for model in (one, two):
         fw = solve_forward(model, _extreme(model) * 0.3)
         h = np.array(fw.history)
@@ -28,6 +29,35 @@ def test_newton_converges_quadratically(one, two):
         # the order estimate log(r_k+1)/log(r_k) approaches 2
         orders = np.log(tail[1:]) / np.log(tail[:-1])
         assert orders.max() > 1.8, (h, orders)
+
+
+def test_chord_steps_near_the_solution_cut_the_residual_and_change_nothing(one, two,
+                                                                           monkeypatch):
+    from bellow_ancf_ros.core import linsolve
+
+    factorisations = []
+    orig = linsolve.BandedKKT.factor
+    monkeypatch.setattr(linsolve.BandedKKT, "factor",
+                        lambda self, J: factorisations.append(1) or orig(self, J))
+    for model in (one, two):
+        p = _extreme(model)
+        factorisations.clear()
+        fw = solve_forward(model, p)
+        n_fast = len(factorisations)
+        h = np.array(fw.history)
+        assert fw.converged and fw.stable and h[-1] < 1e-10
+        # every step below CHORD_BELOW cuts the residual by CHORD_CUT at least (chord or Newton)
+        tail = h[np.argmax(h <= solver.CHORD_BELOW):]
+        assert all(b <= solver.CHORD_CUT * a or b < 1e-10 for a, b in zip(tail[:-1], tail[1:]))
+        factorisations.clear()
+        with monkeypatch.context() as mp:
+            mp.setattr(solver, "CHORD_BELOW", 0.0)
+            ref = solve_forward(model, p)
+        assert n_fast < len(factorisations)  # chord steps saved factorisations
+        assert np.linalg.norm(fw.position - ref.position) < 1e-9
+        # the Jacobian returned is the one at the solution (stability, sensitivities)
+        ev = model.evaluate(fw.x, fw.stretch, 1.0, 0.0, jacobian=True)
+        assert abs(fw.jacobian - ev.jacobian).max() == 0.0
 
 
 @pytest.mark.parametrize("p_kpa", [-50.0, 0.0, 80.0, 150.0])

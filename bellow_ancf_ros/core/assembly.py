@@ -36,7 +36,7 @@ with the potential ``Pi = sum W_e - Q_g.q - Q_f.q``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -65,16 +65,21 @@ class Evaluation:
     jacobian: sp.csc_matrix | None = None
     dres_dlam: np.ndarray | None = None  # (N, A) partial derivative w.r.t. stretches
     model: object = None  # the RobotModel whose KKT solver serves ``solve`` (core.linsolve)
+    _lu: object = field(default=None, repr=False)  # the factorisation, made on first solve
 
     def solve(self, b):
-        """Solve ``J x = b`` with the Jacobian (banded LU, reused along a path; core.linsolve).
+        """Solve ``J x = b`` with the Jacobian (banded LU made once, then reused; core.linsolve).
 
         Raises ``numpy.linalg.LinAlgError`` when the Jacobian is singular.
         """
         if self.model is not None:
-            return linsolve.kkt_solver(self.model).solve(self.jacobian, b)
+            if self._lu is None:
+                self._lu = linsolve.kkt_solver(self.model).bound(self.jacobian)
+            return self._lu.solve(b)
         try:  # a Jacobian without the model's pattern (e.g. the cantilever rig)
-            return spla.splu(sp.csc_matrix(self.jacobian), permc_spec="COLAMD").solve(b)
+            if self._lu is None:
+                self._lu = spla.splu(sp.csc_matrix(self.jacobian), permc_spec="COLAMD")
+            return self._lu.solve(b)
         except RuntimeError as exc:
             raise np.linalg.LinAlgError(str(exc)) from exc
 

@@ -80,17 +80,29 @@ class NewtonResult:
     reached: tuple | None = None
 
 
+# chord phase of newton(): below this scaled residual the last factorisation is reused while
+# each step cuts the residual at least by CHORD_CUT (one residual evaluation and one banded
+# solve per step instead of a Jacobian and a factorisation)
+CHORD_BELOW = 1e-3
+CHORD_CUT = 0.01
+
+
 def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol=1e-7,
            deadline=None):
-    """Damped Newton on ``fun(x, jacobian=True) -> Evaluation``.
+    """Damped Newton on ``fun(x, jacobian=True) -> Evaluation``, with a chord phase.
 
     ``scale`` multiplies the residual component-wise; convergence when the
     scaled infinity norm drops below ``tol``, or when it stops decreasing
     below ``floor_tol`` (round-off floor: fine meshes cannot reach ``tol``).
-    ``history`` holds the scaled residual norm of every iterate (for the
-    quadratic-convergence test).
-    At most ``max_iter`` iterations; past ``deadline`` (``time.perf_counter()``)
-    it stops with status ``TIME_BUDGET``.
+    Near the solution (scaled residual below ``CHORD_BELOW``) the last
+    factorisation is reused as long as every such chord step cuts the
+    residual by ``CHORD_CUT`` at least (else a Newton step again); the
+    Newton steps converge quadratically (``CHORD_BELOW = 0`` switches the
+    chord phase off).  ``history`` holds the scaled residual norm of every
+    iterate.  At most ``max_iter`` Newton iterations (``iterations`` counts
+    them; chord steps are extra, at most as many); past ``deadline``
+    (``time.perf_counter()``) it stops with status ``TIME_BUDGET``.
+    The Jacobian returned is the one at the solution.
     """
     x = np.array(x0, dtype=float)
     ev = fun(x, jacobian=True)
@@ -99,22 +111,44 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         return NewtonResult(x, False, NONFINITE, MESSAGES[NONFINITE], 0, np.inf, [np.inf])
     norm = np.max(np.abs(r))
     hist = [norm]
-    for it in range(max_iter + 1):
+    last = None  # the last Evaluation whose Jacobian was factorised (chord steps reuse it)
+    it, n_chord = 0, 0  # Newton iterations (what ``iterations`` and budgets count), chord steps
+    while True:
         # converged, or stagnating at the round-off floor of a fine discretisation
         # (the Jacobian at the solution is returned; it is factorised only if someone needs it)
         if norm <= tol or (norm <= floor_tol and len(hist) > 1 and norm > 0.25 * hist[-2]):
+            if ev.jacobian is None:
+                ev = fun(x, jacobian=True)
             return NewtonResult(x, True, CONVERGED, MESSAGES[CONVERGED], it, norm, hist,
                                 ev.jacobian)
         if it == max_iter:
             break
         if expired(deadline):
             return NewtonResult(x, False, TIME_BUDGET, MESSAGES[TIME_BUDGET], it, norm, hist)
+        if last is not None and norm <= CHORD_BELOW and n_chord < max_iter:
+            try:
+                xt = x - last.solve(ev.residual)
+            except np.linalg.LinAlgError:
+                xt = None
+            if xt is not None:
+                evt = fun(xt, jacobian=False)
+                rt = evt.residual * scale
+                nt = np.max(np.abs(rt)) if np.all(np.isfinite(rt)) else np.inf
+                if nt <= CHORD_CUT * norm or nt <= tol:
+                    x, ev, r, norm = xt, evt, rt, nt
+                    hist.append(norm)
+                    n_chord += 1
+                    continue
+            last = None  # the chord stalls here: a Newton step from x
+        if ev.jacobian is None:
+            ev = fun(x, jacobian=True)
         try:
             dx = -ev.solve(ev.residual)  # banded LU (core.linsolve)
         except np.linalg.LinAlgError:
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
         if not np.all(np.isfinite(dx)):
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
+        last = ev
         merit = np.dot(r, r)
         step = 1.0
         while True:
@@ -129,6 +163,7 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         x, ev, r = xt, evt, rt
         norm = np.max(np.abs(r))
         hist.append(norm)
+        it += 1
     return NewtonResult(x, False, MAX_ITER, MESSAGES[MAX_ITER], max_iter, norm, hist)
 
 
