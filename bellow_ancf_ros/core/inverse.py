@@ -281,7 +281,7 @@ def solve_inverse(
     atol = 1e-8 if angle_tol is None else float(angle_tol)
     st = model.stage1
     lo, hi = np.full(model.A, st.lam_min), np.full(model.A, st.lam_max)
-    lam_ref = np.full(model.A, float(st.stretch(0.5 * (cfg.p_min + cfg.p_max))))
+    lam_ref = np.full(model.A, st.lam_mid)
 
     def done(fw):
         pe, ae = pose_errors(fw, position, z_axis)

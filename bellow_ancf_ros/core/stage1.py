@@ -125,8 +125,8 @@ class Stage1:
         As given (SI).
     area: float
         Effective actuation area ``pi/4 * D_eff**2`` [m^2].
-    lam_min, lam_max: float
-        Stretches at ``p_min`` and ``p_max``.
+    lam_min, lam_max, lam_mid: float
+        Stretches at ``p_min``, ``p_max`` and mid-range pressure.
     lam_branch: tuple of float
         Open interval ``(lam_lo, lam_hi)`` of the monotone branch through
         ``lam = 1``; ``lam_hi`` may be ``inf``.  ``stretch`` accepts every
@@ -169,9 +169,10 @@ class Stage1:
         self._quadratic = self._kx.size <= 2
 
         self._find_branch()
-        lam_lim = self.stretch(np.array([self.p_min, self.p_max]))
+        lam_lim = self.stretch(np.array([self.p_min, self.p_max, 0.5 * (self.p_min + self.p_max)]))
         self.lam_min = float(lam_lim[0])
         self.lam_max = float(lam_lim[1])
+        self.lam_mid = float(lam_lim[2])  # at mid-range pressure
         self._check_monotone(self.lam_min - 1.0, self.lam_max - 1.0)
 
     @classmethod
