@@ -270,7 +270,6 @@ def solve_inverse(
         take hundreds of milliseconds on a loaded machine).
     """
     budget = Budget(time_budget_s, max_forward_solves)
-    cfg = model.cfg
     position, z_axis = _check_target(model, position, z_axis)
     multi = z_axis is not None
     payload = float(payload_kg)
