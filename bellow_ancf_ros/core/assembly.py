@@ -336,14 +336,12 @@ class RobotModel:
         le = lam * cfg.l0 / self.n
         kt = k * cfg.l0
         kb = cfg.d_a**2 * cfg.l0 * lam * k / 8.0
-        par = {
-            "le": le, "kt": kt, "kb": kb,
-            "dle": np.full_like(lam, cfg.l0 / self.n),
-            "dkt": dk * cfg.l0,
-            "dkb": cfg.d_a**2 * cfg.l0 * (k + lam * dk) / 8.0,
-        }
-        for v in par.values():
+        dkb = cfg.d_a**2 * cfg.l0 * (k + lam * dk) / 8.0
+        dle = np.full_like(lam, cfg.l0 / self.n)
+        dkt = dk * cfg.l0
+        for v in (le, kt, kb, dle, dkt, dkb):
             v.flags.writeable = False  # shared by the cache
+        par = {"le": le, "kt": kt, "kb": kb, "dle": dle, "dkt": dkt, "dkb": dkb}
         self._par_cache = (key, par)
         return par
 

@@ -168,20 +168,31 @@ def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_step
     p = lu.p
     proj = step.proj
     use_proj = proj is not None
-    cfg = model.cfg
-    Qpoint = model._q_masses
-    if payload:
-        Qpoint = Qpoint + payload * model._q_payload
-    st = model.stage1
+    static = _static_args(model, float(payload), target)
     out = _chord_loop(
         np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(lam, dtype=float),
         float(rn_prev), lu.lub, lu.piv, p.kl, p.ku, p.perm, np.ascontiguousarray(W),
         np.ascontiguousarray(step.inv), np.ascontiguousarray(proj) if use_proj else
         np.zeros((model.A, model.A)), use_proj, step.lam_ref, step.lo, step.hi,
-        target.pd.astype(np.int64), float(target.tool), float(target.L), bool(target.axis),
-        target.offset, model.residual_scale, np.asarray(st._k, dtype=float),
-        np.asarray(st._dk, dtype=float), float(cfg.l0), float(model.n), float(cfg.d_a),
-        float(cfg.rho0), model.gravity, Qpoint, model._kargs, float(tol), float(rate),
-        int(max_steps))
+        static[0], float(target.tool), float(target.L), bool(target.axis), target.offset,
+        *static[1:], model._kargs, float(tol), float(rate), int(max_steps))
     x, lam, status, steps, hist, rn = out
     return x, lam, int(status), int(steps), [float(h) for h in hist], float(rn)
+
+
+def _static_args(model, payload, target):
+    """The loop's arguments that depend on the model and payload only (kept on the model)."""
+    cache = getattr(model, "_chord_static", None)
+    if cache is None:
+        cache = model._chord_static = {}
+    args = cache.get(payload)
+    if args is None:
+        cfg, st = model.cfg, model.stage1
+        Qpoint = model._q_masses + payload * model._q_payload if payload else model._q_masses
+        args = cache[payload] = (
+            target.pd.astype(np.int64), model.residual_scale, np.asarray(st._k, dtype=float),
+            np.asarray(st._dk, dtype=float), float(cfg.l0), float(model.n), float(cfg.d_a),
+            float(cfg.rho0), model.gravity, Qpoint)
+        while len(cache) > 8:
+            cache.pop(next(iter(cache)))
+    return args
