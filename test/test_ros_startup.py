@@ -260,6 +260,37 @@ def _active_inverse(env, path, client):
     return node
 
 
+SIGINT_AT_EXECUTOR = """
+import signal
+from rclpy.node import Node
+from bellow_ancf_ros.nodes import ros_util
+
+class Executor(ros_util.SingleThreadedExecutor):
+    def __init__(self, *args, **kwargs):
+        signal.raise_signal(signal.SIGINT)  # Ctrl-C after the constructor, before the spin
+        super().__init__(*args, **kwargs)
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__('startup_sigint_probe')
+
+ros_util.SingleThreadedExecutor = Executor
+ros_util.main_for(Probe, before_destroy=lambda node: print('VENT', flush=True))()
+print('CLEAN EXIT', flush=True)
+"""
+
+
+def test_sigint_between_constructor_and_spin_exits_cleanly_and_vents(env):
+    """Regression: a Ctrl-C while the executor was being built gave a traceback, no vent."""
+    res = subprocess.run([sys.executable, '-c', SIGINT_AT_EXECUTOR], env=env, cwd=REPO,
+                         capture_output=True, text=True, timeout=60,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, out
+    assert 'VENT' in res.stdout and 'CLEAN EXIT' in res.stdout, out
+    assert 'Traceback' not in out, out
+
+
 def test_double_sigint_still_vents(env, tmp_path, client):
     """Terminal and ``ros2 launch`` both send SIGINT: the second must not cut the vent."""
     node = _active_inverse(env, tmp_path / 'inverse.log', client)

@@ -386,19 +386,21 @@ def _ignore_further_signals() -> _ShuttingDown:
     return handler
 
 
-#: Set by the first SIGINT/SIGTERM while spinning: the spin loop ends and the node vents.
+#: Set by the first SIGINT/SIGTERM once the node exists: the spin loop ends and the node vents.
 _STOP = threading.Event()
+#: Set as soon as the node is constructed (a signal from then on stops it cleanly).
 _SPINNING = threading.Event()
 
 
 def _first_signal(signum, frame):  # pragma: no cover - signal path
     """First SIGINT/SIGTERM: stop spinning; later ones are only counted.
 
-    While spinning, the loop is stopped by a flag rather than by raising:
-    KeyboardInterrupt raised while the executor is inside rclpy's C++ code
-    (taking a message) becomes a RuntimeError there, and the process would
-    exit with an error.  Before spinning (in a constructor), it raises
-    KeyboardInterrupt.
+    Once the node exists, the loop is stopped by a flag rather than by
+    raising: KeyboardInterrupt raised while the executor is inside rclpy's
+    C++ code (taking a message) becomes a RuntimeError there, and the
+    process would exit with an error; a signal between the constructor and
+    the first spin (the executor being built) also just stops it.  Before
+    (in a constructor), it raises KeyboardInterrupt.
     """
     _ignore_further_signals()
     if _SPINNING.is_set():
@@ -415,9 +417,9 @@ def run_node(node, before_destroy=None) -> None:
     ``ros2 launch`` and a terminal may both deliver SIGINT, and a second one
     must not interrupt the vent or its acknowledgement wait (which is bounded).
     """
+    _SPINNING.set()
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    _SPINNING.set()
     try:
         while rclpy.ok() and not _STOP.is_set():
             executor.spin_once(timeout_sec=0.1)
@@ -460,6 +462,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None):
         init_rclpy(args)
         try:
             node = node_class()
+            _SPINNING.set()  # from here a signal stops the node cleanly (run_node)
         except (StartupParameterError, ConfigError) as exc:
             rclpy.try_shutdown()
             print(f'[{name}] cannot start: {exc}', file=sys.stderr, flush=True)
