@@ -6,7 +6,8 @@ import scipy.linalg.lapack as lapack
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse
 from bellow_ancf_ros.core import chord
-from bellow_ancf_ros.core.inverse_newton import Target, _StretchStep
+from bellow_ancf_ros.core.inverse_newton import Target
+from bellow_ancf_ros.core.inverse_warm import _StretchStep
 
 
 @pytest.mark.parametrize("n, kl, ku", [(1, 0, 0), (7, 2, 1), (60, 5, 9), (240, 43, 43)])

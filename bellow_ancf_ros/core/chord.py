@@ -1,6 +1,6 @@
 """Chord steps of the warm-started inverse solve, compiled (eqs. 25, 28-30).
 
-Along a trajectory, :func:`core.inverse_newton.full_space_newton` first
+Along a trajectory, :func:`core.inverse_warm.full_space_newton` first
 reuses the banded LU factorisation of the KKT matrix (eq. 27) made near an
 earlier answer: each chord step is one residual evaluation, one
 single-column banded solve and a few small products, so that the loop of
@@ -160,7 +160,7 @@ def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_step
                 rn_prev=np.inf):
     """Chord steps from ``(x, lam)`` with the factorisation ``lu`` (a ``BandedLU``) and ``W``.
 
-    ``step`` is the ``inverse_newton._StretchStep`` of ``W`` (``J_O``'s
+    ``step`` is the ``inverse_warm._StretchStep`` of ``W`` (``J_O``'s
     inverse, the null-space projector).  Returns ``(x, lam, status, steps,
     history, rn)``: the last iterate (its residual norm ``rn``, evaluated),
     why the loop stopped, the steps taken and the residual norms seen.

@@ -50,8 +50,8 @@ class ForwardResult:
     _sensitivity: object = field(default=None, repr=False)
     _sensitivity_exact: bool = field(default=False, repr=False)  # W made at x's last iterate
     _chord: object = field(default=None, repr=False)
-    _step_maps: object = field(default=None, repr=False)  # inverse_newton._StretchStep of W
-    _path: object = field(default=None, repr=False)  # inverse_newton._second_order's record
+    _step_maps: object = field(default=None, repr=False)  # inverse_warm._StretchStep of W
+    _path: object = field(default=None, repr=False)  # inverse_warm._second_order's record
     # a solve that ran out of budget: where it stopped (a warm start continues it)
     resume_state: ResumeState | None = field(default=None, repr=False)
 

@@ -4,8 +4,8 @@ Used by :func:`bellow_ancf_ros.core.inverse.solve_inverse` (see its module
 docstring for the method): the objective ``O`` of eq. (28) as a function of
 the stretches with exact sensitivities (implicit function theorem), the
 reduced Newton / minimum-norm Gauss-Newton iteration with its active set on
-the pressure limits, the full-space Newton method on ``[lam, q, alpha]``
-(eqs. 29, 30) and the solve's budget.
+the pressure limits and the solve's budget.  The warm-started full-space
+Newton method on ``[lam, q, alpha]`` (eqs. 29, 30) is :mod:`core.inverse_warm`.
 """
 
 from __future__ import annotations
@@ -17,9 +17,8 @@ import weakref
 
 import numpy as np
 
-from . import linsolve, solver
-from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps
-from .forward import ForwardResult, solve_forward
+from . import solver
+from .forward import solve_forward
 
 __all__ = [
     "Budget",
@@ -30,7 +29,6 @@ __all__ = [
     "norm",
     "pose_errors",
     "iterate",
-    "full_space_newton",
     "cold_solution",
 ]
 
@@ -386,246 +384,3 @@ def iterate(obj, lam, free, lo, hi, lam_ref, multi, done, max_iter):
         lam, fw, O, J, merit, Jp, null = lam_try, fw_t, O_t, J_t, merit_t, Jp_t, null_t
         obj.advance(lam)
     return lam, fw, O, J, False, max_iter
-
-
-# chord steps (a factorisation from an earlier point, reused): each must cut the residual by
-# this factor at least, and at most this many in a row; then Newton with a new factorisation
-CHORD_RATE = 0.1
-MAX_CHORD = 12
-# redundant robots: a refined W (one step with the last factorisation) counts as the W of its
-# iterate when the refinement changed it by less than REFINE_TOL (relative); up to REFINE_MAX
-# it is used and refined again at the next iterate; beyond, a new factorisation
-REFINE_TOL = 1e-6
-REFINE_MAX = 1e-2
-
-
-class _StretchStep:
-    """The stretch part of the Schur-complement step for one sensitivity matrix ``W``.
-
-    ``J_O = -T W`` (``T``: the objective's linear map, the same for every
-    target of a model) and its (pseudo-)inverse and null-space projector are
-    made once per ``W`` and kept with it (``of``), so that chord steps and
-    predictors with the same ``W`` cost a few matrix-vector products each.
-    """
-
-    def __init__(self, target, multi, W, lam_ref, lo, hi):
-        """Set up; see the class docstring."""
-        self.W, self.lam_ref, self.lo, self.hi = W, lam_ref, lo, hi
-        JO = -target.linear(W)
-        self.inv, self.proj = None, None
-        if np.all(np.isfinite(JO)):
-            if multi:
-                self.inv = np.linalg.pinv(JO, rcond=_RCOND)
-                self.proj = np.eye(W.shape[1]) - self.inv @ JO
-            else:
-                try:
-                    self.inv = np.linalg.inv(JO)
-                except np.linalg.LinAlgError:
-                    pass
-        self.null_norm = np.inf
-
-    @classmethod
-    def of(cls, cache, target, multi, W, lam_ref, lo, hi):
-        """The step map of ``W`` from ``cache`` (a dict kept with ``W``), made on first use."""
-        key = (target.axis, multi)
-        sm = cache.get(key)
-        if sm is None or sm.W is not W:
-            sm = cache[key] = cls(target, multi, W, lam_ref, lo, hi)
-        return sm
-
-    def __call__(self, target, x, lam, w0):
-        """Stretch increment at the state ``x``, ``w0 = J^{-1} R`` (None: leave the fast path)."""
-        if self.inv is None:
-            return None
-        Ot = target(x) - target.linear(w0)
-        d = -self.inv @ Ot
-        if self.proj is not None:
-            null = self.proj @ (self.lam_ref - lam)
-            d = d + null
-            self.null_norm = float(np.max(np.abs(null)))
-        else:
-            self.null_norm = 0.0
-        if (
-            not np.all(np.isfinite(d))
-            or np.max(np.abs(d)) > 0.05
-            or np.any(lam + d <= self.lo)
-            or np.any(lam + d >= self.hi)
-        ):
-            return None
-        return d
-
-
-def _second_order(path, t_new, W, x, lam, lo, hi):
-    """The linear predictor ``(x, lam)`` plus the last target's correction, scaled (or as is).
-
-    ``path`` (``ForwardResult._path`` of the warm start): its target ``t_w``,
-    the target before ``t_prev`` and what the iteration added to its own
-    linear prediction, made with the sensitivities ``(W_w, fresh_w)``, and
-    whether the warm start's own ``W`` is fresh (made near it, not inherited).
-    Along a path sampled at a steady rate, the targets step alike and the
-    second-order term of the prediction is nearly the same: when the new
-    step ``t_new - t_w`` is within 25 % of the last one and the prediction
-    uses the same ``W`` or a fresh one like the last, the correction is
-    added, scaled by the squared ratio of the steps (a start only: the
-    iteration's answer does not depend on it).
-    """
-    if path is None or path[1] is None or path[2] is None:
-        return x, lam
-    t_w, t_prev, cx, cl, (W_w, fresh_w), fresh = path
-    if not (W_w is W or (fresh_w and fresh)):
-        return x, lam
-    last = norm(t_w - t_prev)
-    if not last > 0 or norm(t_new - t_w - (t_w - t_prev)) > 0.25 * last:
-        return x, lam
-    s = (norm(t_new - t_w) / last) ** 2
-    lam_c = lam + s * cl
-    if np.any(lam_c <= lo) or np.any(lam_c >= hi):
-        return x, lam
-    return x + s * cx, lam_c
-
-
-def full_space_newton(
-    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
-    budget=None,
-):
-    """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30), chord first.
-
-    The bordered Jacobian is eliminated by its Schur complement: with
-    ``J_x`` factorised, ``W = J_x^{-1} dR/dlam`` gives the reduced objective
-    Jacobian ``J_O = -T W`` and the equilibrium correction, the stretch step
-    solves ``J_O dlam = -(O - T J_x^{-1} R)`` (minimum-norm plus null-space
-    term for redundant robots, as in the reduced iteration) and
-    ``dx = -J_x^{-1}(R + dR/dlam dlam)``.
-
-    The predictor is the linear step with the warm start's ``W`` (plus, along
-    a steady path, the last target's second-order correction:
-    :func:`_second_order`).  Then the factorisation of an earlier answer
-    (carried by the warm start, ``ForwardResult._chord``) is reused: compiled
-    chord steps (:mod:`core.chord`), one single-column banded solve each,
-    linear convergence at a rate that grows with the distance to where it
-    was made (measured 0.015 to 0.05 per millimetre of target motion).  They
-    must cut the residual by ``CHORD_RATE`` each; when they do not (or after
-    ``MAX_CHORD`` of them) a Newton step with a new factorisation follows,
-    and the chord steps go on with it.  The answer does not depend on the
-    factorisation used: for one segment (as many target equations as
-    stretches) the iteration solves ``R = 0, O = 0`` whatever ``J_x``
-    approximates it; for redundant robots the null-space condition needs the
-    exact ``W``, so the answer is accepted only after a step whose ``W`` is
-    the one of its iterate (a new factorisation there, or ``W`` refined with
-    the last one to ``REFINE_TOL``) and whose null-space correction is below
-    1e-9.  A held target is accepted at once when the warm start's ``W`` was
-    such a one (``ForwardResult._sensitivity_exact``).
-
-    Returns a converged ForwardResult or None (then the robust reduced
-    iteration takes over): it never leaves the interior of the pressure box
-    and gives up on any sign of trouble, or when the ``budget``'s deadline
-    has passed (checked before every factorisation).
-    """
-    x, lam = warm_fw.x.copy(), warm_fw.stretch.copy()
-
-    def step_map(W, cache):
-        return _StretchStep.of(cache, target, multi, W, lam_ref, lo, hi)
-
-    def result(ev, rn, its):
-        return ForwardResult(
-            model=model,
-            pressures_pa=np.clip(model.stage1.pressure(lam), model.cfg.p_min, model.cfg.p_max),
-            stretch=lam.copy(), payload_kg=payload, x=x, converged=True, stable=None,
-            status=solver.CONVERGED, message=solver.MESSAGES[solver.CONVERGED],
-            iterations=its, residual_norm=rn, history=hist, jacobian=ev.jacobian,
-            _sensitivity=W, _sensitivity_exact=exact, _chord=chord, _step_maps=maps,
-            _path=(target.offset, t_warm, None if lin is None else x - lin[0],
-                   None if lin is None else lam - lin[1], lin_W, W is not warm_fw._sensitivity),
-        )
-
-    hist, sm, lin, lin_W = [], None, None, None
-    t_warm = None if warm_fw._path is None else warm_fw._path[0]
-    chord = warm_fw._chord  # (factorisation, its W) from an earlier answer, or None
-    W = warm_fw._sensitivity
-    maps = warm_fw._step_maps if warm_fw._step_maps is not None else {}  # step maps of W
-    if W is not None:
-        # predictor: the warm start is an equilibrium (R ~ 0) and its sensitivities are known
-        sm = step_map(W, maps)
-        dlam = sm(target, x, lam, np.zeros(model.N))
-        if dlam is None:
-            return None
-        x = x - W @ dlam
-        lam = lam + dlam
-        lin, lin_W = (x, lam), W
-        x, lam = _second_order(warm_fw._path, target.offset, W, x, lam, lo, hi)
-        lin_W = (W, warm_fw._path is not None and warm_fw._path[5])
-    n_chord, newton_its, n_refine, refine, first = 0, 0, 0, False, True
-    # exact: the last step's W is the one at its own iterate (factorised there, or refined);
-    # the predictor's is when the warm start's was (a held target is accepted at once)
-    exact = multi and sm is not None and bool(warm_fw._sensitivity_exact)
-    while True:
-        lu = None if chord is None else getattr(chord[0], "lu", None)
-        if first or not exact or not multi:
-            first = False
-            if isinstance(lu, linsolve.BandedLU):
-                chord_map = step_map(chord[1], maps if chord[1] is W else {})
-                if chord_map.inv is not None:
-                    # compiled chord steps (core.chord) with the factorisation of an earlier point
-                    x, lam, status, steps, h, rn = chord_steps(
-                        model, payload, target, lu, chord[1], chord_map, x, lam, tol,
-                        CHORD_RATE, MAX_CHORD)
-                    hist += h
-                    n_chord += steps
-                    exact = exact and steps == 0
-                    if status == NONFINITE:
-                        return None
-                    if status == CHORD_CONVERGED and not multi:
-                        ev = model.evaluate(x, lam, 1.0, payload, jacobian=True)
-                        fw = result(ev, rn, newton_its + n_chord)
-                        if done(fw):
-                            return fw
-                    hist.pop()  # evaluated again below, with its Jacobian
-        ev = model.evaluate(x, lam, 1.0, payload, jacobian=True, lam_derivative=True)
-        rn = float(np.max(np.abs(ev.residual * model.residual_scale)))
-        hist.append(rn)
-        if not np.isfinite(rn):
-            return None
-        if rn <= tol and (not multi or (exact and sm.null_norm <= 1e-9)):
-            fw = result(ev, rn, newton_its + n_chord + n_refine)
-            if done(fw):
-                return fw
-        if (newton_its >= 2 and rn > 1e-2) or newton_its >= max_iter:
-            return None
-        if budget is not None and budget.expired():
-            return None
-        if refine and n_refine < max_iter:
-            # redundant robot after a Newton step: W at this iterate by one refinement with the
-            # last factorisation; it counts as this iterate's W when the refinement changed it
-            # by less than REFINE_TOL, is refined again at the next iterate when by less than
-            # REFINE_MAX, else a new factorisation is made
-            sol = chord[0].solve(np.column_stack([ev.residual, ev.dres_dlam - ev.jacobian @ W]))
-            dW = sol[:, 1:]
-            W_new = W + dW
-            change = np.max(np.abs(dW)) / max(np.max(np.abs(W_new)), 1e-300)
-            if change <= REFINE_MAX:
-                n_refine += 1
-                w0, W, maps = sol[:, 0], W_new, {}
-                chord = (chord[0], W)
-                sm = step_map(W, maps)
-                dlam = sm(target, x, lam, w0)
-                if dlam is None:
-                    return None
-                x = x - (w0 + W @ dlam)
-                lam = lam + dlam
-                exact = change <= REFINE_TOL
-                continue
-        factorised = linsolve.kkt_solver(model).bound(ev.jacobian)
-        try:
-            sol = factorised.solve(np.column_stack([ev.residual, ev.dres_dlam]))  # banded LU
-        except np.linalg.LinAlgError:
-            return None
-        newton_its += 1
-        w0, W = sol[:, 0], sol[:, 1:]
-        chord, maps = (factorised, W), {}
-        sm = step_map(W, maps)
-        dlam = sm(target, x, lam, w0)
-        if dlam is None:
-            return None
-        x = x - (w0 + W @ dlam)
-        lam = lam + dlam
-        exact, refine = True, multi

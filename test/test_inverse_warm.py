@@ -1,10 +1,10 @@
-"""core.inverse_newton.full_space_newton: chord, refined and Newton steps give the same answers."""
+"""core.inverse_warm: chord, refined and Newton steps give the same answers; held targets."""
 
 import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, linsolve, load_robot, solve_forward, solve_inverse
-from bellow_ancf_ros.core import inverse_newton as invn
+from bellow_ancf_ros.core import inverse_warm as warm
 
 
 def _walk_targets(model, n, rng, step_pa=1.5e3):
@@ -34,8 +34,8 @@ def test_answers_with_chord_steps_equal_newton_answers(name, monkeypatch):
 
     fast = walk()
     assert sum(r.forward.iterations for r in fast) > 0
-    monkeypatch.setattr(invn, "MAX_CHORD", 0)  # no chord steps
-    monkeypatch.setattr(invn, "REFINE_TOL", -1.0)  # no refinement: a factorisation per step
+    monkeypatch.setattr(warm, "MAX_CHORD", 0)  # no chord steps
+    monkeypatch.setattr(warm, "REFINE_MAX", -1.0)  # no refinement: a factorisation per step
     newton = walk()
     for f, n in zip(fast, newton):
         assert np.linalg.norm(f.forward.position - n.forward.position) < 1e-9
