@@ -51,7 +51,7 @@ class ForwardResult:
     _sensitivity_exact: bool = field(default=False, repr=False)  # W made at x's last iterate
     _chord: object = field(default=None, repr=False)
     _step_maps: object = field(default=None, repr=False)  # inverse_warm._StretchStep of W
-    _path: object = field(default=None, repr=False)  # inverse_warm._second_order's record
+    _path: object = field(default=None, repr=False)  # inverse_warm.PathRecord
     # a solve that ran out of budget: where it stopped (a warm start continues it)
     resume_state: ResumeState | None = field(default=None, repr=False)
 

@@ -35,6 +35,8 @@ A held target is accepted at once when the warm start's ``W`` was such a one
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import linsolve, solver
@@ -42,7 +44,8 @@ from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps
 from .forward import ForwardResult
 from .inverse_newton import _RCOND, norm
 
-__all__ = ["full_space_newton", "CHORD_RATE", "MAX_CHORD", "REFINE_TOL", "REFINE_MAX"]
+__all__ = ["full_space_newton", "PathRecord", "CHORD_RATE", "MAX_CHORD", "REFINE_TOL",
+           "REFINE_MAX"]
 
 # chord steps (a factorisation from an earlier point, reused): each must cut the residual by
 # this factor at least, and at most this many in a row; then Newton with a new factorisation
@@ -111,33 +114,51 @@ class _StretchStep:
         return d
 
 
+@dataclass(frozen=True)
+class PathRecord:
+    """What an answer along a path leaves for the next target's predictor (:func:`_second_order`).
+
+    ``target``: its scaled target (``Target.offset``); ``previous``: the one
+    before (None: none); ``dx, dlam``: what the iteration added to its linear
+    prediction (None: no prediction), made with the sensitivities
+    ``predicted_with`` and ``predicted_fresh`` (whether those were fresh);
+    ``fresh``: whether the answer's own ``W`` was made in its solve (near
+    it), not inherited from its warm start.
+    """
+
+    target: np.ndarray
+    previous: np.ndarray | None = None
+    dx: np.ndarray | None = None
+    dlam: np.ndarray | None = None
+    predicted_with: object = None
+    predicted_fresh: bool = False
+    fresh: bool = False
+
+
 def _second_order(path, t_new, W, x, lam, lo, hi):
     """The linear predictor ``(x, lam)`` plus the last target's correction, scaled (or as is).
 
-    ``path`` (``ForwardResult._path`` of the warm start): its target ``t_w``,
-    the target before ``t_prev`` and what the iteration added to its own
-    linear prediction, made with the sensitivities ``(W_w, fresh_w)``, and
-    whether the warm start's own ``W`` is fresh (made near it, not inherited).
-    Along a path sampled at a steady rate, the targets step alike and the
-    second-order term of the prediction is nearly the same: when the new
-    step ``t_new - t_w`` is within 25 % of the last one and the prediction
-    uses the same ``W`` or a fresh one like the last, the correction is
-    added, scaled by the squared ratio of the steps (a start only: the
-    iteration's answer does not depend on it).
+    ``path``: the warm start's :class:`PathRecord`.  Along a path sampled at
+    a steady rate, the targets step alike and the second-order term of the
+    prediction is nearly the same: when the new step ``t_new - t_w`` is
+    within 25 % of the last one and the prediction uses the same ``W`` or a
+    fresh one like the last, the correction is added, scaled by the squared
+    ratio of the steps (a start only: the iteration's answer does not depend
+    on it).
     """
-    if path is None or path[1] is None or path[2] is None:
+    if path is None or path.previous is None or path.dx is None:
         return x, lam
-    t_w, t_prev, cx, cl, (W_w, fresh_w), fresh = path
-    if not (W_w is W or (fresh_w and fresh)):
+    if not (path.predicted_with is W or (path.predicted_fresh and path.fresh)):
         return x, lam
+    t_w, t_prev = path.target, path.previous
     last = norm(t_w - t_prev)
     if not last > 0 or norm(t_new - t_w - (t_w - t_prev)) > 0.25 * last:
         return x, lam
     s = (norm(t_new - t_w) / last) ** 2
-    lam_c = lam + s * cl
+    lam_c = lam + s * path.dlam
     if np.any(lam_c <= lo) or np.any(lam_c >= hi):
         return x, lam
-    return x + s * cx, lam_c
+    return x + s * path.dx, lam_c
 
 
 class _WarmSolve:
@@ -151,8 +172,8 @@ class _WarmSolve:
         self.chord = warm_fw._chord  # (factorisation, its W) from an earlier answer, or None
         self.W = warm_fw._sensitivity
         self.maps = warm_fw._step_maps if warm_fw._step_maps is not None else {}  # of W
-        self.t_warm = None if warm_fw._path is None else warm_fw._path[0]
-        self.hist, self.sm, self.lin, self.lin_W = [], None, None, None
+        self.t_warm = None if warm_fw._path is None else warm_fw._path.target
+        self.hist, self.sm, self.lin, self.lin_W = [], None, None, (None, False)
         self.n_chord = self.newton_its = self.n_refine = 0
         # exact: the last step's W is the one at its own iterate (factorised there, or refined)
         self.exact = False
@@ -175,9 +196,10 @@ class _WarmSolve:
             iterations=self.newton_its + self.n_chord + self.n_refine, residual_norm=rn,
             history=self.hist, jacobian=ev.jacobian, _sensitivity=self.W,
             _sensitivity_exact=self.exact, _chord=self.chord, _step_maps=self.maps,
-            _path=(self.target.offset, self.t_warm, None if lin is None else self.x - lin[0],
-                   None if lin is None else self.lam - lin[1], self.lin_W,
-                   self.W is not self.warm._sensitivity),
+            _path=PathRecord(self.target.offset, self.t_warm,
+                             None if lin is None else self.x - lin[0],
+                             None if lin is None else self.lam - lin[1], *self.lin_W,
+                             fresh=self.W is not self.warm._sensitivity),
         )
 
     def predict(self):
@@ -192,7 +214,7 @@ class _WarmSolve:
         self.lin = (self.x, self.lam)
         self.x, self.lam = _second_order(self.warm._path, self.target.offset, self.W, self.x,
                                          self.lam, self.lo, self.hi)
-        self.lin_W = (self.W, self.warm._path is not None and self.warm._path[5])
+        self.lin_W = (self.W, self.warm._path is not None and self.warm._path.fresh)
         # a held target is accepted at once when the warm start's W was its iterate's
         self.exact = self.multi and bool(self.warm._sensitivity_exact)
         return True
