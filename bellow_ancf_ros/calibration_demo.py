@@ -34,72 +34,38 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .ros_demo import _child_env, _NodeProcess, _wait
+from .ros_pipeline import NodeProcess, SpunNode, child_env, record_qos, wait_until
 
 #: pose of the base frame in the demo's motion-capture frame (unknown to the calibration)
 MOCAP_T = np.array([0.042, -0.027, 0.061])
 MOCAP_ROTVEC_DEG = np.array([4.0, -3.0, 6.0])
 
 
-class _Process(_NodeProcess):
-    """A node process with ROS remappings."""
-
-    def __init__(self, module, params, env, log_dir, remaps=()) -> None:
-        self.module = module
-        self.log_path = log_dir / f'{module}.log'
-        cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args']
-        for k, v in params.items():
-            cmd += ['-p', f'{k}:={v}']
-        for a, b in remaps:
-            cmd += ['-r', f'{a}:={b}']
-        with open(self.log_path, 'w') as log:
-            self.proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL, start_new_session=True)
-
-
-class _MocapRecorder:
+class _MocapRecorder(SpunNode):
     """rclpy in this process: the mocap frame relay and the recorder."""
 
     def __init__(self, domain: int) -> None:
-        import rclpy
         from geometry_msgs.msg import PoseStamped
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from std_msgs.msg import Float64MultiArray
 
         from .nodes.ros_util import command_qos
 
-        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                         depth=1000)
-        self.rclpy, self.PoseStamped = rclpy, PoseStamped
-        self.ctx = Context()
-        rclpy.init(context=self.ctx, domain_id=domain)
-        self.node = rclpy.create_node('calibration_demo', context=self.ctx)
-        self.lock = threading.Lock()
+        super().__init__(domain, 'calibration_demo')
+        qos = record_qos()
+        self.PoseStamped = PoseStamped
         self.commands, self.mocap, self.base, self.targets = [], [], [], []
         self.rot = Rotation.from_rotvec(np.radians(MOCAP_ROTVEC_DEG))
         self.pub = self.node.create_publisher(PoseStamped, 'measured_pose', command_qos())
         self.node.create_subscription(Float64MultiArray, 'pressure_command', self._command, qos)
         self.node.create_subscription(PoseStamped, 'sim/measured_pose', self._pose, qos)
         self.node.create_subscription(PoseStamped, 'target_pose', self._target, qos)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - shut down
-            pass
+        self.start()
 
     def _command(self, msg) -> None:
         from .core.recordings import _pressure_unit
@@ -127,12 +93,6 @@ class _MocapRecorder:
         p = msg.pose.position
         with self.lock:
             self.targets.append((time.monotonic(), np.array([p.x, p.y, p.z])))
-
-    def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(5.0)
-        self.node.destroy_node()
-        self.rclpy.try_shutdown(context=self.ctx)
 
 
 def _tracking_rmse(targets, base, t0, t1):
@@ -174,7 +134,7 @@ def _excite_and_record(args, rec, steps, env, logs, procs, bag) -> None:
     from .core.recordings import write_bag
     print(f'[1/4] excitation: {len(steps)} steps of {args.dwell_s:g} s, recording ...',
           flush=True)
-    exc = _Process('excitation_publisher', {
+    exc = NodeProcess('excitation_publisher', {
         'robot_config': args.robot, 'dwell_s': args.dwell_s, 'rate_hz': 10.0,
         'points_per_scheme': args.points_per_scheme, 'n_random': args.n_random,
         'wait_for_subscribers': 2, 'start_delay_s': 0.5}, env, logs)
@@ -183,7 +143,7 @@ def _excite_and_record(args, rec, steps, env, logs, procs, bag) -> None:
     def vented():
         with rec.lock:
             return len(rec.commands) > len(steps) and not np.any(rec.commands[-1][1])
-    if not _wait(vented, len(steps) * args.dwell_s + 90.0):
+    if not wait_until(vented, len(steps) * args.dwell_s + 90.0):
         raise _DemoFailed('excitation did not finish:\n' + exc.tail())
     time.sleep(args.dwell_s)
     exc.stop()
@@ -223,16 +183,16 @@ def _calibrate(args, env, bag, robot_file, res_png) -> dict:
 def _track(args, cfg, rec, env, logs, procs, label, config):
     """Stage 4: feedforward tracking of a circle with robot file ``config``."""
     print(f'[4/4] feedforward tracking, {label} robot file, {args.track_s:g} s ...', flush=True)
-    inv = _Process('inverse_kinetostatic_node', {'robot_config': config}, env, logs)
+    inv = NodeProcess('inverse_kinetostatic_node', {'robot_config': config}, env, logs)
     traj_params = {'robot_config': args.robot, 'period_s': args.track_s, 'start_delay_s': 2.0,
                    'trajectory': 'planar_circle' if cfg.n_segments == 1 else 'bending_circle'}
     if cfg.n_segments > 1:
         traj_params['bending_angle_deg'] = 10.0
-    traj = _Process('trajectory_publisher', traj_params, env, logs)
+    traj = NodeProcess('trajectory_publisher', traj_params, env, logs)
     procs += [inv, traj]
     with rec.lock:
         n0 = len(rec.targets)
-    if not _wait(lambda: len(rec.targets) > n0 + 5, 60.0):
+    if not wait_until(lambda: len(rec.targets) > n0 + 5, 60.0):
         raise _DemoFailed('no targets:\n' + traj.tail() + '\n' + inv.tail())
     t0 = time.monotonic() + 2.0        # the robot reaches the path first
     time.sleep(args.track_s + 2.0)
@@ -257,7 +217,7 @@ def main(argv=None) -> int:
     res_png = out / 'demo_calibration_residuals.png'
     track_png = out / 'demo_calibration_tracking.png'
     domain = random.randint(0, 101)
-    env = _child_env(domain)
+    env = child_env(domain)
     logs = Path(tempfile.mkdtemp(prefix='calibration_demo_'))
     cfg = load_robot(args.robot)
     steps = excitation_sequence(cfg, args.points_per_scheme, args.n_random)
@@ -267,11 +227,12 @@ def main(argv=None) -> int:
           f'{np.round(MOCAP_T * 1e3, 1).tolist()} mm, '
           f'rotation vector {MOCAP_ROTVEC_DEG.tolist()} deg')
     rec = _MocapRecorder(domain)
-    sim = _Process('simulated_robot_node', {'robot_config': f'{args.robot}_mismatched', 'seed': 1},
-                   env, logs, remaps=[('measured_pose', 'sim/measured_pose')])
+    sim = NodeProcess('simulated_robot_node',
+                      {'robot_config': f'{args.robot}_mismatched', 'seed': 1},
+                      env, logs, remaps={'measured_pose': 'sim/measured_pose'})
     procs = [sim]
     try:
-        if not _wait(lambda: len(rec.mocap) > 10, 60.0):
+        if not wait_until(lambda: len(rec.mocap) > 10, 60.0):
             raise _DemoFailed('simulated robot did not come up:\n' + sim.tail())
         _excite_and_record(args, rec, steps, env, logs, procs, bag)
         _calibrate(args, env, bag, robot_file, res_png)

@@ -88,32 +88,38 @@ def child_env(domain: int) -> dict:
     return env
 
 
-class Recorder:
-    """rclpy in this process: records ``topics`` (name -> message type) with arrival times."""
+def record_qos():
+    """Record everything: a deep reliable queue, so that a busy recorder loses nothing."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    def __init__(self, domain: int, topics: dict, name: str = 'ros_demo_recorder') -> None:
-        """Own context on ``domain``, one subscription per topic, spun in a thread."""
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=1000)
+
+
+class SpunNode:
+    """rclpy in this process: a node in its own context on ``domain``, spun in a thread.
+
+    Subclasses create their publishers and subscriptions on ``self.node``,
+    then call :meth:`start`; ``self.lock`` guards what callbacks store.
+    """
+
+    def __init__(self, domain: int, name: str) -> None:
+        """Own context and node; not spinning until :meth:`start`."""
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-        # record everything: a deep reliable queue, so that a busy recorder loses nothing
-        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST, depth=1000)
         self.rclpy = rclpy
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=domain)
         self.node = rclpy.create_node(name, context=self.ctx)
         self.lock = threading.Lock()
-        self.msgs = {t: [] for t in topics}
-        self.subs = {}
-        for topic, typ in topics.items():
-            self.subs[topic] = self.node.create_subscription(
-                typ, topic, lambda m, topic=topic: self._store(topic, m), qos)
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
+
+    def start(self) -> None:
+        """Spin the node in its thread."""
         self.thread.start()
 
     def _spin(self) -> None:
@@ -121,6 +127,29 @@ class Recorder:
             self.executor.spin()
         except Exception:  # noqa: BLE001 - shut down
             pass
+
+    def close(self) -> None:
+        """Stop spinning and shut the context down."""
+        self.executor.shutdown(timeout_sec=2.0)
+        if self.thread.is_alive():
+            self.thread.join(5.0)
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.ctx)
+
+
+class Recorder(SpunNode):
+    """rclpy in this process: records ``topics`` (name -> message type) with arrival times."""
+
+    def __init__(self, domain: int, topics: dict, name: str = 'ros_demo_recorder') -> None:
+        """Own context on ``domain``, one subscription per topic, spun in a thread."""
+        super().__init__(domain, name)
+        qos = record_qos()
+        self.msgs = {t: [] for t in topics}
+        self.subs = {}
+        for topic, typ in topics.items():
+            self.subs[topic] = self.node.create_subscription(
+                typ, topic, lambda m, topic=topic: self._store(topic, m), qos)
+        self.start()
 
     def _store(self, topic: str, msg) -> None:
         with self.lock:
@@ -145,13 +174,6 @@ class Recorder:
         with self.lock:
             for v in self.msgs.values():
                 v.clear()
-
-    def close(self) -> None:
-        """Stop spinning and shut the context down."""
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(5.0)
-        self.node.destroy_node()
-        self.rclpy.try_shutdown(context=self.ctx)
 
 
 def wait_until(pred, timeout: float) -> bool:

@@ -41,6 +41,20 @@ _SKIP = shutil.ignore_patterns('.git', '.venv', 'venv', 'build', 'install', 'log
                                '*.egg-info', '*.png')
 
 
+def test_every_module_of_the_package_imports():
+    """Regression: calibration_demo imported names ros_demo no longer had (make demo-calibrate)."""
+    import importlib
+    import pkgutil
+
+    import bellow_ancf_ros
+
+    names = [m.name for m in pkgutil.walk_packages(bellow_ancf_ros.__path__, 'bellow_ancf_ros.')
+             if not m.name.endswith('.__main__')]  # those run their command on import
+    assert 'bellow_ancf_ros.calibration_demo' in names
+    for name in names:
+        importlib.import_module(name)
+
+
 def test_launch_file_compiles(tmp_path):
     launch = REPO / 'launch' / 'bellow_ancf.launch.py'
     assert launch.is_file()
