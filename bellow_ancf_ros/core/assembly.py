@@ -331,14 +331,9 @@ class RobotModel:
         cached = getattr(self, "_par_cache", None)
         if cached is not None and cached[0] == key:
             return cached[1]  # Newton iterations at fixed stretches ask again and again
-        k = self.stage1.k(lam)
-        dk = self.stage1.dk(lam)
-        le = lam * cfg.l0 / self.n
-        kt = k * cfg.l0
-        kb = cfg.d_a**2 * cfg.l0 * lam * k / 8.0
-        dkb = cfg.d_a**2 * cfg.l0 * (k + lam * dk) / 8.0
-        dle = np.full_like(lam, cfg.l0 / self.n)
-        dkt = dk * cfg.l0
+        st = self.stage1
+        le, kt, kb, dle, dkt, dkb = kernels.element_parameters(
+            lam, st._k, st._dk, float(cfg.l0), float(self.n), float(cfg.d_a))
         for v in (le, kt, kb, dle, dkt, dkb):
             v.flags.writeable = False  # shared by the cache
         par = {"le": le, "kt": kt, "kb": kb, "dle": dle, "dkt": dkt, "dkb": dkb}

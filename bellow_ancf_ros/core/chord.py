@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kernels import evaluate_kernel
+from .kernels import element_parameters, evaluate_kernel
 
 __all__ = ["banded_solve", "chord_steps", "CONVERGED", "STALLED", "LEFT_BOX", "MAX_STEPS",
            "NONFINITE"]
@@ -69,14 +69,6 @@ def banded_solve(lub, piv, kl, ku, b):
 
 
 @njit(cache=True)
-def _horner(a, c):
-    out = np.full(a.shape[0], c[c.shape[0] - 1])
-    for k in range(c.shape[0] - 2, -1, -1):
-        out = out * a + c[k]
-    return out
-
-
-@njit(cache=True)
 def _target(v, pd, tool, L, axis, offset):
     """Objective of eq. (28) at the state ``v`` (``offset`` subtracted; zeros: linear part)."""
     k = 6 if axis else 3
@@ -100,14 +92,7 @@ def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_pro
     status = MAX_STEPS
     rn = np.inf
     while True:
-        k = _horner(lam, kcoef)
-        dk = _horner(lam, dkcoef)
-        le = lam * l0 / n_el
-        kt = k * l0
-        kb = d_a * d_a * l0 * lam * k / 8.0
-        dle = np.full(lam.shape[0], l0 / n_el)
-        dkt = dk * l0
-        dkb = d_a * d_a * l0 * (k + lam * dk) / 8.0
+        le, kt, kb, dle, dkt, dkb = element_parameters(lam, kcoef, dkcoef, l0, n_el, d_a)
         res, _, _ = evaluate_kernel(
             x[:nq], x[nq:], lam, le, kt, kb, dle, dkt, dkb, rho0, g, Qpoint,
             kargs[0], kargs[1], kargs[2], kargs[3], kargs[4], kargs[5], kargs[6], kargs[7],

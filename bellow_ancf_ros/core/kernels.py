@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["evaluate_kernel", "warm_up"]
+__all__ = ["evaluate_kernel", "element_parameters", "horner", "warm_up"]
 
 _PAIRS = np.array([[0, 0], [1, 1], [2, 2], [0, 1], [0, 2], [1, 2]], dtype=np.int64)
 
@@ -329,6 +329,33 @@ def _constraint_part(
                     data[o + 18 * p + 3 * m + i] = a_pm
                     data[o + no + 18 * p + 3 * m + i] = a_pm
     return nc_vals
+
+
+@njit(cache=True)
+def horner(a, c):
+    """``sum_i c[i] a**i`` for the array ``a`` (ascending coefficients ``c``), as ``polyval``."""
+    out = np.full(a.shape[0], c[c.shape[0] - 1])
+    for k in range(c.shape[0] - 2, -1, -1):
+        out = out * a + c[k]
+    return out
+
+
+@njit(cache=True)
+def element_parameters(lam, kcoef, dkcoef, l0, n_el, d_a):
+    """Per-actuator ``le, k_t, k_b`` and their derivatives w.r.t. ``lam`` (eqs. 2, 4).
+
+    ``kcoef``, ``dkcoef``: stage 1's ``k(lam)`` and ``dk/dlam`` (ascending
+    coefficients); ``le = lam l0 / n``, ``k_t = k l0``, ``k_b = D_a^2 l0 lam k / 8``.
+    """
+    k = horner(lam, kcoef)
+    dk = horner(lam, dkcoef)
+    le = lam * l0 / n_el
+    kt = k * l0
+    kb = d_a * d_a * l0 * lam * k / 8.0
+    dle = np.full(lam.shape[0], l0 / n_el)
+    dkt = dk * l0
+    dkb = d_a * d_a * l0 * (k + lam * dk) / 8.0
+    return le, kt, kb, dle, dkt, dkb
 
 
 @njit(cache=True)
