@@ -1,36 +1,25 @@
 """Robot assembly (eqs. 19-25, 27, 30): analytic Jacobians against finite differences."""
 
+import os
+import sys
+
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+from bellow_ancf_ros.core import solve_forward
 
-
-def _model(name, n, tool=0.0):
-    cfg = load_robot(name)
-    if tool:
-        cfg = cfg.replace(tool_length=tool)
-    return RobotModel(cfg, n)
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "data"))
+from make_solver_baseline import eval_state, model_for  # noqa: E402  (the baseline's cases)
 
 
 # plates on nodes (n = 6), plates inside elements (n = 4), two segments with a tool
 CASES = [("one_segment", 6, 0.0), ("one_segment", 4, 0.0), ("two_segment", 4, 0.02)]
 
 
-def _perturbed_state(model, seed):
-    rng = np.random.default_rng(seed)
-    lam = rng.uniform(model.stage1.lam_min, model.stage1.lam_max, model.A)
-    x = model.straight_state(lam)
-    x[: model.nq] += 1e-3 * rng.standard_normal(model.nq)
-    # non-zero multipliers exercise the constraint Hessian
-    x[model.nq:] = rng.standard_normal(model.nc)
-    return x, lam
-
-
 @pytest.mark.parametrize("name,n,tool", CASES)
 def test_kkt_jacobian_eq27_matches_finite_differences(name, n, tool):
-    model = _model(name, n, tool)
-    x, lam = _perturbed_state(model, 0)
+    model = model_for(name, n, tool)
+    x, lam = eval_state(model, 0)
     J = model.evaluate(x, lam, 1.0, 0.07).jacobian.toarray()
     h = 1e-7
     Jfd = np.empty_like(J)
@@ -47,8 +36,8 @@ def test_kkt_jacobian_eq27_matches_finite_differences(name, n, tool):
 
 @pytest.mark.parametrize("name,n,tool", CASES)
 def test_stretch_derivative_eq30_matches_finite_differences(name, n, tool):
-    model = _model(name, n, tool)
-    x, lam = _perturbed_state(model, 1)
+    model = model_for(name, n, tool)
+    x, lam = eval_state(model, 1)
     D = model.evaluate(x, lam, 1.0, 0.07, jacobian=False, lam_derivative=True).dres_dlam
     h = 1e-7
     for a in range(model.A):
@@ -61,8 +50,8 @@ def test_stretch_derivative_eq30_matches_finite_differences(name, n, tool):
 
 @pytest.mark.parametrize("name,n,tool", CASES)
 def test_force_residual_is_potential_gradient_plus_constraint_forces(name, n, tool):
-    model = _model(name, n, tool)
-    x, lam = _perturbed_state(model, 2)
+    model = model_for(name, n, tool)
+    x, lam = eval_state(model, 2)
     q, alpha = x[: model.nq], x[model.nq:]
     res = model.evaluate(x, lam, 1.0, 0.07).residual
     J = model.evaluate(x, lam, 1.0, 0.07).jacobian
@@ -80,7 +69,7 @@ def test_force_residual_is_potential_gradient_plus_constraint_forces(name, n, to
 
 @pytest.mark.parametrize("name", ["one_segment", "two_segment"])
 def test_straight_state_satisfies_constraints_and_counts(name):
-    model = _model(name, 6)
+    model = model_for(name, 6)
     cfg = model.cfg
     x = model.straight_state(np.ones(model.A))
     r = model.evaluate(x, np.ones(model.A), 0.0, 0.0).residual
@@ -93,7 +82,7 @@ def test_straight_state_satisfies_constraints_and_counts(name):
 
 @pytest.mark.parametrize("name", ["one_segment", "two_segment"])
 def test_constraint_jacobian_has_full_row_rank_at_a_bent_solution(name):
-    model = _model(name, 4)
+    model = model_for(name, 4)
     p = np.full(model.A, model.cfg.p_min)
     p[0] = model.cfg.p_max
     fw = solve_forward(model, p, 0.05)

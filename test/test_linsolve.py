@@ -1,19 +1,16 @@
 """KKT solves (core.linsolve): banded LU in level order against SuperLU; one BLAS thread."""
 
+import os
+import sys
+
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
 
 from bellow_ancf_ros.core import RobotModel, linsolve, load_robot
 
-
-def _state(model, seed):
-    rng = np.random.default_rng(seed)
-    lam = rng.uniform(model.stage1.lam_min, model.stage1.lam_max, model.A)
-    x = model.straight_state(lam)
-    x[: model.nq] += 1e-3 * rng.standard_normal(model.nq)
-    x[model.nq:] = rng.standard_normal(model.nc)
-    return x, lam
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "data"))
+from make_solver_baseline import eval_state  # noqa: E402  (the baseline's perturbed states)
 
 
 @pytest.mark.parametrize(
@@ -21,7 +18,7 @@ def _state(model, seed):
 )
 def test_banded_solve_equals_sparse_lu(name, n):
     model = RobotModel(load_robot(name), n)
-    x, lam = _state(model, n)
+    x, lam = eval_state(model, n)
     ev = model.evaluate(x, lam, 1.0, 0.05, jacobian=True, lam_derivative=True)
     B = np.column_stack([ev.residual, ev.dres_dlam])
     ref = spla.splu(ev.jacobian, permc_spec="COLAMD").solve(B)
@@ -35,7 +32,7 @@ def test_dropped_pattern_entries_are_exactly_zero():
     keep = model.structural_nonzeros()
     assert not keep.all()  # plates sit on nodes: the far node of each attachment is dropped
     for seed in range(3):
-        x, lam = _state(model, 10 + seed)
+        x, lam = eval_state(model, 10 + seed)
         J = model.evaluate(x, lam, 1.0, 0.1).jacobian
         assert not np.any(J.data[~keep])
 
@@ -53,7 +50,7 @@ def test_bandwidth_is_independent_of_elements_and_segments():
 
 def test_singular_matrix_raises():
     model = RobotModel(load_robot("one_segment"))
-    x, lam = _state(model, 0)
+    x, lam = eval_state(model, 0)
     ev = model.evaluate(x, lam)
     ev.jacobian = ev.jacobian.copy()
     ev.jacobian.data[:] = 0.0
@@ -75,7 +72,7 @@ def test_factorisation_runs_with_one_blas_thread(monkeypatch):
 
     monkeypatch.setattr(linsolve.lapack, "dgbtrf", spy)
     model = RobotModel(load_robot("one_segment"))
-    x, lam = _state(model, 1)
+    x, lam = eval_state(model, 1)
     ev = model.evaluate(x, lam)
     seen.clear()  # building the model warms the solver up
     with threadpool_limits(limits=2, user_api="blas"):  # a caller that allows two threads
@@ -87,7 +84,7 @@ def test_factorisation_runs_with_one_blas_thread(monkeypatch):
 
 def test_matrix_outside_the_band_falls_back_to_sparse_lu():
     model = RobotModel(load_robot("two_segment"))
-    x, lam = _state(model, 3)
+    x, lam = eval_state(model, 3)
     ev = model.evaluate(x, lam)
     J = ev.jacobian.copy()
     dropped = np.flatnonzero(~model.structural_nonzeros())

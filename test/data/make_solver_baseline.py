@@ -38,7 +38,10 @@ def model_for(name, n, tool=0.0):
 
 
 def eval_state(model, seed):
-    """Perturbed state with non-zero multipliers (as test_assembly does)."""
+    """Perturbed state with non-zero multipliers (they exercise the constraint Hessian).
+
+    Also the states of test_assembly's and test_linsolve's Jacobian and solve checks.
+    """
     rng = np.random.default_rng(seed)
     lam = rng.uniform(model.stage1.lam_min, model.stage1.lam_max, model.A)
     x = model.straight_state(lam)
