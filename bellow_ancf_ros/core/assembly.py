@@ -36,6 +36,7 @@ with the potential ``Pi = sum W_e - Q_g.q - Q_f.q``.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -299,6 +300,8 @@ class RobotModel:
         # shared by every Jacobian: read-only, so that no in-place sparse operation can alter them
         self._csc_indices.flags.writeable = False
         self._csc_indptr.flags.writeable = False
+        self._csc_template = sp.csc_matrix(
+            (np.zeros(self._nnz), self._csc_indices, self._csc_indptr), shape=(self.N, self.N))
         self._aed = aed
         self._pdofs = pdofs
 
@@ -415,8 +418,10 @@ class RobotModel:
             float(self.cfg.rho0), g, Qpoint, *self._kargs, bool(jacobian), bool(lam_derivative))
         ev = Evaluation(residual=res)
         if jacobian:
-            ev.jacobian = sp.csc_matrix((data, self._csc_indices, self._csc_indptr),
-                                        shape=(self.N, self.N))
+            # a shallow copy of the pattern's matrix with these values: the same matrix as
+            # csc_matrix((data, indices, indptr)) sharing the read-only pattern, without its checks
+            ev.jacobian = copy.copy(self._csc_template)
+            ev.jacobian.data = data
             ev.model = self
         if lam_derivative:
             ev.dres_dlam = d

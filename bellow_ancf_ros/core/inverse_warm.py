@@ -38,6 +38,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from . import linsolve, solver
 from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps
@@ -58,6 +59,13 @@ REFINE_TOL = 1e-6
 REFINE_MAX = 1e-2
 
 
+@njit(cache=True)
+def _pinv_projector(JO, rcond):
+    """``J_O^+`` (singular values below ``rcond`` times the largest cut) and ``I - J_O^+ J_O``."""
+    inv = np.linalg.pinv(JO, rcond)
+    return inv, np.eye(JO.shape[1]) - inv @ JO
+
+
 class _StretchStep:
     """The stretch part of the Schur-complement step for one sensitivity matrix ``W``.
 
@@ -74,8 +82,7 @@ class _StretchStep:
         self.inv, self.proj = None, None
         if np.all(np.isfinite(JO)):
             if multi:
-                self.inv = np.linalg.pinv(JO, rcond=_RCOND)
-                self.proj = np.eye(W.shape[1]) - self.inv @ JO
+                self.inv, self.proj = _pinv_projector(np.ascontiguousarray(JO), _RCOND)
             else:
                 try:
                     self.inv = np.linalg.inv(JO)
@@ -247,21 +254,31 @@ class _WarmSolve:
                 return True, fw
         return True, None
 
-    def take(self, w0, W, sm):
-        """Apply the step ``(w0, W)`` with the stretch map ``sm``; False: leave the fast path."""
+    def take(self, w0, W, sm, ev, rn, done):
+        """Apply the step ``(w0, W)`` with the stretch map ``sm``; False: leave the fast path.
+
+        A redundant robot's iterate is the answer already when its ``W`` is
+        its own (``exact``), its residual ``rn`` within the tolerance and the
+        null-space correction below 1e-9: then the converged ForwardResult
+        comes back instead of the step.
+        """
         dlam = sm(self.target, self.x, self.lam, w0)
         if dlam is None:
             return False
+        if self.multi and self.exact and rn <= self.tol and sm.null_norm <= 1e-9:
+            fw = self.result(ev, rn)
+            if done(fw):
+                return fw
         self.x, self.lam = self.x - (w0 + W @ dlam), self.lam + dlam
         return True
 
-    def refine(self, ev):
+    def refine(self, ev, rn, done):
         """Redundant robot after a Newton step: W at this iterate by one refinement.
 
         With the last factorisation; it counts as this iterate's W when the
         refinement changed it by less than REFINE_TOL, is refined again at
         the next iterate when by less than REFINE_MAX.  Returns None when a
-        new factorisation is needed, else whether the step could be taken.
+        new factorisation is needed, else what :meth:`take` returns.
         """
         F, W = self.chord[0], self.W
         sol = F.solve(np.column_stack([ev.residual, ev.dres_dlam - ev.jacobian @ W]))
@@ -275,10 +292,10 @@ class _WarmSolve:
         self.chord = (F, W_new)
         self.sm = self.step_map(W_new, self.maps)
         self.exact = change <= REFINE_TOL
-        return self.take(sol[:, 0], W_new, self.sm)
+        return self.take(sol[:, 0], W_new, self.sm, ev, rn, done)
 
-    def newton(self, ev):
-        """A Newton step with a new factorisation at the iterate; False: leave the fast path."""
+    def newton(self, ev, rn, done):
+        """A Newton step with a new factorisation at the iterate (what :meth:`take` returns)."""
         factorised = linsolve.kkt_solver(self.model).bound(ev.jacobian)
         try:
             sol = factorised.solve(np.column_stack([ev.residual, ev.dres_dlam]))  # banded LU
@@ -289,7 +306,7 @@ class _WarmSolve:
         self.chord, self.maps = (factorised, self.W), {}
         self.sm = self.step_map(self.W, self.maps)
         self.exact = True
-        return self.take(sol[:, 0], self.W, self.sm)
+        return self.take(sol[:, 0], self.W, self.sm, ev, rn, done)
 
 
 def full_space_newton(
@@ -330,10 +347,15 @@ def full_space_newton(
         if budget is not None and budget.expired():
             return None
         if multi and s.newton_its > 0 and s.n_refine < max_iter:
-            ok = s.refine(ev)
+            ok = s.refine(ev, rn, done)
             if ok is not None:
-                if not ok:
+                if ok is False:
                     return None
+                if ok is not True:
+                    return ok  # the iterate is the answer
                 continue
-        if not s.newton(ev):
+        ok = s.newton(ev, rn, done)
+        if ok is False:
             return None
+        if ok is not True:
+            return ok
