@@ -86,3 +86,19 @@ def test_second_order_predictor_starts_closer_along_a_steady_path():
             assert prev.success
         first.append(prev.forward.history[0])
     assert first[0] < 0.2 * first[1]  # the residual after the predictor
+
+
+@pytest.mark.parametrize("shape, rank", [((6, 6), 5), ((5, 6), 5), ((3, 6), 3), ((6, 6), 6)])
+def test_compiled_pseudo_inverse_and_projector_equal_numpy(shape, rank):
+    """J_O's pseudo-inverse with the rcond cut and the null-space projector, as numpy makes them."""
+    rng = np.random.default_rng(rank + shape[0])
+    u, _, vt = np.linalg.svd(rng.normal(size=(shape[0], shape[1])), full_matrices=False)
+    s = np.logspace(0, -3, min(shape))
+    s[rank:] = 1e-14  # round-off directions below the cut
+    JO = (u * s) @ vt
+    inv, proj = warm._pinv_projector(JO, warm._RCOND)
+    ref = np.linalg.pinv(JO, rcond=warm._RCOND)
+    np.testing.assert_allclose(inv, ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))
+    np.testing.assert_allclose(proj, np.eye(shape[1]) - ref @ JO, rtol=0, atol=1e-12)
+    assert np.linalg.matrix_rank(proj, tol=1e-8) == shape[1] - rank  # projects on the null space
+    np.testing.assert_allclose(proj @ proj, proj, atol=1e-12)
