@@ -30,6 +30,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
+from bellow_ancf_ros.nodes import ros_util  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -204,6 +205,17 @@ def test_bad_startup_parameter_one_line_and_exit_2(env, tmp_path):
         assert 'allowed' in line and allowed in line, line
 
 
+def test_bad_executor_name_one_line_and_exit_2(env, tmp_path):
+    p = Proc('inverse_kinetostatic_node', [], {**env, ros_util.EXECUTOR_ENV: 'fast'},
+             tmp_path / 'bad.log')
+    code = p.wait(STARTUP_TIMEOUT)
+    lines = [line for line in p.log().splitlines() if line.strip()]
+    assert code == 2, p.log()
+    assert len(lines) == 1 and 'Traceback' not in p.log(), p.log()
+    assert "environment variable BELLOW_ANCF_EXECUTOR = 'fast'" in lines[0], lines[0]
+    assert 'allowed: events, single_threaded' in lines[0], lines[0]
+
+
 def test_nonexistent_robot_stays_unconfigured_then_recovers_and_vents(env, tmp_path, client):
     node = Proc('inverse_kinetostatic_node', ['-p', 'robot_config:=nonexistent'], env,
                 tmp_path / 'inverse.log')
@@ -250,6 +262,10 @@ def test_nonexistent_robot_stays_unconfigured_then_recovers_and_vents(env, tmp_p
 
 def _active_inverse(env, path, client):
     node = Proc('inverse_kinetostatic_node', [], env, path)
+    return _first_command(node, client)
+
+
+def _first_command(node, client):
     wait_for(lambda: client.targets.get_subscription_count() >= 1, STARTUP_TIMEOUT,
              'inverse node subscribed')
     deadline = time.monotonic() + TIMEOUT
@@ -265,16 +281,17 @@ import signal
 from rclpy.node import Node
 from bellow_ancf_ros.nodes import ros_util
 
-class Executor(ros_util.SingleThreadedExecutor):
-    def __init__(self, *args, **kwargs):
-        signal.raise_signal(signal.SIGINT)  # Ctrl-C after the constructor, before the spin
-        super().__init__(*args, **kwargs)
+make_executor = ros_util.make_executor
+
+def executor():
+    signal.raise_signal(signal.SIGINT)  # Ctrl-C after the constructor, before the spin
+    return make_executor()
 
 class Probe(Node):
     def __init__(self):
         super().__init__('startup_sigint_probe')
 
-ros_util.SingleThreadedExecutor = Executor
+ros_util.make_executor = executor
 ros_util.main_for(Probe, before_destroy=lambda node: print('VENT', flush=True))()
 print('CLEAN EXIT', flush=True)
 """
@@ -291,9 +308,15 @@ def test_sigint_between_constructor_and_spin_exits_cleanly_and_vents(env):
     assert 'Traceback' not in out, out
 
 
-def test_double_sigint_still_vents(env, tmp_path, client):
-    """Terminal and ``ros2 launch`` both send SIGINT: the second must not cut the vent."""
-    node = _active_inverse(env, tmp_path / 'inverse.log', client)
+@pytest.mark.parametrize('executor', ros_util.EXECUTORS)
+def test_double_sigint_still_vents(env, tmp_path, client, executor):
+    """Terminal and ``ros2 launch`` both send SIGINT: the second must not cut the vent.
+
+    With either executor (``BELLOW_ANCF_EXECUTOR``): commands, then the vent.
+    """
+    node = _first_command(Proc('inverse_kinetostatic_node', [],
+                               {**env, ros_util.EXECUTOR_ENV: executor},
+                               tmp_path / 'inverse.log'), client)
     try:
         n = client.n_cmds()
         node.signal(signal.SIGINT)

@@ -32,7 +32,7 @@ __all__ = ["banded_solve", "chord_steps", "CONVERGED", "STALLED", "LEFT_BOX", "M
 CONVERGED, STALLED, LEFT_BOX, MAX_STEPS, NONFINITE = 0, 1, 2, 3, 4
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 def banded_solve(lub, piv, kl, ku, b):
     """Solve ``A x = b`` with the banded LU of scipy's ``dgbtrf`` (``lub``, ``piv``); a copy.
 
@@ -68,7 +68,7 @@ def banded_solve(lub, piv, kl, ku, b):
     return x
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _target(v, pd, tool, L, axis, offset):
     """Objective of eq. (28) at the state ``v`` (``offset`` subtracted; zeros: linear part)."""
     k = 6 if axis else 3
@@ -80,7 +80,7 @@ def _target(v, pd, tool, L, axis, offset):
     return o
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_proj, lam_ref,
                 lo, hi, pd, tool, L, axis, offset, scale, kcoef, dkcoef, l0, n_el, d_a, rho0,
                 g, Qpoint, kargs, tol, rate, max_steps):

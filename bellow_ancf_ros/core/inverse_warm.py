@@ -59,7 +59,7 @@ REFINE_TOL = 1e-6
 REFINE_MAX = 1e-2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pinv_projector(JO, rcond):
     """``J_O^+`` (singular values below ``rcond`` times the largest cut) and ``I - J_O^+ J_O``."""
     inv = np.linalg.pinv(JO, rcond)

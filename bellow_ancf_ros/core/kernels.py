@@ -23,7 +23,7 @@ __all__ = ["evaluate_kernel", "element_parameters", "horner", "warm_up"]
 _PAIRS = np.array([[0, 0], [1, 1], [2, 2], [0, 1], [0, 2], [1, 2]], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _element_part(
     q,
     lam,
@@ -156,7 +156,7 @@ def _element_part(
                     data[base + 12 * r + c] = K[r, c]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _constraint_part(
     q,
     alpha,
@@ -331,7 +331,7 @@ def _constraint_part(
     return nc_vals
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def horner(a, c):
     """``sum_i c[i] a**i`` for the array ``a`` (ascending coefficients ``c``), as ``polyval``."""
     out = np.full(a.shape[0], c[c.shape[0] - 1])
@@ -340,7 +340,7 @@ def horner(a, c):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def element_parameters(lam, kcoef, dkcoef, l0, n_el, d_a):
     """Per-actuator ``le, k_t, k_b`` and their derivatives w.r.t. ``lam`` (eqs. 2, 4).
 
@@ -358,7 +358,7 @@ def element_parameters(lam, kcoef, dkcoef, l0, n_el, d_a):
     return le, kt, kb, dle, dkt, dkb
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _scatter(coo_map, coo_vals, nnz):
     """Sum COO values into the CSC data array of the fixed pattern."""
     out = np.zeros(nnz)
@@ -367,7 +367,7 @@ def _scatter(coo_map, coo_vals, nnz):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def evaluate_kernel(
     q,
     alpha,

@@ -87,7 +87,7 @@ def banded_cholesky(ab):
     return info == 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _assemble(data, indptr, indices, nq, D, iperm, kd):
     """Banded ``H_s``, penalty ``C_s^T W C_s`` (rows of ``C_s`` normalised) and ``max|H_s|``."""
     bh = np.zeros((nq, kd + 1))

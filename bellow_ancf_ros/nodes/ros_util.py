@@ -9,6 +9,7 @@ in :mod:`bellow_ancf_ros.nodes.common`.
 from __future__ import annotations
 
 import math
+import os
 import signal
 import sys
 import threading
@@ -97,6 +98,15 @@ class StartupParameterError(ValueError):
         if reason:
             text += f' ({reason})'
         super().__init__(f'{text}; allowed: {allowed}')
+
+
+class StartupEnvironmentError(StartupParameterError):
+    """An environment variable the node cannot run with (one line: name, value, allowed)."""
+
+    def __init__(self, name: str, value: Any, allowed: str) -> None:
+        self.name, self.value, self.allowed, self.reason = name, value, allowed, ''
+        ValueError.__init__(self, f'environment variable {name} = {value!r} is not allowed; '
+                                  f'allowed: {allowed}')
 
 
 def descriptor(description: str, ptype: int, *, lo: float | None = None,
@@ -409,6 +419,41 @@ def _first_signal(signum, frame):  # pragma: no cover - signal path
         raise KeyboardInterrupt
 
 
+#: Environment variable choosing the nodes' executor: ``events`` (default) or ``single_threaded``.
+EXECUTOR_ENV = 'BELLOW_ANCF_EXECUTOR'
+EXECUTORS = ('events', 'single_threaded')
+
+
+def executor_choice() -> str:
+    """The executor ``BELLOW_ANCF_EXECUTOR`` names (default ``events``); a bad name raises."""
+    choice = os.environ.get(EXECUTOR_ENV, '').strip().lower() or 'events'
+    if choice not in EXECUTORS:
+        raise StartupEnvironmentError(EXECUTOR_ENV, choice, ', '.join(EXECUTORS))
+    return choice
+
+
+def make_executor():
+    """The executor a node spins in: rclpy's EventsExecutor where rclpy has one.
+
+    rclpy's SingleThreadedExecutor rebuilds its wait set in Python on every
+    wake-up: for a lifecycle node (its services, parameter services, QoS
+    event handlers) about 0.7 ms of CPU per incoming target, holding the GIL
+    that the solver thread needs (bench/ros_latency.py measures the end-to-end
+    latency).  The EventsExecutor (``rclpy.experimental``, C++ event queue)
+    does not.  ``BELLOW_ANCF_EXECUTOR=single_threaded`` selects the
+    SingleThreadedExecutor, which is also used when rclpy has no
+    EventsExecutor (older Jazzy releases).
+    """
+    if executor_choice() == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:
+            pass
+        else:
+            return EventsExecutor()
+    return SingleThreadedExecutor()
+
+
 def run_node(node, before_destroy=None) -> None:
     """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
 
@@ -418,7 +463,7 @@ def run_node(node, before_destroy=None) -> None:
     must not interrupt the vent or its acknowledgement wait (which is bounded).
     """
     _SPINNING.set()
-    executor = SingleThreadedExecutor()
+    executor = make_executor()
     executor.add_node(node)
     try:
         while rclpy.ok() and not _STOP.is_set():
@@ -461,6 +506,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None):
     def main(args=None) -> None:
         init_rclpy(args)
         try:
+            executor_choice()
             node = node_class()
             _SPINNING.set()  # from here a signal stops the node cleanly (run_node)
         except (StartupParameterError, ConfigError) as exc:
