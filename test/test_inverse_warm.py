@@ -90,7 +90,7 @@ def test_second_order_predictor_starts_closer_along_a_steady_path():
 
 @pytest.mark.parametrize("shape, rank", [((6, 6), 5), ((5, 6), 5), ((3, 6), 3), ((6, 6), 6)])
 def test_compiled_pseudo_inverse_and_projector_equal_numpy(shape, rank):
-    """J_O's pseudo-inverse with the rcond cut and the null-space projector, as numpy makes them."""
+    """J_O pseudo-inverse (rcond cut) and null-space projector equal to what numpy makes."""
     rng = np.random.default_rng(rank + shape[0])
     u, _, vt = np.linalg.svd(rng.normal(size=(shape[0], shape[1])), full_matrices=False)
     s = np.logspace(0, -3, min(shape))

@@ -7,8 +7,10 @@
 * :mod:`.trajectory_publisher` -- the paper's trajectories on ``target_pose``.
 * :mod:`.common` -- message-free helpers (no rclpy import) shared by the nodes.
 * :mod:`.ros_util` -- rclpy helpers: QoS, checked parameter declaration,
-  one-line start-up errors, the 1 Hz status heartbeat, the acknowledged vent,
-  the main / spin / signal idiom.
+  one-line start-up errors, the acknowledged vent, the executor and the
+  main / spin / signal idiom.
+* :mod:`.diagnostics` -- ``/diagnostics``: the 1 Hz status heartbeat,
+  per-event statuses, rate limits for refusals and per-solve statuses.
 
 Every node module has a ``main(args=None)`` and runs with
 ``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``.

@@ -33,6 +33,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import load_robot
 from ..core.excitation import excitation_sequence
 from . import common
+from .diagnostics import publish_diagnostic
 from .ros_util import (
     command_qos,
     descriptor,
@@ -40,7 +41,6 @@ from .ros_util import (
     guard_parameters,
     main_for,
     pressure_message,
-    publish_diagnostic,
 )
 
 __all__ = ['ExcitationPublisher', 'main']

@@ -54,10 +54,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward
 from . import common
+from .diagnostics import Heartbeat, Refusals, publish_diagnostic, solve_values
 from .ros_util import (
     WARN_THROTTLE_S,
-    Heartbeat,
-    Refusals,
     StartupParameterError,
     command_qos,
     declare,
@@ -66,8 +65,6 @@ from .ros_util import (
     guard_parameters,
     main_for,
     pose_message,
-    publish_diagnostic,
-    solve_values,
 )
 
 __all__ = ['ForwardKinetostaticNode', 'main', 'shape_markers']

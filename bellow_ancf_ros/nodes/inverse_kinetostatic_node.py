@@ -21,12 +21,14 @@ publishes
     ``commanded_pose`` (geometry_msgs/PoseStamped): the end-effector pose the
     model predicts for the command (stamp = the target's stamp, or the solve
     time if the target had none).
-    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): one status per solve
-    (solve time, iterations, residual, reachable, active pressure limits), per
-    refused target (WARN, throttled), and a 1 Hz heartbeat
+    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): a status per solve
+    (solve time, iterations, residual, reachable, active pressure limits;
+    a new level or message at once, an unchanged one at most at 10 Hz with
+    the newest values, :class:`~bellow_ancf_ros.nodes.diagnostics.ThrottledStatus`),
+    per refused target (WARN, throttled), and a 1 Hz heartbeat
     ``'<node>: status'`` in every lifecycle state (lifecycle state, robot, age
     of the last solve, solve-time statistics, counters;
-    :class:`~bellow_ancf_ros.nodes.ros_util.Heartbeat`: other parts of the
+    :class:`~bellow_ancf_ros.nodes.diagnostics.Heartbeat`: other parts of the
     node add their fields with ``self.heartbeat.add_source(fn)``).
 
 QoS
@@ -125,11 +127,10 @@ from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inv
 from ..core.inverse import ITERATION_BUDGET, TIME_BUDGET, precompute_corners
 from . import common
 from .measured_feedback import FeedbackLink
+from .diagnostics import Heartbeat, Refusals, ThrottledStatus, solve_values
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
-    Heartbeat,
-    Refusals,
     command_qos,
     declare,
     descriptor,
@@ -139,8 +140,6 @@ from .ros_util import (
     pose_message,
     pressure_message,
     publish_and_wait_acked,
-    publish_diagnostic,
-    solve_values,
 )
 
 __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_S', 'main']
@@ -209,6 +208,9 @@ class InverseKinetostaticNode(LifecycleNode):
         self._last_item, self._continuations = None, 0   # budget slices of one target
         # diagnostics in every lifecycle state: per-solve statuses and the 1 Hz heartbeat
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        # per-solve statuses: a new level or message at once, an unchanged one at most at 10 Hz
+        self._status = ThrottledStatus(self, self._pub_diag,
+                                       f'{self.get_name()}: inverse kinetostatics')
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self._cfg.name if self._cfg is not None else '')
         self.heartbeat.add_source(self._feedback_heartbeat)
@@ -561,8 +563,7 @@ class InverseKinetostaticNode(LifecycleNode):
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
         cfg = self._cfg
-        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: inverse kinetostatics',
-                           cfg.name if cfg is not None else '', level, message, values)
+        self._status.submit(cfg.name if cfg is not None else '', level, message, values)
 
 
 main = main_for(InverseKinetostaticNode, before_destroy=lambda n: n.vent_and_shutdown())

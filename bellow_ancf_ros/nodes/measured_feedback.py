@@ -29,7 +29,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..core.feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from . import common
-from .ros_util import QOS_DEPTH, Refusals, descriptor
+from .diagnostics import Refusals
+from .ros_util import QOS_DEPTH, descriptor
 
 __all__ = ['FeedbackLink', 'measured_pose_qos']
 

@@ -1,14 +1,14 @@
 """rclpy helpers shared by the nodes.
 
-QoS profiles, checked parameter declaration, message builders, the 1 Hz
-status heartbeat, the vent-acknowledgement wait, and the start-up / spin /
-shutdown idiom of every node executable.  The pure (rclpy-free) helpers live
-in :mod:`bellow_ancf_ros.nodes.common`.
+QoS profiles, checked parameter declaration, message builders, the
+vent-acknowledgement wait, and the start-up / spin / shutdown idiom of every
+node executable.  Diagnostics (statuses, the 1 Hz heartbeat) live in
+:mod:`bellow_ancf_ros.nodes.diagnostics`, the pure (rclpy-free) helpers in
+:mod:`bellow_ancf_ros.nodes.common`.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import sys
@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -43,19 +42,15 @@ from ..core.solver import limit_blas_threads
 from . import common
 
 __all__ = [
-    'HEARTBEAT_PERIOD_S', 'QOS_DEPTH', 'REFUSAL_DIAG_INTERVAL_S', 'STARTUP_ERROR_EXIT',
-    'VENT_ACK_TIMEOUT_S', 'WARN_THROTTLE_S', 'Heartbeat', 'Refusals', 'StartupParameterError',
-    'allowed_values', 'command_qos', 'declare', 'descriptor', 'diagnostic_status',
-    'diagnostics_qos', 'guard_parameters', 'init_rclpy', 'main_for', 'pose_message',
-    'pressure_message', 'publish_and_wait_acked', 'publish_diagnostic', 'run_node',
+    'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT', 'VENT_ACK_TIMEOUT_S',
+    'WARN_THROTTLE_S', 'StartupEnvironmentError', 'StartupParameterError', 'allowed_values',
+    'command_qos', 'declare', 'descriptor', 'diagnostics_qos', 'executor_choice',
+    'guard_parameters', 'init_rclpy', 'main_for', 'make_executor', 'pose_message',
+    'pressure_message', 'publish_and_wait_acked', 'run_node',
 ]
 
 QOS_DEPTH = 5
 WARN_THROTTLE_S = 2.0
-#: Minimum interval between two WARN diagnostics of the same refusal reason [s].
-REFUSAL_DIAG_INTERVAL_S = 0.1
-#: Period of the status heartbeat on ``/diagnostics`` [s] (diagnostic_updater's default).
-HEARTBEAT_PERIOD_S = 1.0
 #: Longest wait for the matched subscribers to acknowledge the vent command on shutdown [s].
 #: Fast DDS readers acknowledge on the writer's heartbeat (every 3 s by default), so
 #: an acknowledgement takes up to about 3 s; 4 s stays below ``ros2 launch``'s 5 s
@@ -226,32 +221,6 @@ def pressure_message(pressures_pa: Any, unit: str) -> Float64MultiArray:
     return msg
 
 
-def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
-                      values: dict) -> DiagnosticStatus:
-    """Build a DiagnosticStatus with the key/values of ``values`` (as strings)."""
-    st = DiagnosticStatus()
-    st.name = name
-    st.hardware_id = hardware_id
-    st.level = level
-    st.message = message
-    st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
-    return st
-
-
-def publish_diagnostic(node, pub, name: str, hardware_id: str, level: bytes, message: str,
-                       values: dict) -> None:
-    """Publish one DiagnosticStatus on ``pub`` (no-op without a publisher or once destroyed)."""
-    if pub is None:
-        return
-    arr = DiagnosticArray()
-    arr.header.stamp = node.get_clock().now().to_msg()
-    arr.status = [diagnostic_status(name, hardware_id, level, message, values)]
-    try:
-        pub.publish(arr)
-    except Exception:  # noqa: BLE001 - publisher destroyed meanwhile
-        pass
-
-
 def publish_and_wait_acked(node, pub, msg, what: str,
                            timeout_s: float = VENT_ACK_TIMEOUT_S) -> bool:
     """Publish ``msg`` on a reliable publisher and wait until every matched subscriber acked.
@@ -283,101 +252,6 @@ def publish_and_wait_acked(node, pub, msg, what: str,
 
 
 # ------------------------------------------------------------ heartbeat
-class Heartbeat:
-    """Periodic node status on ``/diagnostics`` (1 Hz), like diagnostic_updater.
-
-    Every period one DiagnosticStatus named ``'<node>: status'`` is published
-    with the level, message and key/values of ``status()`` (a callable
-    returning ``(level, message, values)``) merged with those of every
-    source added by :meth:`add_source`.  A source is a callable returning
-    either a dict of key/values, or ``(level, message, values)``: its level
-    raises the status level (OK < WARN < ERROR), its message is appended.
-    This is how a node part adds its own fields (e.g. a feedback state)
-    without touching the node's base status.
-    """
-
-    def __init__(self, node, pub, status: Callable[[], tuple],
-                 hardware_id: Callable[[], str], period_s: float = HEARTBEAT_PERIOD_S) -> None:
-        self.node, self.pub = node, pub
-        self._status, self._hardware_id = status, hardware_id
-        self._sources: list = []
-        self.published = 0
-        self.name = f'{node.get_name()}: status'
-        self._timer = node.create_timer(period_s, self.publish)
-
-    def add_source(self, source: Callable[[], Any]) -> None:
-        """Add a callable contributing key/values (and optionally a level) to every beat."""
-        self._sources.append(source)
-
-    def compose(self) -> tuple:
-        """The current ``(level, message, values)`` with every source merged in."""
-        level, message, values = self._status()
-        values = dict(values)
-        for source in self._sources:
-            try:
-                extra = source()
-            except Exception as exc:  # noqa: BLE001 - one bad source must not stop the beat
-                level = max(level, DiagnosticStatus.WARN)
-                values[f'source_error_{len(values)}'] = f'{type(exc).__name__}: {exc}'
-                continue
-            if isinstance(extra, tuple):
-                lvl, msg, extra = extra
-                level = max(level, lvl)
-                if msg:
-                    message = f'{message}; {msg}' if message else msg
-            values.update(extra or {})
-        return level, message, values
-
-    def publish(self) -> None:
-        """Publish one status now (the timer calls this every period)."""
-        level, message, values = self.compose()
-        publish_diagnostic(self.node, self.pub, self.name, self._hardware_id(), level, message,
-                           values)
-        self.published += 1
-
-
-def solve_values(stats: common.SolveStats) -> dict:
-    """Heartbeat key/values of a :class:`common.SolveStats` (times in ms, age in s)."""
-    s = stats.summary()
-
-    def ms(v):
-        return 'n/a' if v is None or not math.isfinite(v) else f'{v * 1e3:.3f}'
-    age = s['last_solve_age_s']
-    return {
-        'solves': s['count'],
-        'last_solve_age_s': 'never' if age is None else f'{age:.3f}',
-        'last_solve_ok': 'n/a' if s['last_ok'] is None else str(s['last_ok']).lower(),
-        'solve_ms_last': ms(s['last_s']),
-        'solve_ms_median': ms(s['median_s']),
-        'solve_ms_p95': ms(s['p95_s']),
-        'solve_ms_max': ms(s['max_s']),
-        'solve_stats_window': s['window'],
-    }
-
-
-class Refusals:
-    """Reporting of refused inputs: a throttled warning always, a WARN diagnostic rate-limited.
-
-    At most one WARN diagnostic every :data:`REFUSAL_DIAG_INTERVAL_S` per
-    reason (a flood of bad input cannot flood ``/diagnostics``).  ``what``
-    names the input (``targets``, ``pressures``).
-    """
-
-    def __init__(self, node, what: str, publish_diag) -> None:
-        self.node, self.what, self.publish_diag = node, what, publish_diag
-        self._last = ('', 0.0)
-
-    def report(self, reason: str, total: int) -> None:
-        """Log and report one refusal (``total``: refusals so far)."""
-        self.node.get_logger().warning(f'{self.what} refused: {reason}',
-                                       throttle_duration_sec=WARN_THROTTLE_S)
-        now = time.monotonic()
-        if reason != self._last[0] or now - self._last[1] >= REFUSAL_DIAG_INTERVAL_S:
-            self._last = (reason, now)
-            self.publish_diag(DiagnosticStatus.WARN, f'{self.what} refused: {reason}',
-                              {f'refused_{self.what}': total})
-
-
 # --------------------------------------------------------- run / signals
 class _ShuttingDown:
     """SIGINT/SIGTERM handler during shutdown: a repeated signal must not cut the vent short."""

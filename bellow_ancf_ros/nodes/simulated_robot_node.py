@@ -46,15 +46,14 @@ from std_msgs.msg import Float64MultiArray
 from ..core import load_robot
 from ..core.simulated_robot import SimulatedRobot
 from . import common
+from .diagnostics import Refusals, publish_diagnostic
 from .ros_util import (
-    Refusals,
     command_qos,
     descriptor,
     diagnostics_qos,
     main_for,
     pose_message,
     pressure_message,
-    publish_diagnostic,
 )
 
 __all__ = ['SimulatedRobotNode', 'main']

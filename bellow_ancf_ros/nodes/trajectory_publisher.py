@@ -35,8 +35,8 @@ from rclpy.node import Node
 from ..core import ConfigError, load_robot
 from ..core.trajectories import TRAJECTORY_NAMES, trajectory, trajectory_parameters
 from . import common
+from .diagnostics import Heartbeat
 from .ros_util import (
-    Heartbeat,
     StartupParameterError,
     command_qos,
     declare,

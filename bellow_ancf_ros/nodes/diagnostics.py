@@ -1,0 +1,198 @@
+"""Diagnostics of the nodes on ``/diagnostics``: statuses, the heartbeat, refusals, throttling.
+
+Like diagnostic_updater: a 1 Hz status heartbeat per node
+(:class:`Heartbeat`), per-event statuses (:func:`publish_diagnostic`), rate
+limits for floods of refused input (:class:`Refusals`) and for per-solve
+statuses at high solve rates (:class:`ThrottledStatus`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+from . import common
+from .ros_util import WARN_THROTTLE_S
+
+__all__ = [
+    'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
+    'ThrottledStatus', 'diagnostic_status', 'publish_diagnostic', 'solve_values',
+]
+
+#: Minimum interval between two WARN diagnostics of the same refusal reason [s].
+REFUSAL_DIAG_INTERVAL_S = 0.1
+#: Period of the status heartbeat on ``/diagnostics`` [s] (diagnostic_updater's default).
+HEARTBEAT_PERIOD_S = 1.0
+#: Per-solve statuses: an unchanged one is published at most this often [s] (10 Hz).
+STATUS_PERIOD_S = 0.1
+
+
+def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
+                      values: dict) -> DiagnosticStatus:
+    """Build a DiagnosticStatus with the key/values of ``values`` (as strings)."""
+    st = DiagnosticStatus()
+    st.name = name
+    st.hardware_id = hardware_id
+    st.level = level
+    st.message = message
+    st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    return st
+
+
+def publish_diagnostic(node, pub, name: str, hardware_id: str, level: bytes, message: str,
+                       values: dict) -> None:
+    """Publish one DiagnosticStatus on ``pub`` (no-op without a publisher or once destroyed)."""
+    if pub is None:
+        return
+    arr = DiagnosticArray()
+    arr.header.stamp = node.get_clock().now().to_msg()
+    arr.status = [diagnostic_status(name, hardware_id, level, message, values)]
+    try:
+        pub.publish(arr)
+    except Exception:  # noqa: BLE001 - publisher destroyed meanwhile
+        pass
+
+
+class Heartbeat:
+    """Periodic node status on ``/diagnostics`` (1 Hz), like diagnostic_updater.
+
+    Every period one DiagnosticStatus named ``'<node>: status'`` is published
+    with the level, message and key/values of ``status()`` (a callable
+    returning ``(level, message, values)``) merged with those of every
+    source added by :meth:`add_source`.  A source is a callable returning
+    either a dict of key/values, or ``(level, message, values)``: its level
+    raises the status level (OK < WARN < ERROR), its message is appended.
+    This is how a node part adds its own fields (e.g. a feedback state)
+    without touching the node's base status.
+    """
+
+    def __init__(self, node, pub, status: Callable[[], tuple],
+                 hardware_id: Callable[[], str], period_s: float = HEARTBEAT_PERIOD_S) -> None:
+        self.node, self.pub = node, pub
+        self._status, self._hardware_id = status, hardware_id
+        self._sources: list = []
+        self.published = 0
+        self.name = f'{node.get_name()}: status'
+        self._timer = node.create_timer(period_s, self.publish)
+
+    def add_source(self, source: Callable[[], Any]) -> None:
+        """Add a callable contributing key/values (and optionally a level) to every beat."""
+        self._sources.append(source)
+
+    def compose(self) -> tuple:
+        """The current ``(level, message, values)`` with every source merged in."""
+        level, message, values = self._status()
+        values = dict(values)
+        for source in self._sources:
+            try:
+                extra = source()
+            except Exception as exc:  # noqa: BLE001 - one bad source must not stop the beat
+                level = max(level, DiagnosticStatus.WARN)
+                values[f'source_error_{len(values)}'] = f'{type(exc).__name__}: {exc}'
+                continue
+            if isinstance(extra, tuple):
+                lvl, msg, extra = extra
+                level = max(level, lvl)
+                if msg:
+                    message = f'{message}; {msg}' if message else msg
+            values.update(extra or {})
+        return level, message, values
+
+    def publish(self) -> None:
+        """Publish one status now (the timer calls this every period)."""
+        level, message, values = self.compose()
+        publish_diagnostic(self.node, self.pub, self.name, self._hardware_id(), level, message,
+                           values)
+        self.published += 1
+
+
+def solve_values(stats: common.SolveStats) -> dict:
+    """Heartbeat key/values of a :class:`common.SolveStats` (times in ms, age in s)."""
+    s = stats.summary()
+
+    def ms(v):
+        return 'n/a' if v is None or not math.isfinite(v) else f'{v * 1e3:.3f}'
+    age = s['last_solve_age_s']
+    return {
+        'solves': s['count'],
+        'last_solve_age_s': 'never' if age is None else f'{age:.3f}',
+        'last_solve_ok': 'n/a' if s['last_ok'] is None else str(s['last_ok']).lower(),
+        'solve_ms_last': ms(s['last_s']),
+        'solve_ms_median': ms(s['median_s']),
+        'solve_ms_p95': ms(s['p95_s']),
+        'solve_ms_max': ms(s['max_s']),
+        'solve_stats_window': s['window'],
+    }
+
+
+class Refusals:
+    """Reporting of refused inputs: a throttled warning always, a WARN diagnostic rate-limited.
+
+    At most one WARN diagnostic every :data:`REFUSAL_DIAG_INTERVAL_S` per
+    reason (a flood of bad input cannot flood ``/diagnostics``).  ``what``
+    names the input (``targets``, ``pressures``).
+    """
+
+    def __init__(self, node, what: str, publish_diag) -> None:
+        self.node, self.what, self.publish_diag = node, what, publish_diag
+        self._last = ('', 0.0)
+
+    def report(self, reason: str, total: int) -> None:
+        """Log and report one refusal (``total``: refusals so far)."""
+        self.node.get_logger().warning(f'{self.what} refused: {reason}',
+                                       throttle_duration_sec=WARN_THROTTLE_S)
+        now = time.monotonic()
+        if reason != self._last[0] or now - self._last[1] >= REFUSAL_DIAG_INTERVAL_S:
+            self._last = (reason, now)
+            self.publish_diag(DiagnosticStatus.WARN, f'{self.what} refused: {reason}',
+                              {f'refused_{self.what}': total})
+
+
+class ThrottledStatus:
+    """Per-event statuses at a bounded rate: a new level or message at once, repeats at 10 Hz.
+
+    At a high solve rate a status per solve costs the solver thread about
+    0.3 ms (message building and publishing) for news that rarely changes.
+    :meth:`submit` publishes at once when the level or the message differs
+    from the last status published, or when ``period_s`` has passed since
+    then; otherwise the status is kept and the node's timer publishes the
+    newest one kept at the end of the period (:meth:`flush`), so the latest
+    values always arrive within ``period_s``.
+    """
+
+    def __init__(self, node, pub, name: str, period_s: float = STATUS_PERIOD_S) -> None:
+        self.node, self.pub, self.name, self.period_s = node, pub, name, period_s
+        self._lock = threading.Lock()
+        self._last = (None, None, -math.inf)  # level, message, time of the last published
+        self._pending = None
+        self.published = self.deferred = 0
+        self._timer = node.create_timer(period_s, self.flush)
+
+    def submit(self, hardware_id: str, level: bytes, message: str, values: dict) -> None:
+        """Publish this status now, or keep it for :meth:`flush` (see the class docstring)."""
+        now = time.monotonic()
+        with self._lock:
+            lvl, msg, t = self._last
+            if (level, message) == (lvl, msg) and now - t < self.period_s:
+                self._pending = (hardware_id, level, message, values)
+                self.deferred += 1
+                return
+            self._pending = None
+            self._publish(now, hardware_id, level, message, values)
+
+    def flush(self) -> None:
+        """Publish the status kept by :meth:`submit`, if any (the node's timer calls it)."""
+        with self._lock:
+            if self._pending is not None:
+                pending, self._pending = self._pending, None
+                self._publish(time.monotonic(), *pending)
+
+    def _publish(self, now, hardware_id, level, message, values) -> None:
+        self._last = (level, message, now)
+        self.published += 1
+        publish_diagnostic(self.node, self.pub, self.name, hardware_id, level, message, values)
