@@ -50,7 +50,8 @@ __all__ = ["full_space_newton", "PathRecord", "CHORD_RATE", "MAX_CHORD", "REFINE
 
 # chord steps (a factorisation from an earlier point, reused): each must cut the residual by
 # this factor at least, and at most this many in a row; then Newton with a new factorisation
-CHORD_RATE = 0.1
+# (one segment, 1 mm steps: 0.1 refactorised every 2nd target, 0.3 every 6th, ~20 % less time)
+CHORD_RATE = 0.3
 MAX_CHORD = 12
 # redundant robots: a refined W (one step with the last factorisation) counts as the W of its
 # iterate when the refinement changed it by less than REFINE_TOL (relative); up to REFINE_MAX
