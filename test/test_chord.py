@@ -89,3 +89,47 @@ def test_chord_loop_stops_when_a_step_does_not_cut_the_residual_enough():
         model, 0.0, target, factorised.lu, WF, step, fw.x, fw.stretch, tol=0.0, rate=1e-9,
         max_steps=10)
     assert status == chord.STALLED and steps == 1 and rn == h[-1] > 1e-9 * h[0]
+
+
+def _numpy_stretch_step(target, x, w0, lam, inv, proj, lam_ref, lo, hi):
+    """The stretch step written with numpy: ``-J_O^{-1}(O(x) - T w0)`` plus the null-space term."""
+    d = -inv @ (target(x) - target.linear(w0))
+    null = np.zeros_like(lam) if proj is None else proj @ (lam_ref - lam)
+    d = d + null
+    ok = bool(np.all(np.abs(d) <= 0.05) and np.all(lo < lam + d) and np.all(lam + d < hi))
+    return d, float(np.max(np.abs(null))), ok
+
+
+@pytest.mark.parametrize("multi", [False, True])
+def test_compiled_stretch_step_is_the_numpy_formula(multi):
+    model = RobotModel(load_robot("two_segment" if multi else "one_segment"))
+    rng = np.random.default_rng(11)
+    x = model.straight_state(np.ones(model.A)) + 1e-3 * rng.standard_normal(model.N)
+    w0 = 1e-4 * rng.standard_normal(model.N)
+    target = Target(model, np.array([0.01, -0.02, 0.2]),
+                    np.array([0.1, 0.0, 0.99]) / np.linalg.norm([0.1, 0.0, 0.99]) if multi
+                    else None)
+    k = 6 if multi else 3
+    inv = 1e-3 * rng.standard_normal((model.A, k))
+    proj = None
+    if multi:
+        q, _ = np.linalg.qr(rng.standard_normal((model.A, 1)))
+        proj = q @ q.T  # a rank-1 null-space projector
+    lam_ref, lam = np.ones(model.A), 1.0 + 0.01 * rng.standard_normal(model.A)
+    lo, hi = np.full(model.A, 0.5), np.full(model.A, 1.5)
+    args = (target.pd, target.tool, target.L, target.axis, target.offset, inv,
+            proj if multi else np.zeros((model.A, model.A)), multi, lam_ref, lo, hi)
+    d, null, ok = chord.stretch_step(x, w0, lam, *args)
+    d_ref, null_ref, ok_ref = _numpy_stretch_step(target, x, w0, lam, inv, proj, lam_ref, lo, hi)
+    np.testing.assert_allclose(d, d_ref, rtol=1e-12, atol=1e-15)
+    assert null == pytest.approx(null_ref, rel=1e-12, abs=1e-300) and ok == ok_ref
+    assert ok and (null > 0) == multi  # a step inside the region, with a null-space term
+    # outside the trust region (0.05 per stretch), outside the box, non-finite: refused
+    _, _, ok_big = chord.stretch_step(x, w0, lam, *args[:5], 1e4 * inv, *args[6:])
+    assert not ok_big
+    _, _, ok_box = chord.stretch_step(x, w0, np.full(model.A, 1.5 - 1e-12), *args)
+    assert not ok_box
+    x_nan = x.copy()
+    x_nan[target.pd[0]] = np.nan
+    _, _, ok_nan = chord.stretch_step(x_nan, w0, lam, *args)
+    assert not ok_nan

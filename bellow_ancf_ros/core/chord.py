@@ -26,8 +26,8 @@ from numba import njit
 
 from .kernels import element_parameters, evaluate_kernel
 
-__all__ = ["banded_solve", "chord_steps", "CONVERGED", "STALLED", "LEFT_BOX", "MAX_STEPS",
-           "NONFINITE"]
+__all__ = ["banded_solve", "chord_steps", "stretch_step", "CONVERGED", "STALLED", "LEFT_BOX",
+           "MAX_STEPS", "NONFINITE"]
 
 CONVERGED, STALLED, LEFT_BOX, MAX_STEPS, NONFINITE = 0, 1, 2, 3, 4
 
@@ -81,13 +81,42 @@ def _target(v, pd, tool, L, axis, offset):
 
 
 @njit(cache=True, nogil=True)
+def stretch_step(x, w0, lam, pd, tool, L, axis, offset, JOinv, proj, use_proj, lam_ref, lo, hi):
+    """Stretch increment of the Schur-complement step (eqs. 28, 30); ``(d, null_norm, ok)``.
+
+    ``d = -J_O^{-1} (O(x) - T w0)`` plus, for a redundant robot
+    (``use_proj``), the null-space term ``(I - J_O^+ J_O)(lam_ref - lam)``
+    whose largest entry is ``null_norm``.  ``ok`` is false when ``d`` is not
+    finite, larger than 0.05 in any stretch, or leaves the open box
+    ``(lo, hi)``.
+    """
+    zero = np.zeros(offset.shape[0])
+    Ot = _target(x, pd, tool, L, axis, offset) - _target(w0, pd, tool, L, axis, zero)
+    d = -(JOinv @ Ot)
+    null_norm = 0.0
+    if use_proj:
+        null = proj @ (lam_ref - lam)
+        for i in range(null.shape[0]):
+            a = abs(null[i])
+            if a != a:
+                null_norm = np.inf  # NaN
+            elif a > null_norm:
+                null_norm = a
+        d = d + null
+    ok = True
+    for i in range(d.shape[0]):
+        if not (abs(d[i]) <= 0.05 and lo[i] < lam[i] + d[i] < hi[i]):
+            ok = False
+    return d, null_norm, ok
+
+
+@njit(cache=True, nogil=True)
 def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_proj, lam_ref,
                 lo, hi, pd, tool, L, axis, offset, scale, kcoef, dkcoef, l0, n_el, d_a, rho0,
                 g, Qpoint, kargs, tol, rate, max_steps):
     N = x.shape[0]
     nq = Qpoint.shape[0]
     hist = np.empty(max_steps + 1)
-    zero = np.zeros(offset.shape[0])
     n_steps = 0
     status = MAX_STEPS
     rn = np.inf
@@ -123,15 +152,9 @@ def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_pro
         w0 = np.empty(N)
         for i in range(N):
             w0[perm[i]] = sol[i]
-        Ot = _target(x, pd, tool, L, axis, offset) - _target(w0, pd, tool, L, axis, zero)
-        d = -(JOinv @ Ot)
-        if use_proj:
-            d = d + proj @ (lam_ref - lam)
-        bad = False
-        for i in range(d.shape[0]):
-            if not (abs(d[i]) <= 0.05 and lo[i] < lam[i] + d[i] < hi[i]):
-                bad = True
-        if bad:
+        d, _, ok = stretch_step(x, w0, lam, pd, tool, L, axis, offset, JOinv, proj, use_proj,
+                                lam_ref, lo, hi)
+        if not ok:
             status = LEFT_BOX
             break
         x = x - (w0 + W @ d)

@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 
 from . import linsolve, solver
-from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps
+from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps, stretch_step
 from .forward import ForwardResult
 from .inverse_newton import _RCOND, norm
 
@@ -90,6 +90,7 @@ class _StretchStep:
                 except np.linalg.LinAlgError:
                     pass
         self.null_norm = np.inf
+        self._no_proj = np.zeros((W.shape[1], W.shape[1]))
 
     @classmethod
     def of(cls, cache, target, multi, W, lam_ref, lo, hi):
@@ -101,25 +102,18 @@ class _StretchStep:
         return sm
 
     def __call__(self, target, x, lam, w0):
-        """Stretch increment at the state ``x``, ``w0 = J^{-1} R`` (None: leave the fast path)."""
+        """Stretch increment at the state ``x``, ``w0 = J^{-1} R`` (None: leave the fast path).
+
+        :func:`core.chord.stretch_step`, the step of the compiled chord loop.
+        """
         if self.inv is None:
             return None
-        Ot = target(x) - target.linear(w0)
-        d = -self.inv @ Ot
-        if self.proj is not None:
-            null = self.proj @ (self.lam_ref - lam)
-            d = d + null
-            self.null_norm = float(np.max(np.abs(null)))
-        else:
-            self.null_norm = 0.0
-        if (
-            not np.all(np.isfinite(d))
-            or np.max(np.abs(d)) > 0.05
-            or np.any(lam + d <= self.lo)
-            or np.any(lam + d >= self.hi)
-        ):
-            return None
-        return d
+        use_proj = self.proj is not None
+        d, self.null_norm, ok = stretch_step(
+            x, w0, lam, target.pd, float(target.tool), float(target.L), bool(target.axis),
+            target.offset, self.inv, self.proj if use_proj else self._no_proj, use_proj,
+            self.lam_ref, self.lo, self.hi)
+        return d if ok else None
 
 
 @dataclass(frozen=True)
