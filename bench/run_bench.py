@@ -385,8 +385,9 @@ def _ros_row(r, robot, base=None):
         "key": f"ros {robot}",
         "median_s": r["median_s"],
         "p99_s": r["p99_s"],
-        "case": "ROS end to end, target_pose -> pressure_command, separate processes, "
-        f"{robot.replace('_', ' ')} ({r['answered']} of {r['sent']} answered)",
+        "case": "ROS end to end, target_pose -> pressure_command reception, separate processes, "
+        f"{robot.replace('_', ' ')} ({r['answered']} of {r['sent']} answered; at the client's "
+        f"callback {r['callback_median_s'] * 1e3:.2f} ms)",
     }
     if base is not None:
         row["base_median_s"], row["base_p99_s"] = base["median_s"], base["p99_s"]
