@@ -14,6 +14,7 @@ import numpy as np
 from . import linsolve, solver
 from .blas import one_thread_call
 from .assembly import RobotModel
+from .pcc import arc_state
 from .stability import StabilityCheck
 
 __all__ = ["ForwardResult", "ResumeState", "solve_forward", "check_pressures", "UNSTABLE"]
@@ -187,9 +188,9 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
     else:
         direct = True
         if warm is None:
-            # cold start: straight guess at the target stretches, then continuation
-            # from the exactly solved unloaded straight robot at lam = 1
-            guess = model.straight_state(lam)
+            # cold start: the PCC arcs of the target stretches as the guess, then (if Newton
+            # fails from there) continuation from the exactly solved unloaded straight robot
+            guess = arc_state(model, lam)
             start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
         else:
             guess, start = warm[0], warm

@@ -47,7 +47,7 @@ from scipy.optimize import least_squares
 from .config import RobotConfig
 from .stage1 import Stage1
 
-__all__ = ['PccPose', 'PccModel', 'arc_parameters', 'arc_transform']
+__all__ = ['PccPose', 'PccModel', 'arc_parameters', 'arc_state', 'arc_transform']
 
 
 def _rz(a):
@@ -95,6 +95,51 @@ def arc_points(s, beta, phi, n_points):
     for i, t in enumerate(np.linspace(0.0, 1.0, n_points)):
         out[i] = arc_transform(s * t, beta * t, phi)[0]
     return out
+
+
+def arc_state(model, lam):
+    """A state ``x = [q, alpha]`` of the ANCF model (``model``) on the PCC arcs of ``lam``.
+
+    The cold start of the forward solve: every segment the arc of its
+    actuator lengths ``lam * l0`` (:func:`arc_parameters`), chained as in
+    :meth:`PccModel.forward_stretch`; the nodes of every actuator on its
+    parallel arc at the pitch radius, the gradients its tangent scaled by
+    the arc's length over the natural length (1 for three actuators), the
+    plates in the arc's frame at their fraction, the multipliers zero.  The
+    constraints hold at the nodes, and the ANCF elements' cubic interpolation
+    of the arc leaves a small residual at attachments inside an element;
+    gravity and payload are what the Newton iteration then adds.
+    """
+    cfg = model.cfg
+    lam = np.asarray(lam, dtype=float)
+    q = np.zeros(model.nq)
+    act = q[:model.nq_act].reshape(model.A, model.n_nodes, 6)
+    pl = q[model.nq_act:].reshape(model.P, 12)
+    frac = np.arange(model.n_nodes) / model.n
+    p0, R0 = np.zeros(3), np.eye(3)
+    for j, (seg, sl) in enumerate(zip(cfg.segments, cfg.actuator_slices)):
+        if j > 0:
+            p0 = p0 + seg.connector_height * R0[:, 2]
+        s, beta, phi = arc_parameters(lam[sl] * cfg.l0, seg.actuator_angles, seg.pitch_radius)
+        frames = [arc_transform(f * s, f * beta, phi) for f in frac]
+        for a in range(sl.start, sl.stop):
+            off = model.act_offset[a]
+            length = s - float(np.hypot(off[0], off[1])) * beta * np.cos(
+                model.act_angle[a] - phi)  # this actuator's arc
+            stretch = length / (lam[a] * cfg.l0)
+            for k, (dp, dR) in enumerate(frames):
+                act[a, k, :3] = p0 + R0 @ (dp + dR @ off)
+                act[a, k, 3:] = stretch * (R0 @ dR[:, 2])
+        for k in model.seg_plates[j]:
+            plate = model.plates[k]
+            if plate["fraction"] > 0:
+                f = plate["fraction"]
+                dp, dR = arc_transform(f * s, f * beta, phi)
+                pl[plate["unknown"], :3] = p0 + R0 @ dp
+                pl[plate["unknown"], 3:] = (R0 @ dR).T.ravel()  # d1, d2, d3
+        dp, dR = arc_transform(s, beta, phi)
+        p0, R0 = p0 + R0 @ dp, R0 @ dR
+    return np.concatenate([q, np.zeros(model.nc)])
 
 
 @dataclass
