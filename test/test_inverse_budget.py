@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import solve_forward, solve_inverse, solver
+from bellow_ancf_ros.core import forward, solve_forward, solve_inverse, solver
 from bellow_ancf_ros.core.inverse_newton import norm, pose_errors
 
 BUDGET_STATUSES = (solver.TIME_BUDGET, solver.ITERATION_BUDGET)
@@ -57,8 +57,13 @@ def _slices(model, position, z_axis, warm, max_slices, **budget):
 
 @pytest.mark.parametrize("robot, kpa, iterations",
                          [("one", ONE_TARGET_KPA, 3), ("two", TWO_TARGET_KPA, 6)])
-def test_forward_solve_slices_converge_to_the_unbudgeted_answer(robot, kpa, iterations, request):
+def test_forward_solve_slices_converge_to_the_unbudgeted_answer(robot, kpa, iterations, request,
+                                                                monkeypatch):
+    """A cold solve from the straight robot (continuation), cut by iteration budgets."""
     model = request.getfixturevalue(robot)
+    # the straight guess instead of the constant-curvature arcs (which need 1-3 iterations):
+    # a solve long enough to be sliced
+    monkeypatch.setattr(forward, "arc_state", lambda m, lam: m.straight_state(lam))
     p = np.array(kpa) * 1e3
     ref = solve_forward(model, p, payload_kg=0.1)
     assert ref.iterations > iterations

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core.pcc import PccModel, arc_parameters, arc_transform
+from bellow_ancf_ros.core.pcc import PccModel, arc_parameters, arc_state, arc_transform
 
 NO_GRAVITY = (0.0, 0.0, 0.0)
 
@@ -119,3 +119,30 @@ def test_unreachable_target_stays_within_the_limits(one_cfg):
     assert np.all((p >= one_cfg.p_min) & (p <= one_cfg.p_max))
     with pytest.raises(ValueError):
         pcc.inverse([0.0, 0.0, -0.05])
+
+
+@pytest.mark.parametrize('name', ['one_segment', 'two_segment'])
+def test_arc_state_meets_every_constraint_and_starts_near_the_equilibrium(name):
+    """The cold start: constraints exact, the straight robot at lam = 1, the PCC pose."""
+    model = RobotModel(load_robot(name))
+    nq = model.nq
+    np.testing.assert_allclose(arc_state(model, np.ones(model.A)),
+                               model.straight_state(np.ones(model.A)), rtol=0, atol=1e-14)
+    rng = np.random.default_rng(4)
+    st = model.stage1
+    for _ in range(3):
+        lam = rng.uniform(st.lam_min, st.lam_max, model.A)
+        x = arc_state(model, lam)
+        r = model.evaluate(x, lam, 0.0, 0.0, jacobian=False).residual * model.residual_scale
+        assert np.max(np.abs(r[nq:])) < 1e-12  # attachments, parallelism, orthonormality
+        # the end plate is where the PCC model puts it
+        pcc = PccModel(model.cfg).forward_stretch(lam)
+        p, D = model.end_effector(x[:nq])
+        np.testing.assert_allclose(p, pcc.position, atol=1e-12)
+        np.testing.assert_allclose(D, pcc.rotation, atol=1e-12)
+        # much nearer the equilibrium than the straight robot (load included)
+        fw = solve_forward(model, st.pressure(lam))
+        assert fw.converged
+        d_arc = np.max(np.abs(fw.x[:nq] - x[:nq]))
+        d_straight = np.max(np.abs(fw.x[:nq] - model.straight_state(lam)[:nq]))
+        assert d_arc < 0.5 * d_straight, (d_arc, d_straight)
