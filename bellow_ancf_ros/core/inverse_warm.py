@@ -45,14 +45,18 @@ from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps, stretch
 from .forward import ForwardResult
 from .inverse_newton import _RCOND, norm
 
-__all__ = ["full_space_newton", "PathRecord", "CHORD_RATE", "MAX_CHORD", "REFINE_TOL",
-           "REFINE_MAX"]
+__all__ = ["full_space_newton", "PathRecord", "CHORD_RATE", "CHORD_TOL_MULTI", "MAX_CHORD",
+           "REFINE_TOL", "REFINE_MAX"]
 
 # chord steps (a factorisation from an earlier point, reused): each must cut the residual by
 # this factor at least, and at most this many in a row; then Newton with a new factorisation
 # (one segment, 1 mm steps: 0.1 refactorised every 2nd target, 0.3 every 6th, ~20 % less time)
 CHORD_RATE = 0.3
 MAX_CHORD = 12
+# redundant robots: their answer needs the W of a Newton step (or a refinement) anyway, so the
+# chord steps only bring the residual to this (the Newton step then takes it below tol; one
+# chord step fewer per two-segment target, the same acceptance tests)
+CHORD_TOL_MULTI = 1e-7
 # redundant robots: a refined W (one step with the last factorisation) counts as the W of its
 # iterate when the refinement changed it by less than REFINE_TOL (relative); up to REFINE_MAX
 # it is used and refined again at the next iterate; beyond, a new factorisation
@@ -235,7 +239,7 @@ class _WarmSolve:
             return True, None
         self.x, self.lam, status, steps, h, rn = chord_steps(
             self.model, self.payload, self.target, lu, W_c, chord_map, self.x, self.lam,
-            self.tol, CHORD_RATE, MAX_CHORD)
+            max(self.tol, CHORD_TOL_MULTI) if self.multi else self.tol, CHORD_RATE, MAX_CHORD)
         self.hist += h
         self.n_chord += steps
         self.exact = self.exact and steps == 0
