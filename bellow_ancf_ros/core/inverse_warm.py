@@ -18,7 +18,8 @@ Per target:
    each, linear convergence at a rate that grows with the distance to where
    it was made (measured 0.015 to 0.05 per millimetre of target motion);
    each must cut the residual by ``CHORD_RATE``, at most ``MAX_CHORD`` of
-   them;
+   them (redundant robots: down to ``CHORD_TOL_MULTI`` only, as a Newton
+   step follows);
 3. then Newton steps with a new factorisation; one segment goes back to
    chord steps with it, redundant robots refine ``W`` with it at the next
    iterates (``REFINE_TOL``, ``REFINE_MAX``).
@@ -26,9 +27,11 @@ Per target:
 The answer does not depend on the factorisation used: for one segment (as
 many target equations as stretches) the iteration solves ``R = 0, O = 0``
 whatever ``J_x`` approximates it; for redundant robots the null-space
-condition needs the exact ``W``, so the answer is accepted only after a step
-whose ``W`` is the one of its iterate (a new factorisation there, or ``W``
-refined to ``REFINE_TOL``) and whose null-space correction is below 1e-9.
+condition needs the exact ``W``, so the answer is an iterate whose ``W`` is
+its own (a new factorisation there, or ``W`` refined there to
+``REFINE_TOL``), whose residual is within the tolerance and whose null-space
+correction, computed with that ``W``, is below 1e-9 (it is accepted before
+the step it would take; :meth:`_WarmSolve.take`).
 A held target is accepted at once when the warm start's ``W`` was such a one
 (``ForwardResult._sensitivity_exact``).
 """
