@@ -27,11 +27,12 @@ Per target:
 The answer does not depend on the factorisation used: for one segment (as
 many target equations as stretches) the iteration solves ``R = 0, O = 0``
 whatever ``J_x`` approximates it; for redundant robots the null-space
-condition needs the exact ``W``, so the answer is an iterate whose ``W`` is
-its own (a new factorisation there, or ``W`` refined there to
-``REFINE_TOL``), whose residual is within the tolerance and whose null-space
-correction, computed with that ``W``, is below 1e-9 (it is accepted before
-the step it would take; :meth:`_WarmSolve.take`).
+condition needs the exact ``W``: the answer is an iterate with a ``W`` of its
+own (a new factorisation there, or ``W`` refined there to ``REFINE_TOL``),
+its residual within the tolerance and the null-space correction computed
+with that ``W`` below 1e-9 (accepted before the step it would take,
+:meth:`_WarmSolve.take`), or the iterate after a step made with such a
+``W`` and a correction below 1e-9, its residual within the tolerance.
 A held target is accepted at once when the warm start's ``W`` was such a one
 (``ForwardResult._sensitivity_exact``).
 """
