@@ -21,7 +21,8 @@ from .ros_util import WARN_THROTTLE_S
 
 __all__ = [
     'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
-    'ThrottledStatus', 'diagnostic_status', 'publish_diagnostic', 'solve_values',
+    'ThrottledStatus', 'diagnostic_status', 'inverse_values', 'publish_diagnostic',
+    'solve_values',
 ]
 
 #: Minimum interval between two WARN diagnostics of the same refusal reason [s].
@@ -127,6 +128,24 @@ def solve_values(stats: common.SolveStats) -> dict:
         'solve_ms_p95': ms(s['p95_s']),
         'solve_ms_max': ms(s['max_s']),
         'solve_stats_window': s['window'],
+    }
+
+
+def inverse_values(inv, dt: float, payload: float, unit: str) -> dict:
+    """Key/values of one inverse solve (an ``InverseResult``, ``dt`` seconds) for its status."""
+    fw = inv.forward
+    return {
+        'solve_time_ms': f'{dt * 1e3:.3f}',
+        'iterations': inv.iterations,
+        'residual_norm': 'nan' if fw is None else f'{fw.residual_norm:.3e}',
+        'position_error_m': f'{inv.position_error_m:.3e}',
+        'angle_error_rad': ('n/a' if inv.angle_error_rad is None
+                            else f'{inv.angle_error_rad:.3e}'),
+        'reachable': str(bool(inv.reachable)).lower(),
+        'active_limits': ' '.join(str(int(v)) for v in inv.active_limits),
+        'status': inv.status,
+        'payload_kg': payload,
+        'pressure_unit': unit,
     }
 
 

@@ -127,7 +127,7 @@ from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inv
 from ..core.inverse import ITERATION_BUDGET, TIME_BUDGET, precompute_corners
 from . import common
 from .measured_feedback import FeedbackLink
-from .diagnostics import Heartbeat, Refusals, ThrottledStatus, solve_values
+from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
@@ -509,19 +509,17 @@ class InverseKinetostaticNode(LifecycleNode):
                     self.get_parameter('base_frame').value, stamp))
                 self.last_command_pa = p
                 self.stats['published'] += 1
-        values = {
-            'solve_time_ms': f'{dt * 1e3:.3f}',
-            'iterations': inv.iterations,
-            'residual_norm': 'nan' if fw is None else f'{fw.residual_norm:.3e}',
-            'position_error_m': f'{inv.position_error_m:.3e}',
-            'angle_error_rad': ('n/a' if inv.angle_error_rad is None
-                                else f'{inv.angle_error_rad:.3e}'),
-            'reachable': str(bool(inv.reachable)).lower(),
-            'active_limits': ' '.join(str(int(v)) for v in inv.active_limits),
-            'status': inv.status,
-            'payload_kg': payload,
-            'pressure_unit': unit,
-        }
+        self._report(item, inv, dt, payload, unit, p, unsafe, usable)
+
+    def _report(self, item, inv, dt, payload, unit, p, unsafe, usable) -> None:
+        """Counters, log lines and the status of one solve (after its command went out).
+
+        ``p``: the published pressures (None: nothing published, because the
+        solve was not ``usable`` or the safety gate refused it, ``unsafe``).
+        A budget-limited answer queues the same target again (its next
+        slice), at most ``MAX_CONTINUATIONS`` times.
+        """
+        values = inverse_values(inv, dt, payload, unit)
         if usable:
             self._feedback.after_solve(inv)
         values.update(self._feedback.status())
