@@ -308,6 +308,58 @@ def test_sigint_between_constructor_and_spin_exits_cleanly_and_vents(env):
     assert 'Traceback' not in out, out
 
 
+HANGING_TEARDOWN = """
+import sys, time
+from rclpy.node import Node
+from bellow_ancf_ros.nodes import ros_util
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__('hanging_teardown_probe')
+        print('UP', flush=True)
+
+    def destroy_node(self):
+        if sys.argv[1] == 'teardown':
+            time.sleep(60)  # a teardown that hangs
+        return super().destroy_node()
+
+def vent(node):
+    if sys.argv[1] == 'vent':
+        time.sleep(60)  # a vent step that hangs
+
+ros_util.main_for(Probe, before_destroy=vent)()
+print('RETURNED', flush=True)
+"""
+
+
+def test_a_hanging_shutdown_still_ends_the_process_by_the_deadline(env, tmp_path):
+    """Whatever hangs after Ctrl-C, the process exits STOP_DEADLINE_S later, and says so."""
+    procs = {}
+    for where in ('teardown', 'vent'):
+        log = open(tmp_path / f'{where}.log', 'w')
+        procs[where] = (subprocess.Popen(
+            [sys.executable, '-c', HANGING_TEARDOWN, where], env=env, cwd=REPO, stdout=log,
+            stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=_default_sigint), log)
+    for where, (proc, _) in procs.items():
+        wait_for(lambda: 'UP' in (tmp_path / f'{where}.log').read_text(), STARTUP_TIMEOUT,
+                 f'{where} probe up')
+    t0 = time.monotonic()
+    for proc, _ in procs.values():
+        os.killpg(proc.pid, signal.SIGINT)
+    for where, (proc, log) in procs.items():
+        try:
+            code = proc.wait(ros_util.STOP_DEADLINE_S + 10.0)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            log.close()
+        out = (tmp_path / f'{where}.log').read_text()
+        assert time.monotonic() - t0 >= ros_util.STOP_DEADLINE_S - 0.5, out
+        assert code == (0 if where == 'teardown' else 1), out
+        assert f'shutdown did not finish within {ros_util.STOP_DEADLINE_S:g} s' in out, out
+        assert 'RETURNED' not in out
+
+
 @pytest.mark.parametrize('executor', ros_util.EXECUTORS)
 def test_double_sigint_still_vents(env, tmp_path, client, executor):
     """Terminal and ``ros2 launch`` both send SIGINT: the second must not cut the vent.

@@ -274,6 +274,28 @@ def _ignore_further_signals() -> _ShuttingDown:
 _STOP = threading.Event()
 #: Set as soon as the node is constructed (a signal from then on stops it cleanly).
 _SPINNING = threading.Event()
+#: Set once the spin loop has ended and ``before_destroy`` (the vent) has returned.
+_VENTED = threading.Event()
+#: After the first SIGINT/SIGTERM the process exits within this time [s], whatever hangs: the
+#: vent and its acknowledgement wait (VENT_ACK_TIMEOUT_S) have their time, then the teardown of
+#: the node and the middleware gets as long again (a hang of it was seen once, on a loaded
+#: machine, in a node with a 100 Hz timer; it would otherwise keep the process alive).
+STOP_DEADLINE_S = 2.0 * VENT_ACK_TIMEOUT_S
+_NODE_LABEL = ['node']
+
+
+def _exit_if_still_running() -> None:  # pragma: no cover - only when a teardown hangs
+    code = 0 if _VENTED.is_set() else 1
+    print(f'[{_NODE_LABEL[0]}] shutdown did not finish within {STOP_DEADLINE_S:g} s of the '
+          f'signal ({"after" if code == 0 else "before"} the vent step): exiting now',
+          file=sys.stderr, flush=True)
+    os._exit(code)
+
+
+def _arm_stop_deadline() -> None:
+    timer = threading.Timer(STOP_DEADLINE_S, _exit_if_still_running)
+    timer.daemon = True
+    timer.start()
 
 
 def _first_signal(signum, frame):  # pragma: no cover - signal path
@@ -289,6 +311,7 @@ def _first_signal(signum, frame):  # pragma: no cover - signal path
     _ignore_further_signals()
     if _SPINNING.is_set():
         _STOP.set()
+        _arm_stop_deadline()
     else:
         raise KeyboardInterrupt
 
@@ -335,6 +358,9 @@ def run_node(node, before_destroy=None) -> None:
     From the first signal on, further SIGINT/SIGTERM are counted, not raised:
     ``ros2 launch`` and a terminal may both deliver SIGINT, and a second one
     must not interrupt the vent or its acknowledgement wait (which is bounded).
+    The first signal also starts a deadline (``STOP_DEADLINE_S``): should
+    anything hang after it, the process still exits then, with a line on
+    stderr (status 0 once the vent step returned, else 1).
     """
     _SPINNING.set()
     executor = make_executor()
@@ -350,6 +376,7 @@ def run_node(node, before_destroy=None) -> None:
             if before_destroy is not None and rclpy.ok():
                 before_destroy(node)
         finally:
+            _VENTED.set()
             executor.remove_node(node)
             node.destroy_node()
             rclpy.try_shutdown()
@@ -378,6 +405,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None):
     name = node_name or getattr(node_class, 'NODE_NAME', node_class.__name__)
 
     def main(args=None) -> None:
+        _NODE_LABEL[0] = name
         init_rclpy(args)
         try:
             executor_choice()
