@@ -291,6 +291,11 @@ def send_until_prediction(client, pos, stamp_sec, timeout=TIMEOUT):
 
 
 # ------------------------------------------------------------------ tests
+# the first trajectory target is 10 mm from the straight robot: on a loaded machine it can be
+# answered in budget slices (best in-limit pressures so far, by design) for a few tenths of a s
+SETTLE_S = 1.0
+
+
 def test_trajectory_publisher_drives_pipeline(stack):
     client, cfg = stack['client'], stack['cfg']
     traj = NodeProcess('trajectory_publisher', stack['env'], stack['logs'],
@@ -306,21 +311,20 @@ def test_trajectory_publisher_drives_pipeline(stack):
         def settled():
             """Predictions received well after the first target this process recorded.
 
-            Their targets (sent >= 0.1 s before, at 10 Hz) were all recorded here too.
+            Their targets (sent >= 0.1 s before, at 10 Hz) were all recorded here too; the
+            first answers (SETTLE_S) are left out.
             """
             tgt = client.since('target_pose', n_t)
             if not tgt:
                 return []
             return [(t, m) for t, m in client.since('predicted_pose', n_p)
-                    if t >= tgt[0][0] + 0.25]
+                    if t >= tgt[0][0] + SETTLE_S]
         wait_for(lambda: len(settled()) >= 15, STARTUP_TIMEOUT,
                  '15 predictions driven by the trajectory publisher')
     finally:
         code = traj.stop()
     assert code == 0, traj.log()
     targets = np.array([position(m) for _, m in client.since('target_pose', n_t)])
-    # (the first target is 10 mm from the straight robot: on a loaded machine its first answers
-    # can be budget slices, the best in-limit pressures so far, by design; settled() skips them)
     preds = np.array([position(m) for _, m in settled()])
     assert len(targets) >= 10 and len(preds) >= 15
     # the published targets follow the default circle ...
