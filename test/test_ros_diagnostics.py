@@ -12,15 +12,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from bellow_ancf_ros.nodes.diagnostics import STATUS_PERIOD_S, ThrottledStatus  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import diagnostics_qos  # noqa: E402
-
-
-def _wait_for(pred, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return False
+from bellow_ancf_ros.ros_pipeline import wait_until  # noqa: E402
 
 
 @pytest.fixture
@@ -38,7 +30,7 @@ def spun(ros_context):
     ex.add_node(node)
     thread = threading.Thread(target=ex.spin, daemon=True)
     thread.start()
-    assert _wait_for(lambda: pub.get_subscription_count() >= 1)
+    assert wait_until(lambda: pub.get_subscription_count() >= 1, 10.0)
 
     def statuses():
         with lock:
@@ -61,7 +53,7 @@ def test_repeats_are_throttled_news_go_at_once_and_the_newest_arrives(spun):
     for i in range(200):  # a burst far faster than 10 Hz, all "target reached"
         st.submit('robot', OK, 'target reached', {'i': str(i)})
     burst_s = time.monotonic() - t0
-    assert _wait_for(lambda: any(_values(s)['i'] == '199' for s in statuses()))
+    assert wait_until(lambda: any(_values(s)['i'] == '199' for s in statuses()), 10.0)
     ok = statuses()
     assert _values(ok[0])['i'] == '0'  # the first at once
     assert _values(ok[-1])['i'] == '199'  # the newest flushed by the timer
@@ -74,10 +66,11 @@ def test_repeats_are_throttled_news_go_at_once_and_the_newest_arrives(spun):
     assert st.published == published + 1
     st.submit('robot', WARN, 'target unreachable', {'i': 'w2'})
     assert st.published == published + 1
-    assert _wait_for(lambda: len(statuses()) >= n + 2)
+    assert wait_until(lambda: len(statuses()) >= n + 2, 10.0)
     assert [(s.level, _values(s)['i']) for s in statuses()[n:]] == [(WARN, 'w'), (WARN, 'w2')]
     # and statuses slower than the period are each published
     for i in range(3):
         time.sleep(STATUS_PERIOD_S * 1.2)
         st.submit('robot', WARN, 'target unreachable', {'i': f's{i}'})
-    assert _wait_for(lambda: [_values(s)['i'] for s in statuses()][-3:] == ['s0', 's1', 's2'])
+    assert wait_until(
+        lambda: [_values(s)['i'] for s in statuses()][-3:] == ['s0', 's1', 's2'], 10.0)

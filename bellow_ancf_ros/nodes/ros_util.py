@@ -251,7 +251,6 @@ def publish_and_wait_acked(node, pub, msg, what: str,
     return ok
 
 
-# ------------------------------------------------------------ heartbeat
 # --------------------------------------------------------- run / signals
 class _ShuttingDown:
     """SIGINT/SIGTERM handler during shutdown: a repeated signal must not cut the vent short."""
