@@ -37,6 +37,29 @@ def two_cfg():
     return load_robot("two_segment")
 
 
+@pytest.fixture
+def factorisations(monkeypatch):
+    """A list that grows by one for each KKT factorisation made (LDL^T, or the banded LU)."""
+    from bellow_ancf_ros.core import ldlt, linsolve
+
+    made = []
+    orig_ldl, orig_lu = ldlt.EnvelopeKKT.factor, linsolve.BandedKKT.factor
+
+    def ldl(self, J, D):
+        f = orig_ldl(self, J, D)
+        if f is not None:  # refused: the banded LU follows, and counts
+            made.append(1)
+        return f
+
+    def lu(self, J):
+        made.append(1)
+        return orig_lu(self, J)
+
+    monkeypatch.setattr(ldlt.EnvelopeKKT, "factor", ldl)
+    monkeypatch.setattr(linsolve.BandedKKT, "factor", lu)
+    return made
+
+
 @pytest.fixture(scope='module')
 def ros_context():
     """Isolated ROS 2 context: random domain id, localhost discovery, set before init."""

@@ -5,7 +5,7 @@ import pytest
 import scipy.linalg.lapack as lapack
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse
-from bellow_ancf_ros.core import chord
+from bellow_ancf_ros.core import chord, ldlt, linsolve
 from bellow_ancf_ros.core.inverse_newton import Target
 from bellow_ancf_ros.core.inverse_warm import _StretchStep
 
@@ -48,14 +48,18 @@ def _path_start(name):
     return model, multi, b, Target(model, target_pos, z0)
 
 
+@pytest.mark.parametrize("kind", ["ldlt", "banded_lu"])
 @pytest.mark.parametrize("name", ["one_segment", "two_segment"])
-def test_compiled_chord_steps_are_the_python_steps(name):
+def test_compiled_chord_steps_are_the_python_steps(name, kind):
     model, multi, warm, target = _path_start(name)
     fw = warm.forward
     st = model.stage1
     lo, hi = np.full(model.A, st.lam_min), np.full(model.A, st.lam_max)
     lam_ref = np.full(model.A, float(st.stretch(0.5 * (model.cfg.p_min + model.cfg.p_max))))
     factorised, WF = fw._chord
+    assert isinstance(factorised.lu, ldlt.EnvelopeLDL)  # what the solver made
+    if kind == "banded_lu":  # the fallback for a refused LDL^T, on the same matrix
+        factorised = linsolve.kkt_solver(model).pattern.factor(factorised.J)
     step = _StretchStep(target, multi, WF, lam_ref, lo, hi)
     x, lam = fw.x.copy(), fw.stretch.copy()
     d = step(target, x, lam, np.zeros(model.N))  # the predictor of full_space_newton
@@ -68,8 +72,9 @@ def test_compiled_chord_steps_are_the_python_steps(name):
         w0 = factorised.solve(r)
         d = step(target, xp, lp, w0)
         xp, lp = xp - (w0 + WF @ d), lp + d
+    lu = factorised if kind == "banded_lu" else factorised.lu
     xc, lc, status, steps, h, rn = chord.chord_steps(
-        model, 0.0, target, factorised.lu, WF, step, x, lam, tol=0.0, rate=10.0, max_steps=4)
+        model, 0.0, target, lu, WF, step, x, lam, tol=0.0, rate=10.0, max_steps=4)
     assert status == chord.MAX_STEPS and steps == 4
     np.testing.assert_allclose(h[:4], hist, rtol=1e-6, atol=1e-10 * hist[0])  # round-off
     np.testing.assert_allclose(xc, xp, rtol=0, atol=1e-12)

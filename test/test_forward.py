@@ -32,13 +32,8 @@ def test_newton_converges_quadratically(one, two, monkeypatch):
 
 
 def test_chord_steps_near_the_solution_cut_the_residual_and_change_nothing(one, two,
-                                                                           monkeypatch):
-    from bellow_ancf_ros.core import linsolve
-
-    factorisations = []
-    orig = linsolve.BandedKKT.factor
-    monkeypatch.setattr(linsolve.BandedKKT, "factor",
-                        lambda self, J: factorisations.append(1) or orig(self, J))
+                                                                           monkeypatch,
+                                                                           factorisations):
     for model in (one, two):
         p = _extreme(model)
         factorisations.clear()

@@ -1,4 +1,4 @@
-"""KKT solves (core.linsolve): banded LU in level order against SuperLU; one BLAS thread."""
+"""KKT solves (core.linsolve): envelope LDL^T or banded LU against SuperLU; one BLAS thread."""
 
 import os
 import sys
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
 
-from bellow_ancf_ros.core import RobotModel, linsolve, load_robot
+from bellow_ancf_ros.core import RobotModel, ldlt, linsolve, load_robot
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "data"))
 from make_solver_baseline import eval_state  # noqa: E402  (the baseline's perturbed states)
@@ -59,6 +59,7 @@ def test_singular_matrix_raises():
 
 
 def test_factorisation_runs_with_one_blas_thread(monkeypatch):
+    """The banded LU (the LDL^T of core.ldlt uses no BLAS; here it is refused) on one thread."""
     threadpoolctl = pytest.importorskip('threadpoolctl')
     threadpool_info = threadpoolctl.threadpool_info
     threadpool_limits = threadpoolctl.threadpool_limits
@@ -71,6 +72,7 @@ def test_factorisation_runs_with_one_blas_thread(monkeypatch):
         return real(*args, **kw)
 
     monkeypatch.setattr(linsolve.lapack, "dgbtrf", spy)
+    monkeypatch.setattr(ldlt, "MAX_GROWTH", -1.0)  # every LDL^T refused: the banded LU
     model = RobotModel(load_robot("one_segment"))
     x, lam = eval_state(model, 1)
     ev = model.evaluate(x, lam)

@@ -69,7 +69,7 @@ class Evaluation:
     _lu: object = field(default=None, repr=False)  # the factorisation, made on first solve
 
     def solve(self, b):
-        """Solve ``J x = b`` with the Jacobian (banded LU made once, then reused; core.linsolve).
+        """Solve ``J x = b`` with the Jacobian (factorised once, then reused; core.linsolve).
 
         Raises ``numpy.linalg.LinAlgError`` when the Jacobian is singular.
         """

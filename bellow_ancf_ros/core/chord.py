@@ -1,9 +1,9 @@
 """Chord steps of the warm-started inverse solve, compiled (eqs. 25, 28-30).
 
 Along a trajectory, :func:`core.inverse_warm.full_space_newton` first
-reuses the banded LU factorisation of the KKT matrix (eq. 27) made near an
+reuses the factorisation of the KKT matrix (eq. 27) made near an
 earlier answer: each chord step is one residual evaluation, one
-single-column banded solve and a few small products, so that the loop of
+single-column solve and a few small products, so that the loop of
 such steps runs here, compiled, with no Python call per step.  The step is
 the one of ``full_space_newton`` (Schur complement of the bordered
 Jacobian, with ``J_x`` and ``W = J_x^{-1} dR/dlam`` frozen)::
@@ -15,8 +15,10 @@ Jacobian, with ``J_x`` and ``W = J_x^{-1} dR/dlam`` frozen)::
 The loop stops when the residual is below the tolerance, when a step cuts
 it by less than ``rate``, after ``max_steps``, or when a step would leave
 the trust region or the pressure box; the caller goes on with Newton's
-method from there.  :func:`banded_solve` is LAPACK's ``dgbtrs`` (no
-transpose, one right-hand side) for the factors of ``dgbtrf``.
+method from there.  The factorisation is the envelope LDL^T of
+:mod:`core.ldlt` or, where that was refused, the banded LU of ``dgbtrf``:
+:func:`banded_solve` is LAPACK's ``dgbtrs`` (no transpose, one right-hand
+side) for it.
 """
 
 from __future__ import annotations
@@ -25,11 +27,18 @@ import numpy as np
 from numba import njit
 
 from .kernels import element_parameters, evaluate_kernel
+from .ldlt import EnvelopeLDL, ldl_solve_vector
 
 __all__ = ["banded_solve", "chord_steps", "stretch_step", "CONVERGED", "STALLED", "LEFT_BOX",
            "MAX_STEPS", "NONFINITE"]
 
 CONVERGED, STALLED, LEFT_BOX, MAX_STEPS, NONFINITE = 0, 1, 2, 3, 4
+
+# the factorisation not used by a call of the loop (the same types: one compiled loop)
+_NO_LU = (np.zeros((1, 1), order="F"), np.zeros(1, dtype=np.int32), 0, 0,
+          np.zeros(1, dtype=np.int64))
+_NO_LDL = (np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0), 0.0)
+_NO_LDL[2].flags.writeable = False  # as a pattern's packed integers
 
 
 @njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
@@ -111,7 +120,24 @@ def stretch_step(x, w0, lam, pd, tool, L, axis, offset, JOinv, proj, use_proj, l
 
 
 @njit(cache=True, nogil=True)
-def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_proj, lam_ref,
+def _solve(lu, ldl, b):
+    """``J^{-1} b`` with the envelope LDL^T (``ldl[0]`` non-empty) or else the banded LU."""
+    if ldl[0].shape[0] > 0:
+        return ldl_solve_vector(ldl[0], ldl[1], ldl[2], ldl[3], ldl[4], b)
+    lub, piv, kl, ku, perm = lu
+    N = b.shape[0]
+    bp = np.empty(N)
+    for i in range(N):
+        bp[i] = b[perm[i]]
+    sol = banded_solve(lub, piv, kl, ku, bp)
+    w0 = np.empty(N)
+    for i in range(N):
+        w0[perm[i]] = sol[i]
+    return w0
+
+
+@njit(cache=True, nogil=True)
+def _chord_loop(x, lam, rn_prev, lu, ldl, W, JOinv, proj, use_proj, lam_ref,
                 lo, hi, pd, tool, L, axis, offset, scale, kcoef, dkcoef, l0, n_el, d_a, rho0,
                 g, Qpoint, kargs, tol, rate, max_steps):
     N = x.shape[0]
@@ -145,13 +171,7 @@ def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_pro
         if n_steps >= max_steps:
             status = MAX_STEPS
             break
-        bp = np.empty(N)
-        for i in range(N):
-            bp[i] = res[perm[i]]
-        sol = banded_solve(lub, piv, kl, ku, bp)
-        w0 = np.empty(N)
-        for i in range(N):
-            w0[perm[i]] = sol[i]
+        w0 = _solve(lu, ldl, res)
         d, _, ok = stretch_step(x, w0, lam, pd, tool, L, axis, offset, JOinv, proj, use_proj,
                                 lam_ref, lo, hi)
         if not ok:
@@ -166,20 +186,26 @@ def _chord_loop(x, lam, rn_prev, lub, piv, kl, ku, perm, W, JOinv, proj, use_pro
 
 def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_steps,
                 rn_prev=np.inf):
-    """Chord steps from ``(x, lam)`` with the factorisation ``lu`` (a ``BandedLU``) and ``W``.
+    """Chord steps from ``(x, lam)`` with the factorisation ``lu`` and ``W``.
+
+    ``lu``: an ``ldlt.EnvelopeLDL`` or a ``linsolve.BandedLU``.
 
     ``step`` is the ``inverse_warm._StretchStep`` of ``W`` (``J_O``'s
     inverse, the null-space projector).  Returns ``(x, lam, status, steps,
     history, rn)``: the last iterate (its residual norm ``rn``, evaluated),
     why the loop stopped, the steps taken and the residual norms seen.
     """
-    p = lu.p
     proj = step.proj
     use_proj = proj is not None
     static = _static_args(model, float(payload), target)
+    if isinstance(lu, EnvelopeLDL):
+        ldl, lu_args = lu.args(), _NO_LU
+    else:
+        p = lu.p
+        ldl, lu_args = _NO_LDL, (lu.lub, lu.piv, p.kl, p.ku, p.perm)
     out = _chord_loop(
         np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(lam, dtype=float),
-        float(rn_prev), lu.lub, lu.piv, p.kl, p.ku, p.perm, np.ascontiguousarray(W),
+        float(rn_prev), lu_args, ldl, np.ascontiguousarray(W),
         np.ascontiguousarray(step.inv), np.ascontiguousarray(proj) if use_proj else
         np.zeros((model.A, model.A)), use_proj, step.lam_ref, step.lo, step.hi,
         static[0], float(target.tool), float(target.L), bool(target.axis), target.offset,

@@ -14,7 +14,7 @@ Per target:
    steady path the last target's second-order correction
    (:func:`_second_order`);
 2. chord steps (:mod:`core.chord`, compiled) with the factorisation of an
-   earlier answer (``ForwardResult._chord``): one single-column banded solve
+   earlier answer (``ForwardResult._chord``): one single-column solve
    each, linear convergence at a rate that grows with the distance to where
    it was made (measured 0.015 to 0.05 per millimetre of target motion);
    each must cut the residual by ``CHORD_RATE``, at most ``MAX_CHORD`` of
@@ -47,6 +47,7 @@ from numba import njit
 from . import linsolve, solver
 from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps, stretch_step
 from .forward import ForwardResult
+from .ldlt import EnvelopeLDL
 from .inverse_newton import _RCOND, norm
 
 __all__ = ["full_space_newton", "PathRecord", "CHORD_RATE", "CHORD_TOL_MULTI", "MAX_CHORD",
@@ -235,7 +236,7 @@ class _WarmSolve:
         ``False`` as the first value: give up (a non-finite residual).
         """
         lu = None if self.chord is None else getattr(self.chord[0], "lu", None)
-        if not isinstance(lu, linsolve.BandedLU):
+        if not isinstance(lu, (linsolve.BandedLU, EnvelopeLDL)):
             return True, None
         W_c = self.chord[1]
         chord_map = self.step_map(W_c, self.maps if W_c is self.W else {})
@@ -301,7 +302,7 @@ class _WarmSolve:
         """A Newton step with a new factorisation at the iterate (what :meth:`take` returns)."""
         factorised = linsolve.kkt_solver(self.model).bound(ev.jacobian)
         try:
-            sol = factorised.solve(np.column_stack([ev.residual, ev.dres_dlam]))  # banded LU
+            sol = factorised.solve(np.column_stack([ev.residual, ev.dres_dlam]))
         except np.linalg.LinAlgError:
             return False
         self.newton_its += 1

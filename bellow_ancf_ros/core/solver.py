@@ -144,7 +144,7 @@ def newton(fun, x0, scale, tol=1e-10, max_iter=25, min_alpha=1.0 / 64, floor_tol
         if ev.jacobian is None:
             ev = fun(x, jacobian=True)
         try:
-            dx = -ev.solve(ev.residual)  # banded LU (core.linsolve)
+            dx = -ev.solve(ev.residual)  # envelope LDL^T or banded LU (core.linsolve)
         except np.linalg.LinAlgError:
             return NewtonResult(x, False, SINGULAR, MESSAGES[SINGULAR], it, norm, hist)
         if not np.all(np.isfinite(dx)):
