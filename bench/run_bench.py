@@ -254,7 +254,7 @@ def _inverse_chain(impls, models, targets, z, laps=1, start=None):
                 times[i].append(dt)
             ok += bool(prev[0].success and prev[0].forward.stable)
             errs.append(prev[0].position_error_m)
-            # proved stable by the banded test (the rest: decided by the exact dense test)
+            # proved stable by the linear-time test (the rest: decided by the exact dense test)
             chk = prev[0].forward._reduced_hessian if prev[0].forward is not None else None
             proved.append(getattr(chk, "proved_by", None) is not None)
     return times, ok, errs, prev, int(np.sum(proved))
@@ -271,7 +271,7 @@ def bench_inverse(impls, name, laps):
     return _row(
         f"inverse {name}",
         f"inverse {name}, warm, 1 mm steps ({ok} of {n} reached and stable, "
-        f"{proved} proved by the banded test)",
+        f"{proved} proved by the linear-time test)",
         times,
         {"answers": n, "stable_reached": ok, "banded_proofs": proved,
          "max_position_error_m": float(np.max(errs)), **_alone(alone[0])},
@@ -472,8 +472,8 @@ def main(argv=None):
     print("median, p99: the new code on its own, call after call (as a controller runs it; the "
           "ROS rows: one node at a time); interl.: the same calls interleaved call by call with "
           "today's code, which evicts the caches between them; speed-up: today / interl.")
-    print("stable: answers reached and stable; banded: stability proved by the banded test "
-          "(the others by the exact dense test)")
+    print("stable: answers reached and stable; banded: stability proved by the linear-time "
+          "(envelope) test (the others by the exact dense test)")
     print(
         "today: the same case on the code before the rewrite (commit 1f2d442; "
         + (

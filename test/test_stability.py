@@ -1,10 +1,13 @@
-"""Stability test (core.stability): penalised banded Cholesky against the dense reduced Hessian."""
+"""Stability test (core.stability): penalised envelope factorisation against dense tests."""
+
+import os
+import sys
 
 import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core import solver, stability
+from bellow_ancf_ros.core import ldlt, solver, stability
 
 
 def _dense(fw):
@@ -12,30 +15,42 @@ def _dense(fw):
     return solver.ReducedHessian(fw.jacobian, m.nq, m.dof_scale)
 
 
-def test_banded_cholesky_matches_numpy_and_detects_indefinite():
-    rng = np.random.default_rng(0)
-    n, kd = 40, 5
-    A = np.zeros((n, n))
-    for i in range(n):
-        for j in range(max(0, i - kd), i + 1):
-            A[i, j] = A[j, i] = rng.standard_normal()
-    A += 2 * kd * np.eye(n)  # diagonally dominant: positive definite
-    ab = np.zeros((n, kd + 1))
-    for j in range(n):
-        for k in range(min(kd, n - 1 - j) + 1):
-            ab[j, k] = A[j + k, j]
-    assert stability.banded_cholesky(ab)
-    L = np.zeros((n, n))
-    for j in range(n):
-        for k in range(min(kd, n - 1 - j) + 1):
-            L[j + k, j] = ab[j, k]
-    np.testing.assert_allclose(L, np.linalg.cholesky(A), atol=1e-12)
-    A[7, 7] = -1.0
-    ab2 = np.zeros((n, kd + 1))
-    for j in range(n):
-        for k in range(min(kd, n - 1 - j) + 1):
-            ab2[j, k] = A[j + k, j]
-    assert not stability.banded_cholesky(ab2)
+def _penalised_dense(model, J, pen, rtol):
+    """``H_s - s I + rho C_s^T W C_s`` as a dense matrix (rows of ``C_s`` normalised)."""
+    nq, D = model.nq, model.dof_scale
+    Jd = J.toarray()
+    Hs = D[:, None] * Jd[:nq, :nq] * D[None, :]
+    Cs = Jd[nq:, :nq] * D[None, :]
+    ref = np.abs(Hs).max()
+    w = 1.0 / np.sum(Cs ** 2, axis=1)
+    return Hs - rtol * ref * np.eye(nq) + pen * ref * (Cs.T * w) @ Cs
+
+
+@pytest.mark.parametrize("name,n", [("one_segment", 6), ("one_segment", 4), ("two_segment", 3)])
+def test_envelope_test_is_numpys_positive_definiteness(name, n):
+    """The envelope factorisation's verdict is the sign of the penalised matrix's eigenvalues."""
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "data"))
+    from make_solver_baseline import eval_state
+
+    model = RobotModel(load_robot(name), n)
+    pat = stability._pattern(model)
+    rng = np.random.default_rng(n)
+    # perturbed states with random multipliers (indefinite), and equilibria (stable)
+    jacobians = [model.evaluate(*eval_state(model, seed), 1.0, 0.1).jacobian for seed in range(3)]
+    for _ in range(2):
+        p = rng.uniform(model.cfg.p_min, model.cfg.p_max, model.A)
+        jacobians.append(solve_forward(model, p, check_stability=False).jacobian)
+    verdicts = set()
+    for J in jacobians:
+        for pen in stability.PENALTIES:
+            lmin = np.linalg.eigvalsh(_penalised_dense(model, J, pen, 1e-10)).min()
+            ref = np.abs(_penalised_dense(model, J, 0.0, 0.0)).max()
+            if abs(lmin) < 1e-8 * ref * pen:
+                continue  # too close to call in floating point
+            got = pat.positive_definite(J, model.dof_scale, pen, 1e-10)
+            assert got == (lmin > 0), (pen, lmin)
+            verdicts.add(got)
+    assert verdicts == {True, False}
 
 
 CASES = [
@@ -70,7 +85,7 @@ def test_penalised_test_agrees_with_dense_reduced_hessian(name, n, payload):
     assert checked
 
 
-def test_stable_default_answers_are_proved_by_the_banded_test(one, two):
+def test_stable_default_answers_are_proved_by_the_linear_time_test(one, two):
     for model in (one, two):
         p = np.full(model.A, model.cfg.p_min)
         p[0] = model.cfg.p_max
@@ -78,8 +93,10 @@ def test_stable_default_answers_are_proved_by_the_banded_test(one, two):
         assert fw.stable and fw._reduced_hessian.proved_by is not None
 
 
-def test_banded_pattern_bandwidth_does_not_grow_with_elements():
-    kd = [
-        stability.BandedPattern(RobotModel(load_robot("two_segment"), n)).kd for n in (6, 12, 24)
-    ]
-    assert kd[0] == kd[1] == kd[2], kd
+def test_envelope_height_does_not_grow_with_elements():
+    heights = []
+    for n in (6, 12, 24):
+        pat = stability._pattern(RobotModel(load_robot("two_segment"), n))
+        last = pat.ints[pat.ints[ldlt._LAST]:pat.ints[ldlt._LAST + 1]]
+        heights.append(int(np.max(last - np.arange(len(last)))))
+    assert heights[0] == heights[1] == heights[2], heights

@@ -480,6 +480,8 @@ def warm_up(model):
     ev = model.evaluate(x, np.ones(model.A), 1.0, 0.0, jacobian=True, lam_derivative=True)
     try:
         StabilityCheck(ev.jacobian, model).is_positive_definite()
-        kkt_solver(model).solve(ev.jacobian, ev.residual)
+        f = kkt_solver(model).bound(ev.jacobian)
+        f.solve(ev.residual)
+        f.solve(np.column_stack([ev.residual, ev.dres_dlam]))  # the multi-column solve too
     except np.linalg.LinAlgError:  # e.g. one element per actuator: the straight robot is singular
         pass

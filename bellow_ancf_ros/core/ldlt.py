@@ -77,9 +77,13 @@ _HEAD = _NS + 1 + 5
 
 
 class EnvelopeKKT:
-    """Order, envelope and scatter maps of one model's penalised KKT matrix (built once)."""
+    """Order, envelope and scatter maps of one model's penalised KKT matrix (built once).
 
-    def __init__(self, model):
+    ``coordinates_only``: the leading block ``H_s + rho C_s^T C_s`` alone
+    (the coordinates in level order), for :meth:`positive_definite`.
+    """
+
+    def __init__(self, model, coordinates_only=False):
         """Build from ``model``'s KKT pattern (its structural non-zeros)."""
         nq, N, nc = model.nq, model.N, model.nc
         keep = model.structural_nonzeros()
@@ -88,6 +92,13 @@ class EnvelopeKKT:
         cols = np.repeat(np.arange(N), np.diff(ip)).astype(np.int64)
         rows = ix.astype(np.int64)
         k_all = np.flatnonzero(keep)
+        n = N
+        if coordinates_only:  # the coordinates in the same relative order, first
+            k_all = k_all[(rows[k_all] < nq) & (cols[k_all] < nq)]
+            rank = np.empty(nq, dtype=np.int64)
+            rank[np.argsort(new[:nq], kind="stable")] = np.arange(nq)
+            new = np.concatenate([rank, nq + np.arange(nc)])
+            order, n = np.argsort(new[:nq]), nq
         a, b = new[rows[k_all]], new[cols[k_all]]
         low = a >= b  # one triangle of J (with the diagonal)
         ent_k, ent_a, ent_b = k_all[low], a[low], b[low]
@@ -106,13 +117,13 @@ class EnvelopeKKT:
             pb.append(jj[m])
         pa, pb = np.concatenate(pa), np.concatenate(pb)
         # envelope: column j holds rows j..last[j] (last non-decreasing: no fill outside)
-        lastnz = np.arange(N)
+        lastnz = np.arange(n)
         np.maximum.at(lastnz, ent_b, ent_a)
         np.maximum.at(lastnz, new[cq[pb]], new[cq[pa]])
         last = np.maximum.accumulate(lastnz)
-        colptr = np.concatenate([[0], np.cumsum(last - np.arange(N) + 1)])
-        first = np.searchsorted(last, np.arange(N))  # row i of L: columns first[i]..i-1
-        rowptr = np.concatenate([[0], np.cumsum(np.arange(N) - first)])
+        colptr = np.concatenate([[0], np.cumsum(last - np.arange(n) + 1)])
+        first = np.searchsorted(last, np.arange(n))  # row i of L: columns first[i]..i-1
+        rowptr = np.concatenate([[0], np.cumsum(np.arange(n) - first)])
         secs = dict(new=new, ck=ck, cr=cr, cq=cq, last=last, colptr=colptr, first=first,
                     rowptr=rowptr, ent_k=ent_k, ent_pos=colptr[ent_b] + ent_a - ent_b,
                     ent_i=rows[ent_k], ent_j=cols[ent_k], rptr=rptr, pa=pa, pb=pb, pr=cr[pa],
@@ -120,25 +131,45 @@ class EnvelopeKKT:
         parts = [np.asarray(secs[k], dtype=np.int64) for k in _SECTIONS]
         offs = _HEAD + np.concatenate([[0], np.cumsum([len(x) for x in parts])])
         self.size, self.rsize = int(colptr[-1]), int(rowptr[-1])
-        head = np.concatenate([offs, [nq, N, nc, self.size, self.rsize]])
+        head = np.concatenate([offs, [nq, n, nc, self.size, self.rsize]])
         self.ints = np.concatenate([head] + parts).astype(np.int64)
         self.ints.flags.writeable = False
         self.order, self.new = order, new
         self.dropped = np.flatnonzero(~keep)
-        self.nq, self.N, self.nc, self.nnz = nq, N, nc, model._nnz
-        self.flops = float(((last - np.arange(N)) ** 2).sum() / 2)  # multiply-adds
+        self.nq, self.N, self.nc, self.nnz, self.n = nq, N, nc, model._nnz, n
+        self.coordinates_only = coordinates_only
+        self.flops = float(((last - np.arange(n)) ** 2).sum() / 2)  # multiply-adds
 
-    def factor(self, J, D):
-        """``EnvelopeLDL`` of ``J`` (CSC, the model's pattern; ``D`` the dof scales), or None."""
+    def _check(self, J):
         if J.nnz != self.nnz:
             raise ValueError("matrix does not have the model's KKT pattern")
         if self.dropped.size and np.any(J.data[self.dropped]):
             raise ValueError("matrix has non-zeros outside the model's pattern")
-        fv = np.empty(self.nc + self.size + self.rsize + self.N)
-        rho, growth = _factorise(J.data, D, self.ints, fv, PENALTY)
+
+    def factor(self, J, D):
+        """``EnvelopeLDL`` of ``J`` (CSC, the model's pattern; ``D`` the dof scales), or None."""
+        self._check(J)
+        if self.coordinates_only:
+            raise ValueError("a pattern of the coordinates only factorises no KKT matrix")
+        fv = np.empty(self.nc + self.size + self.rsize + self.n)
+        rho, growth = _factorise(J.data, D, self.ints, fv, PENALTY, 0.0)
         if not growth <= MAX_GROWTH:  # also NaN: a zero or non-finite pivot
             return None
         return EnvelopeLDL(self, J.data, D, fv, rho, growth)
+
+    def positive_definite(self, J, D, penalty, shift):
+        """Is ``H_s - s I + rho C_s^T C_s`` positive definite? (``coordinates_only`` pattern).
+
+        ``rho = penalty * max|H_s|``, ``s = shift * max|H_s|``: every pivot of
+        its LDL^T positive, the test a Cholesky factorisation makes (the
+        same operations, without the square roots).
+        """
+        self._check(J)
+        if not self.coordinates_only:
+            raise ValueError("positive_definite needs a pattern of the coordinates only")
+        fv = np.empty(self.nc + self.size + self.rsize + self.n)
+        _, growth = _factorise(J.data, D, self.ints, fv, float(penalty), float(shift))
+        return bool(growth == growth and np.all(fv[-self.n:] > 0.0))
 
 
 class EnvelopeLDL:
@@ -176,15 +207,23 @@ def _views(ints, fv):
 
 
 @njit(cache=True, nogil=True)
-def _factorise(data, D, ints, fv, penalty):
-    """Assemble, factorise, copy ``L`` by rows; returns ``rho`` and the relative growth."""
+def _factorise(data, D, ints, fv, penalty, shift):
+    """Assemble, factorise, copy ``L`` by rows; returns ``rho`` and the relative growth.
+
+    ``shift * max|H_s|`` is subtracted from the coordinates' diagonal.
+    """
     nq = ints[_NS + 1]
     E, env, renv, d = _views(ints, fv)
-    rho, kmax = _assemble(data, D, nq, E, env, _sec(ints, _ENT_K), _sec(ints, _ENT_POS),
+    ref, kmax = _assemble(data, D, nq, E, env, _sec(ints, _ENT_K), _sec(ints, _ENT_POS),
                           _sec(ints, _ENT_I), _sec(ints, _ENT_J), _sec(ints, _CK),
                           _sec(ints, _CQ), _sec(ints, _RPTR), _sec(ints, _PA), _sec(ints, _PB),
                           _sec(ints, _PR), _sec(ints, _PPOS), penalty)
     last, colptr = _sec(ints, _LAST), _sec(ints, _COLPTR)
+    rho = penalty * ref
+    if shift != 0.0:
+        new = _sec(ints, _NEW)
+        for i in range(nq):
+            env[colptr[new[i]]] -= shift * ref
     g = _factor(env, last, colptr, d)
     if not g <= np.inf:
         return rho, np.nan
@@ -195,7 +234,7 @@ def _factorise(data, D, ints, fv, penalty):
 @njit(cache=True, nogil=True)
 def _assemble(data, D, nq, E, env, ent_k, ent_pos, ent_i, ent_j, ck, cq, rptr, pa, pb, pr, ppos,
               penalty):
-    """Scaled, penalised ``K`` into ``env`` (envelope) and ``E``; returns ``rho``, ``max|K|``."""
+    """Scaled, penalised ``K`` into ``env`` (envelope), ``E``; returns max|H_s|, max|K|."""
     nc = rptr.shape[0] - 1
     for r in range(nc):
         s = 0.0
@@ -224,7 +263,7 @@ def _assemble(data, D, nq, E, env, ent_k, ent_pos, ent_i, ent_j, ck, cq, rptr, p
     for t in range(env.shape[0]):
         if abs(env[t]) > kmax:
             kmax = abs(env[t])
-    return rho, kmax
+    return ref, kmax
 
 
 @njit(cache=True, nogil=True, fastmath=True)
