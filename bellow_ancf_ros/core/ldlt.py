@@ -40,6 +40,7 @@ __all__ = ["EnvelopeKKT", "EnvelopeLDL", "PENALTY", "MAX_GROWTH", "ldl_solve_vec
 PENALTY = 1.0
 # growth of the factorisation (relative to max|K|) above which it is not used
 MAX_GROWTH = 1e6
+_OUTSIDE = -1.0  # the growth a factorisation reports for non-zeros outside the pattern
 
 
 def _ldl_order(model, keep):
@@ -68,9 +69,9 @@ def _ldl_order(model, keep):
 # the integer arrays of a pattern, packed in one array (fewer arguments for compiled calls):
 # sections, in this order, after a header of their offsets and the sizes below
 _SECTIONS = ("new", "ck", "cr", "cq", "last", "colptr", "first", "rowptr", "ent_k", "ent_pos",
-             "ent_i", "ent_j", "rptr", "pa", "pb", "pr", "ppos")
+             "ent_i", "ent_j", "rptr", "pa", "pb", "pr", "ppos", "dropped")
 (_NEW, _CK, _CR, _CQ, _LAST, _COLPTR, _FIRST, _ROWPTR, _ENT_K, _ENT_POS, _ENT_I, _ENT_J, _RPTR,
- _PA, _PB, _PR, _PPOS) = range(len(_SECTIONS))
+ _PA, _PB, _PR, _PPOS, _DROPPED) = range(len(_SECTIONS))
 _NS = len(_SECTIONS)
 # header: offsets of the sections (_NS + 1), then nq, N, nc, size (envelope), rsize (by rows)
 _HEAD = _NS + 1 + 5
@@ -127,7 +128,8 @@ class EnvelopeKKT:
         secs = dict(new=new, ck=ck, cr=cr, cq=cq, last=last, colptr=colptr, first=first,
                     rowptr=rowptr, ent_k=ent_k, ent_pos=colptr[ent_b] + ent_a - ent_b,
                     ent_i=rows[ent_k], ent_j=cols[ent_k], rptr=rptr, pa=pa, pb=pb, pr=cr[pa],
-                    ppos=colptr[new[cq[pb]]] + new[cq[pa]] - new[cq[pb]])
+                    ppos=colptr[new[cq[pb]]] + new[cq[pa]] - new[cq[pb]],
+                    dropped=np.flatnonzero(~keep))
         parts = [np.asarray(secs[k], dtype=np.int64) for k in _SECTIONS]
         offs = _HEAD + np.concatenate([[0], np.cumsum([len(x) for x in parts])])
         self.size, self.rsize = int(colptr[-1]), int(rowptr[-1])
@@ -135,24 +137,24 @@ class EnvelopeKKT:
         self.ints = np.concatenate([head] + parts).astype(np.int64)
         self.ints.flags.writeable = False
         self.order, self.new = order, new
-        self.dropped = np.flatnonzero(~keep)
         self.nq, self.N, self.nc, self.nnz, self.n = nq, N, nc, model._nnz, n
         self.coordinates_only = coordinates_only
         self.flops = float(((last - np.arange(n)) ** 2).sum() / 2)  # multiply-adds
 
-    def _check(self, J):
+    def _check(self, J, growth):
         if J.nnz != self.nnz:
             raise ValueError("matrix does not have the model's KKT pattern")
-        if self.dropped.size and np.any(J.data[self.dropped]):
+        if growth == _OUTSIDE:
             raise ValueError("matrix has non-zeros outside the model's pattern")
 
     def factor(self, J, D):
         """``EnvelopeLDL`` of ``J`` (CSC, the model's pattern; ``D`` the dof scales), or None."""
-        self._check(J)
         if self.coordinates_only:
             raise ValueError("a pattern of the coordinates only factorises no KKT matrix")
+        self._check(J, 0.0)
         fv = np.empty(self.nc + self.size + self.rsize + self.n)
-        rho, growth = _factorise(J.data, D, self.ints, fv, PENALTY, 0.0)
+        rho, growth = _factorise(J.data, D, self.ints, fv, PENALTY, 0.0, True)
+        self._check(J, growth)
         if not growth <= MAX_GROWTH:  # also NaN: a zero or non-finite pivot
             return None
         return EnvelopeLDL(self, J.data, D, fv, rho, growth)
@@ -164,11 +166,12 @@ class EnvelopeKKT:
         its LDL^T positive, the test a Cholesky factorisation makes (the
         same operations, without the square roots).
         """
-        self._check(J)
         if not self.coordinates_only:
             raise ValueError("positive_definite needs a pattern of the coordinates only")
-        fv = np.empty(self.nc + self.size + self.rsize + self.n)
-        _, growth = _factorise(J.data, D, self.ints, fv, float(penalty), float(shift))
+        self._check(J, 0.0)
+        fv = np.empty(self.nc + self.size + self.n)
+        _, growth = _factorise(J.data, D, self.ints, fv, float(penalty), float(shift), False)
+        self._check(J, growth)
         return bool(growth == growth and np.all(fv[-self.n:] > 0.0))
 
 
@@ -201,17 +204,27 @@ def _sec(ints, k):
 
 @njit(cache=True, nogil=True)
 def _views(ints, fv):
-    """The arrays inside ``fv``: ``E``, ``env`` (``L`` by columns), ``renv`` (by rows), ``d``."""
-    nc, size, rsize = ints[_NS + 3], ints[_NS + 4], ints[_NS + 5]
+    """The arrays inside ``fv``: ``E``, ``env`` (``L`` by columns), ``renv`` (by rows), ``d``.
+
+    ``renv`` is empty when ``fv`` has no room for it (a positive-definiteness test).
+    """
+    nc, size, rsize, n = ints[_NS + 3], ints[_NS + 4], ints[_NS + 5], ints[_NS + 2]
+    if fv.shape[0] < nc + size + rsize + n:
+        rsize = 0
     return fv[:nc], fv[nc:nc + size], fv[nc + size:nc + size + rsize], fv[nc + size + rsize:]
 
 
 @njit(cache=True, nogil=True)
-def _factorise(data, D, ints, fv, penalty, shift):
-    """Assemble, factorise, copy ``L`` by rows; returns ``rho`` and the relative growth.
+def _factorise(data, D, ints, fv, penalty, shift, rows):
+    """Assemble, factorise (``rows``: ``L`` by rows too); returns ``rho`` and the relative growth.
 
-    ``shift * max|H_s|`` is subtracted from the coordinates' diagonal.
+    ``shift * max|H_s|`` is subtracted from the coordinates' diagonal.  The
+    growth is NaN after a zero or non-finite pivot, ``_OUTSIDE`` when ``data``
+    has a non-zero outside the pattern.
     """
+    for k in _sec(ints, _DROPPED):
+        if data[k] != 0.0:
+            return 0.0, _OUTSIDE
     nq = ints[_NS + 1]
     E, env, renv, d = _views(ints, fv)
     ref, kmax = _assemble(data, D, nq, E, env, _sec(ints, _ENT_K), _sec(ints, _ENT_POS),
@@ -224,10 +237,9 @@ def _factorise(data, D, ints, fv, penalty, shift):
         new = _sec(ints, _NEW)
         for i in range(nq):
             env[colptr[new[i]]] -= shift * ref
-    g = _factor(env, last, colptr, d)
+    g = _factor(env, last, colptr, d, rows, _sec(ints, _FIRST), _sec(ints, _ROWPTR), renv)
     if not g <= np.inf:
         return rho, np.nan
-    _rows(env, last, colptr, _sec(ints, _FIRST), _sec(ints, _ROWPTR), renv)
     return rho, g / kmax if kmax > 0.0 else np.nan
 
 
@@ -267,8 +279,12 @@ def _assemble(data, D, nq, E, env, ent_k, ent_pos, ent_i, ent_j, ck, cq, rptr, p
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def _factor(env, last, colptr, d):
-    """In-place ``K = L D L^T`` (unit ``L`` below the diagonal of ``env``); the growth, or NaN."""
+def _factor(env, last, colptr, d, rows, first, rowptr, renv):
+    """In-place ``K = L D L^T`` (unit ``L`` below the diagonal of ``env``); the growth, or NaN.
+
+    ``rows``: ``L`` by rows into ``renv`` too (row ``i``: columns ``first[i]..i-1``), for
+    the forward sweep.
+    """
     N = last.shape[0]
     u = np.empty(N)
     lc = np.empty(N)
@@ -287,6 +303,8 @@ def _factor(env, last, colptr, d):
             lc[t] = v * inv
             env[base + t] = v * inv
             rowsum[j + t] += abs(v * v * inv)
+            if rows:
+                renv[rowptr[j + t] - first[j + t] + j] = v * inv
         for t in range(1, n + 1):
             cb = colptr[j + t] - t
             f = u[t]
@@ -300,16 +318,6 @@ def _factor(env, last, colptr, d):
         if not v <= g:
             g = v
     return g
-
-
-@njit(cache=True, nogil=True)
-def _rows(env, last, colptr, first, rowptr, renv):
-    """``L`` by rows into ``renv`` (row ``i``: columns ``first[i]..i-1``): the forward sweep's."""
-    N = last.shape[0]
-    for j in range(N):
-        o = colptr[j] - j
-        for i in range(j + 1, last[j] + 1):
-            renv[rowptr[i] - first[i] + j] = env[o + i]
 
 
 @njit(cache=True, nogil=True)
@@ -399,7 +407,7 @@ def ldl_solve_vector(data, D, ints, fv, rho, b):
 
 @njit(cache=True, nogil=True)
 def _solve_columns(data, D, ints, fv, rho, B):
-    """Solve ``J X = B`` for the columns of ``B``, eight at a time."""
+    """Solve ``J X = B`` for the columns of ``B``: eight at a time, one or two left one by one."""
     nq = ints[_NS + 1]
     E, env, renv, d = _views(ints, fv)
     new, ck, cr, cq = _sec(ints, _NEW), _sec(ints, _CK), _sec(ints, _CR), _sec(ints, _CQ)
@@ -409,13 +417,23 @@ def _solve_columns(data, D, ints, fv, rho, B):
     X = np.empty((N, M))
     y = np.empty(N)
     x = np.empty(N)
-    for c0 in range(0, M, 8):
+    c0 = 0
+    while c0 < M:
+        w = min(8, M - c0)
+        if w <= 2:  # a sweep of eight columns costs about three of one
+            for c in range(c0, M):
+                _rhs(data, D, E, rho, nq, new, ck, cr, cq, np.ascontiguousarray(B[:, c]), y)
+                _sweeps(env, renv, d, last, colptr, first, rowptr, y)
+                _unscale(D, E, nq, new, y, x)
+                X[:, c] = x
+            break
         Y = np.zeros((N, 8))
-        for c in range(c0, min(c0 + 8, M)):
+        for c in range(c0, c0 + w):
             _rhs(data, D, E, rho, nq, new, ck, cr, cq, np.ascontiguousarray(B[:, c]), y)
             Y[:, c - c0] = y
         _sweeps8(env, renv, d, last, colptr, first, rowptr, Y)
-        for c in range(c0, min(c0 + 8, M)):
+        for c in range(c0, c0 + w):
             _unscale(D, E, nq, new, np.ascontiguousarray(Y[:, c - c0]), x)
             X[:, c] = x
+        c0 += w
     return X

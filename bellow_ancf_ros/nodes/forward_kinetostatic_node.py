@@ -19,10 +19,11 @@ publishes
     namespace ``backbones``, one LINE_STRIP per actuator (width = the
     actuator diameter D_a); namespace ``plates``, one CYLINDER per plate (base,
     constraint and top plates of every segment).
-    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): one status per solve
-    (solve time, iterations, residual), per refused input (WARN), and a 1 Hz
-    heartbeat ``'<node>: status'`` (robot, age of the last solve, solve-time
-    statistics, counters).
+    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): the status of the
+    solves (solve time, iterations, residual; a new level or message at once,
+    an unchanged one at most at 10 Hz with the newest values), of refused
+    input (WARN), and a 1 Hz heartbeat ``'<node>: status'`` (robot, age of
+    the last solve, solve-time statistics, counters).
 
 QoS: reliable, keep-last, depth 5 for the pressures and the outputs;
 ``/diagnostics`` keep-last 10.  Like the inverse node it works on the latest
@@ -54,7 +55,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward
 from . import common
-from .diagnostics import Heartbeat, Refusals, publish_diagnostic, solve_values
+from .diagnostics import Heartbeat, Refusals, ThrottledStatus, solve_values
 from .ros_util import (
     WARN_THROTTLE_S,
     StartupParameterError,
@@ -160,6 +161,8 @@ class ForwardKinetostaticNode(Node):
         self._pub_pose = self.create_publisher(PoseStamped, 'predicted_pose', qos)
         self._pub_shape = self.create_publisher(MarkerArray, 'predicted_shape', qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self._status = ThrottledStatus(self, self._pub_diag,
+                                       f'{self.get_name()}: forward kinetostatics')
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self.cfg.name)
         self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
@@ -248,8 +251,7 @@ class ForwardKinetostaticNode(Node):
         self._publish_diag(DiagnosticStatus.OK, 'prediction published', values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
-        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: forward kinetostatics',
-                           self.cfg.name, level, message, values)
+        self._status.submit(self.cfg.name, level, message, values)
 
     def destroy_node(self):
         """Stop the worker, then destroy the node."""
