@@ -90,3 +90,11 @@ def test_compiled_pseudo_inverse_and_projector_equal_numpy(shape, rank):
     np.testing.assert_allclose(proj, np.eye(shape[1]) - ref @ JO, rtol=0, atol=1e-12)
     assert np.linalg.matrix_rank(proj, tol=1e-8) == shape[1] - rank  # projects on the null space
     np.testing.assert_allclose(proj @ proj, proj, atol=1e-12)
+
+
+def test_warm_up_compiles_the_fast_path_kernels(two):
+    from bellow_ancf_ros.core import chord
+
+    assert warm.warm_up(two)
+    for kernel in (chord._chord_loop, chord.stretch_step, warm._pinv_projector):
+        assert kernel.signatures  # compiled or loaded from the cache by the warm-up

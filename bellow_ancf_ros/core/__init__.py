@@ -8,6 +8,7 @@ Typical use::
     inv = solve_inverse(model, fw.position, payload_kg=0.05, warm_start=fw)
 """
 
+from . import numba_cache  # noqa: F401  (first: where the compiled kernels are cached)
 from .assembly import RobotModel
 from .config import ConfigError, RobotConfig, SegmentConfig, load_robot, robot_from_dict
 from .forward import ForwardResult, solve_forward

@@ -50,8 +50,8 @@ from .forward import ForwardResult
 from .ldlt import EnvelopeLDL
 from .inverse_newton import _RCOND, norm
 
-__all__ = ["full_space_newton", "PathRecord", "CHORD_RATE", "CHORD_TOL_MULTI", "MAX_CHORD",
-           "REFINE_TOL", "REFINE_MAX"]
+__all__ = ["full_space_newton", "PathRecord", "warm_up", "CHORD_RATE", "CHORD_TOL_MULTI",
+           "MAX_CHORD", "REFINE_TOL", "REFINE_MAX"]
 
 # chord steps (a factorisation from an earlier point, reused): each must cut the residual by
 # this factor at least, and at most this many in a row; then Newton with a new factorisation
@@ -363,3 +363,27 @@ def full_space_newton(
             return None
         if ok is not True:
             return ok
+
+
+def warm_up(model, payload_kg=0.0):
+    """Compile (or load from the disk cache) the kernels of this fast path; True when it ran.
+
+    Three warm-started solves along 1 mm steps from the robot at mid
+    pressure: the chord loop, the stretch step and the pseudo-inverse get
+    compiled here (node configure, set-up), not at the first target of a
+    control loop.  Once they are in the disk cache: 50-100 ms in a new process
+    (loading them), under 10 ms after.
+    """
+    from .forward import solve_forward
+    from .inverse import solve_inverse
+
+    cfg = model.cfg
+    fw = solve_forward(model, np.full(model.A, 0.5 * (cfg.p_min + cfg.p_max)), payload_kg)
+    if not fw.success:
+        return False
+    z = fw.z_axis if cfg.n_segments > 1 else None
+    prev = fw
+    for k in range(3):
+        prev = solve_inverse(model, fw.position + [1e-3 * k, 0.0, 0.0], z, payload_kg,
+                             warm_start=prev)
+    return bool(prev.success)

@@ -125,6 +125,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
 from ..core.inverse import ITERATION_BUDGET, TIME_BUDGET, precompute_corners
+from ..core.inverse_warm import warm_up
 from . import common
 from .measured_feedback import FeedbackLink
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
@@ -267,6 +268,7 @@ class InverseKinetostaticNode(LifecycleNode):
             fw0 = solve_forward(model, common.vent_pressures(model.A, cfg.p_min, cfg.p_max))
             # the corners of the pressure box, needed by the first unreachable target
             precompute_corners(model, float(self.get_parameter('payload_kg').value))
+            warm_up(model)  # the warm-started path's kernels compiled (or loaded) now
         except (ConfigError, ValueError, OSError) as exc:
             self._configure_error = f'robot_config {name!r}: {exc}'
             self.get_logger().error(f'configure failed: {self._configure_error}')
