@@ -20,6 +20,7 @@ import numpy as np
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solve_inverse
 from bellow_ancf_ros.core.inverse import precompute_corners
+from bellow_ancf_ros.core.inverse_warm import warm_up
 from bellow_ancf_ros.core.solver import ITERATION_BUDGET, TIME_BUDGET, limit_blas_threads
 
 from fuzz_bench import fuzz_targets
@@ -34,6 +35,7 @@ def run(name, n_targets, seed, budget):
     payloads = [0.0, float(rng.uniform(0.0, 0.1)), 0.1]
     for m in payloads:
         precompute_corners(model, m)  # as the node does at configure
+    warm_up(model)  # (so does this: the fast path's kernels loaded before the first slice)
     over, slices, ended, dp = [], [], 0, 0.0
     for kind, p, z, m in fuzz_targets(model, rng, n_targets, payloads):
         straight = solve_forward(model, np.zeros(model.A), m)
