@@ -725,6 +725,28 @@ def test_forward_node_kpa_unit(h, one):
     wait_for(lambda: node.stats['refused'] == 1, what='Pa-labelled array refused in kPa mode')
 
 
+def test_forward_node_statuses_are_throttled_and_the_newest_arrives(h, one):
+    """A prediction stream at ~100 Hz: its OK statuses at most at ~10 Hz, the last one sent."""
+    h.record(PoseStamped, 'predicted_pose')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(ForwardKinetostaticNode)
+    pub = h.publisher(Float64MultiArray, 'pressure_command')
+    wait_for(lambda: node._pub_pose.get_subscription_count() >= 1)
+    t0 = time.monotonic()
+    for k in range(40):
+        pub.publish(pressure_msg([1e3 * k, 0.0, 0.0]))
+        time.sleep(0.01)
+    wait_for(node._worker.idle, what='the last prediction')
+    last = pose_of(h.last('predicted_pose'))[0]
+    wait_for(lambda: any(kv(s).get('position_m', '').split() and np.allclose(
+        [float(v) for v in kv(s)['position_m'].split()], last, atol=1e-5)
+        for s in diag_statuses(h, 'forward kinetostatics')), what='the newest status')
+    seconds = time.monotonic() - t0
+    ok = [s for s in diag_statuses(h, 'forward kinetostatics') if s.level == DiagnosticStatus.OK]
+    assert len(ok) <= 10.0 * seconds + 2  # at most one per period, plus the first and the flush
+    assert node.stats['published'] >= 10 and len(ok) < node.stats['published']
+
+
 # ================================================================== trajectory
 def test_trajectory_publisher_bending_circle(h, two):
     got = h.record(PoseStamped, 'target_pose')

@@ -47,8 +47,8 @@ from numba import njit
 from . import linsolve, solver
 from .chord import CONVERGED as CHORD_CONVERGED, NONFINITE, chord_steps, stretch_step
 from .forward import ForwardResult
-from .ldlt import EnvelopeLDL
 from .inverse_newton import _RCOND, norm
+from .ldlt import EnvelopeLDL
 
 __all__ = ["full_space_newton", "PathRecord", "warm_up", "CHORD_RATE", "CHORD_TOL_MULTI",
            "MAX_CHORD", "REFINE_TOL", "REFINE_MAX"]
