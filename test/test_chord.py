@@ -49,8 +49,9 @@ def _path_start(name):
 
 
 @pytest.mark.parametrize("kind", ["ldlt", "banded_lu"])
-@pytest.mark.parametrize("name", ["one_segment", "two_segment"])
-def test_compiled_chord_steps_are_the_python_steps(name, kind):
+@pytest.mark.parametrize("name,null_space", [("one_segment", True), ("two_segment", True),
+                                             ("two_segment", False)])
+def test_compiled_chord_steps_are_the_python_steps(name, null_space, kind):
     model, multi, warm, target = _path_start(name)
     fw = warm.forward
     st = model.stage1
@@ -64,6 +65,8 @@ def test_compiled_chord_steps_are_the_python_steps(name, kind):
     x, lam = fw.x.copy(), fw.stretch.copy()
     d = step(target, x, lam, np.zeros(model.N))  # the predictor of full_space_newton
     x, lam = x - WF @ d, lam + d
+    if not null_space:  # minimum-norm steps (the chord phase of redundant robots)
+        step.proj = None
     # the same steps in Python: evaluate, banded solve, Schur-complement stretch step
     xp, lp, hist = x.copy(), lam.copy(), []
     for _ in range(4):
@@ -74,7 +77,8 @@ def test_compiled_chord_steps_are_the_python_steps(name, kind):
         xp, lp = xp - (w0 + WF @ d), lp + d
     lu = factorised if kind == "banded_lu" else factorised.lu
     xc, lc, status, steps, h, rn = chord.chord_steps(
-        model, 0.0, target, lu, WF, step, x, lam, tol=0.0, rate=10.0, max_steps=4)
+        model, 0.0, target, lu, WF, step, x, lam, tol=0.0, rate=10.0, max_steps=4,
+        null_space=null_space)
     assert status == chord.MAX_STEPS and steps == 4
     np.testing.assert_allclose(h[:4], hist, rtol=1e-6, atol=1e-10 * hist[0])  # round-off
     np.testing.assert_allclose(xc, xp, rtol=0, atol=1e-12)

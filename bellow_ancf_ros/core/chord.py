@@ -185,17 +185,19 @@ def _chord_loop(x, lam, rn_prev, lu, ldl, W, JOinv, proj, use_proj, lam_ref,
 
 
 def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_steps,
-                rn_prev=np.inf):
+                rn_prev=np.inf, null_space=True):
     """Chord steps from ``(x, lam)`` with the factorisation ``lu`` and ``W``.
 
     ``lu``: an ``ldlt.EnvelopeLDL`` or a ``linsolve.BandedLU``.
 
     ``step`` is the ``inverse_warm._StretchStep`` of ``W`` (``J_O``'s
-    inverse, the null-space projector).  Returns ``(x, lam, status, steps,
-    history, rn)``: the last iterate (its residual norm ``rn``, evaluated),
-    why the loop stopped, the steps taken and the residual norms seen.
+    inverse, the null-space projector; ``null_space`` False: the
+    minimum-norm steps alone, without the null-space term).  Returns ``(x,
+    lam, status, steps, history, rn)``: the last iterate (its residual norm
+    ``rn``, evaluated), why the loop stopped, the steps taken and the
+    residual norms seen.
     """
-    proj = step.proj
+    proj = step.proj if null_space else None
     use_proj = proj is not None
     static = _static_args(model, float(payload), target)
     if isinstance(lu, EnvelopeLDL):
