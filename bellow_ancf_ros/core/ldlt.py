@@ -143,20 +143,24 @@ class EnvelopeKKT:
         self.coordinates_only = coordinates_only
         self.flops = float(((last - np.arange(n)) ** 2).sum() / 2)  # multiply-adds
 
-    def _check(self, J, growth):
-        if J.nnz != self.nnz:
+    def _factorise(self, J, D, penalty, shift, rows):
+        """Assemble and factorise ``J``'s values: ``(fv, rho, growth)`` (see :func:`_factorise`).
+
+        ``rows``: room for ``L`` by rows in ``fv`` (the solves need it).
+        """
+        if J.nnz != self.nnz:  # before the compiled call indexes J.data by the pattern
             raise ValueError("matrix does not have the model's KKT pattern")
+        fv = np.empty(self.nc + self.size + (self.rsize if rows else 0) + self.n)
+        rho, growth = _factorise(J.data, D, self.ints, fv, float(penalty), float(shift), rows)
         if growth == _OUTSIDE:
             raise ValueError("matrix has non-zeros outside the model's pattern")
+        return fv, rho, growth
 
     def factor(self, J, D):
         """``EnvelopeLDL`` of ``J`` (CSC, the model's pattern; ``D`` the dof scales), or None."""
         if self.coordinates_only:
             raise ValueError("a pattern of the coordinates only factorises no KKT matrix")
-        self._check(J, 0.0)
-        fv = np.empty(self.nc + self.size + self.rsize + self.n)
-        rho, growth = _factorise(J.data, D, self.ints, fv, PENALTY, 0.0, True)
-        self._check(J, growth)
+        fv, rho, growth = self._factorise(J, D, PENALTY, 0.0, True)
         if not growth <= MAX_GROWTH:  # also NaN: a zero or non-finite pivot
             return None
         return EnvelopeLDL(self, J.data, D, fv, rho, growth)
@@ -170,10 +174,7 @@ class EnvelopeKKT:
         """
         if not self.coordinates_only:
             raise ValueError("positive_definite needs a pattern of the coordinates only")
-        self._check(J, 0.0)
-        fv = np.empty(self.nc + self.size + self.n)
-        _, growth = _factorise(J.data, D, self.ints, fv, float(penalty), float(shift), False)
-        self._check(J, growth)
+        fv, _, growth = self._factorise(J, D, penalty, shift, False)
         return bool(growth == growth and np.all(fv[-self.n:] > 0.0))
 
 
