@@ -17,23 +17,22 @@ $(STAMP): requirements.txt setup.py
 	$(VENV)/bin/python -m pip install -r requirements.txt
 	$(VENV)/bin/python -m pip install -e .
 	# compile the numba kernels once into their disk cache (set-up, not the first node start)
-	$(VENV)/bin/python -c "from bellow_ancf_ros.core import RobotModel, load_robot; \
-	  from bellow_ancf_ros.core.inverse_warm import warm_up; \
+	$(VENV)/bin/python -c "from bellow_ancf_ros.core import RobotModel, load_robot, warm_up; \
 	  [warm_up(RobotModel(load_robot(n))) for n in ('one_segment', 'two_segment')]"
 	touch $@
 
 # main job: model vs a mismatched simulated robot, feedforward then closed loop (ROS processes, ~2 min)
 demo: $(STAMP)
-	$(VENV)/bin/python -m bellow_ancf_ros.ros_demo
+	$(VENV)/bin/python -m bellow_ancf_ros.demos.closed_loop
 
 # calibration end to end: excitation -> simulated mismatched robot seen by an offset mocap ->
 # rosbag2 -> bellow-ancf calibrate -> feedforward tracking with the nominal and calibrated files
 demo-calibrate: $(STAMP)
-	$(VENV)/bin/python -m bellow_ancf_ros.calibration_demo
+	$(VENV)/bin/python -m bellow_ancf_ros.demos.calibration
 
 # the core alone: forward and inverse problems printed (no ROS)
 demo-offline: $(STAMP)
-	$(VENV)/bin/python -m bellow_ancf_ros.demo
+	$(VENV)/bin/python -m bellow_ancf_ros.demos.offline
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest

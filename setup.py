@@ -43,7 +43,7 @@ setup(
         'PyYAML',
         'matplotlib',
         'rosbags',
-        'numba',  # compiled evaluation and stability kernels (core/kernels.py, core/stability.py)
+        'numba',  # compiled kernels (core/model/_kernels.py, linalg/_ldlt.py, solve/_chord.py)
     ],
     extras_require={'test': ['pytest', 'hypothesis']},
     python_requires='>=3.10',

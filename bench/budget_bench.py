@@ -18,14 +18,13 @@ import time
 
 import numpy as np
 
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solve_inverse
-from bellow_ancf_ros.core.inverse import precompute_corners
-from bellow_ancf_ros.core.inverse_warm import warm_up
-from bellow_ancf_ros.core.solver import ITERATION_BUDGET, TIME_BUDGET, limit_blas_threads
+from bellow_ancf_ros.core import (InverseStatus, RobotModel, limit_blas_threads, load_robot,
+                                  precompute_corners, solve_forward, solve_inverse, warm_up)
 
 from fuzz_bench import fuzz_targets
 
 MAX_SLICES = 40
+TIME_BUDGET, ITERATION_BUDGET = InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET
 
 
 def run(name, n_targets, seed, budget):

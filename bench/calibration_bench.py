@@ -15,12 +15,9 @@ import time
 
 import numpy as np
 
-from bellow_ancf_ros.core import load_robot
+from bellow_ancf_ros.core import calibrate, limit_blas_threads, load_robot, robot_from_dict
 from bellow_ancf_ros.core import parameter_keys as pk
-from bellow_ancf_ros.core.calibration import calibrate
-from bellow_ancf_ros.core.config import robot_from_dict
-from bellow_ancf_ros.core.excitation import excitation_sequence, simulate_recording
-from bellow_ancf_ros.core.solver import limit_blas_threads
+from bellow_ancf_ros.core.fit import excitation_sequence, simulate_recording
 
 TARGET_S = 60.0
 

@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solve_inverse
-from bellow_ancf_ros.core.solver import limit_blas_threads
+from bellow_ancf_ros.core import (RobotModel, limit_blas_threads, load_robot, solve_forward,
+                                  solve_inverse)
 
 
 def _unit(v):

@@ -45,7 +45,7 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
     from std_msgs.msg import Float64MultiArray
 
     from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-    from bellow_ancf_ros.nodes.common import quaternion_from_rotation
+    from bellow_ancf_ros.core.geometry import quaternion_from_rotation
     from bellow_ancf_ros.nodes.ros_util import command_qos
 
     env, cwd = dict(os.environ), None

@@ -153,7 +153,9 @@ def pressure_walk(model, n_targets, step_m=1e-3):
 
 def make_impl(core, blas_one_thread=False):
     """The entry points of one version of the core (``core``: its package module)."""
-    fwd = importlib.import_module(core.__name__ + ".forward")
+    solve = getattr(core, "solve", None)  # this tree: core.solve; the baseline: core.forward
+    fwd = solve if hasattr(solve, "assess_stability") else importlib.import_module(
+        core.__name__ + ".forward")
     ctx = contextlib.nullcontext
     if blas_one_thread:
         from threadpoolctl import threadpool_limits

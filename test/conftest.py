@@ -1,13 +1,17 @@
 """Test-session settings and fixtures shared by all test modules."""
 
 import os
+from pathlib import Path
 import random
+import sys
 
 import pytest
 
-from bellow_ancf_ros.core import RobotModel, load_robot
+from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 
-from bellow_ancf_ros.core.solver import limit_blas_threads
+TEST_DIR = Path(__file__).resolve().parent
+# shared test helpers (reference_beams, calibration_data) import by name from any folder
+sys.path.insert(0, str(TEST_DIR / 'support'))
 
 # Small dense matrices: single-threaded BLAS is faster, and much faster on a loaded 2-core machine.
 limit_blas_threads()
@@ -40,10 +44,10 @@ def two_cfg():
 @pytest.fixture
 def factorisations(monkeypatch):
     """A list that grows by one for each KKT factorisation made (LDL^T, or the banded LU)."""
-    from bellow_ancf_ros.core import ldlt, linsolve
+    from bellow_ancf_ros.core.linalg import BandedKKT, EnvelopeKKT
 
     made = []
-    orig_ldl, orig_lu = ldlt.EnvelopeKKT.factor, linsolve.BandedKKT.factor
+    orig_ldl, orig_lu = EnvelopeKKT.factor, BandedKKT.factor
 
     def ldl(self, J, D):
         f = orig_ldl(self, J, D)
@@ -55,8 +59,8 @@ def factorisations(monkeypatch):
         made.append(1)
         return orig_lu(self, J)
 
-    monkeypatch.setattr(ldlt.EnvelopeKKT, "factor", ldl)
-    monkeypatch.setattr(linsolve.BandedKKT, "factor", lu)
+    monkeypatch.setattr(EnvelopeKKT, "factor", ldl)
+    monkeypatch.setattr(BandedKKT, "factor", lu)
     return made
 
 

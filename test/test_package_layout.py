@@ -50,7 +50,7 @@ def test_every_module_of_the_package_imports():
 
     names = [m.name for m in pkgutil.walk_packages(bellow_ancf_ros.__path__, 'bellow_ancf_ros.')
              if not m.name.endswith('.__main__')]  # those run their command on import
-    assert 'bellow_ancf_ros.calibration_demo' in names
+    assert 'bellow_ancf_ros.demos.calibration' in names
     for name in names:
         importlib.import_module(name)
 

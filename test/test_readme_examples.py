@@ -33,7 +33,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse  # noqa: E402
-from bellow_ancf_ros.nodes import common  # noqa: E402
+from bellow_ancf_ros.core import geometry  # noqa: E402
 from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher  # noqa: E402
@@ -267,7 +267,7 @@ def test_ros2_param_set_and_topic_pub_examples():
             q = msg['pose']['orientation']
             quat = [q.get(k, 0.0) for k in ('x', 'y', 'z', 'w')]
             model = RobotModel(load_robot(block_robot[block]))
-            z = common.z_axis_from_quaternion(quat) if model.cfg.n_segments >= 2 else None
+            z = geometry.z_axis_from_quaternion(quat) if model.cfg.n_segments >= 2 else None
             inv = solve_inverse(model, [p.get('x', 0.0), p.get('y', 0.0), p.get('z', 0.0)], z)
             assert inv.reachable and inv.success, (line, inv.message)
             checked += 1

@@ -6,9 +6,9 @@ Registered by :func:`register` into the parser of :mod:`bellow_ancf_ros.cli`::
                           [--pressure-topic T] [--pose-topic T] [--out calibrated.yaml]
                           [--json] [--plot FILE]
 
-Input formats: :mod:`bellow_ancf_ros.core.recordings`; the fit:
-:mod:`bellow_ancf_ros.core.calibration`; parameter keys:
-:mod:`bellow_ancf_ros.core.parameter_keys`.  A table on stdout (or with
+Input formats: :mod:`bellow_ancf_ros.core.fit`; the fit:
+:mod:`bellow_ancf_ros.core.fit.calibration`; parameter keys:
+:mod:`bellow_ancf_ros.core.model.parameter_keys`.  A table on stdout (or with
 ``--json`` one JSON object on the last stdout line), warnings on stderr
 (``bellow-ancf: warning: ...``), bad input as one line on stderr with exit
 status 2, a forward-model failure at the fitted parameters exit status 1.
@@ -24,11 +24,10 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from ..core import ConfigError, load_robot
+from ..core import ConfigError, limit_blas_threads, load_robot
 from ..core import parameter_keys as pk
-from ..core.calibration import CalibrationError, CalibrationResult, calibrate
-from ..core.recordings import POSE_TOPIC, PRESSURE_TOPIC, RecordingError, read_bag, read_csv
-from ..core.solver import limit_blas_threads
+from ..core.fit import (POSE_TOPIC, PRESSURE_TOPIC, CalibrationError, CalibrationResult,
+                        RecordingError, calibrate, read_bag, read_csv)
 from .common import EXIT_OK, SolverError, UsageError, emit_json, nonneg_float, warn
 
 __all__ = ['register', 'robot_yaml_text', 'plot_residuals']

@@ -9,7 +9,7 @@
     bellow-ancf compare-pcc [--config C] [--payload-kg M ...] [--points N] [--no-gravity]
                             [--plot PNG] [--csv FILE] [--json]
 
-The studies themselves are :mod:`bellow_ancf_ros.core.studies`.  A readable
+The studies themselves are :mod:`bellow_ancf_ros.core.experiments.studies`.  A readable
 table on stdout, or with ``--json`` one JSON summary object on one line (SI
 units); progress of long runs on stderr (``--quiet`` silences it); plots are
 PNG files.  ``workspace --csv`` writes one row per solve: ``payload_kg,
@@ -25,8 +25,7 @@ import math
 
 import numpy as np
 
-from ..core import studies
-from ..core.solver import limit_blas_threads
+from ..core import limit_blas_threads, studies
 from .common import (EXIT_FAILED, EXIT_OK, add_config, add_out, add_quiet, emit_json,
                      int_at_least, load_config, payload_mass, positive_float, print_lines,
                      progress, run_study)

@@ -17,8 +17,7 @@ from __future__ import annotations
 import csv
 import math
 
-from ..core import studies, trajectories
-from ..core.solver import limit_blas_threads
+from ..core import limit_blas_threads, studies, trajectories
 from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_out, add_quiet,
                      emit_json, finite_float, int_at_least, load_config, make_model,
                      payload_mass, positive_float, print_lines, progress, run_study)

@@ -1,4 +1,4 @@
-"""Pure-Python core of the model (numpy/scipy only, no ROS imports).
+"""The core library: the paper's model and its problems in numpy/scipy/numba, no ROS imports.
 
 Typical use::
 
@@ -6,16 +6,44 @@ Typical use::
     model = RobotModel(load_robot("one_segment"))
     fw = solve_forward(model, [150e3, -50e3, -50e3], payload_kg=0.05)
     inv = solve_inverse(model, fw.position, payload_kg=0.05, warm_start=fw)
+
+This package's ``__all__`` is the public API: what the nodes, the CLI, the
+demos, the benchmarks and users import.  The subpackages, in the order they
+import each other (only downwards):
+
+* :mod:`.status`, :mod:`.geometry`: status codes; rotations and quaternions (leaves);
+* :mod:`.linalg`: the KKT matrix's patterns and factorisations;
+* :mod:`.model`: the robot file and the model (paper section III);
+* :mod:`.solve`: forward and inverse problems, stability, budgets (section IV);
+* :mod:`.experiments`: the paper's trajectories and studies (section VI);
+* :mod:`.control`: feedback law and simulated robot (closing the loop without ROS);
+* :mod:`.fit`: identification and calibration (section V).
+
+Modules named ``_name.py`` are private: import their names from the
+subpackage.
 """
 
 from . import numba_cache  # noqa: F401  (first: where the compiled kernels are cached)
-from .assembly import RobotModel
-from .config import ConfigError, RobotConfig, SegmentConfig, load_robot, robot_from_dict
-from .forward import ForwardResult, solve_forward
-from .inverse import InverseResult, solve_inverse
-from .stage1 import Stage1
+from . import control, experiments, fit, geometry, linalg, model, solve, status
+from .control import (FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, PressureRegulators,
+                      SimulatedRobot)
+from .experiments import studies, trajectories
+from .fit import (CalibrationError, CalibrationResult, Recording, RecordingError, calibrate,
+                  calibration, identification, read_recording)
+from .linalg import limit_blas_threads
+from .model import (ConfigError, PccModel, RobotConfig, RobotModel, SegmentConfig, Stage1,
+                    load_robot, parameter_keys, robot_from_dict)
+from .solve import (ForwardResult, InverseResult, precompute_corners, solve_forward,
+                    solve_inverse, warm_up)
+from .status import ForwardStatus, InverseStatus
 
 __all__ = [
-    "ConfigError", "ForwardResult", "InverseResult", "RobotConfig", "RobotModel", "SegmentConfig",
-    "Stage1", "load_robot", "robot_from_dict", "solve_forward", "solve_inverse",
+    "CalibrationError", "CalibrationResult", "ConfigError", "FEEDBACK_MODES", "FeedbackSettings",
+    "ForwardResult", "ForwardStatus", "IntegralFeedback", "InverseResult", "InverseStatus",
+    "PccModel", "PressureRegulators", "Recording", "RecordingError", "RobotConfig", "RobotModel",
+    "SegmentConfig", "SimulatedRobot", "Stage1", "calibrate", "calibration", "control",
+    "experiments", "fit", "geometry", "identification", "limit_blas_threads", "linalg",
+    "load_robot", "model", "parameter_keys", "precompute_corners", "read_recording",
+    "robot_from_dict", "solve", "solve_forward", "solve_inverse", "status", "studies",
+    "trajectories", "warm_up",
 ]

@@ -3,15 +3,16 @@
 numba drops a function's cached machine code when the function's own source
 file changes, but not when a compiled function it calls from another module
 does (a documented limitation of its cache).  The chord loop
-(``chord.py``) compiles in the residual kernel (``kernels.py``) and the
-LDL^T solve (``ldlt.py``): after an update of ``ldlt.py`` alone, its cached
-code would still run the old solve on the new memory layout, and crash.
+(``solve/_chord.py``) compiles in the residual kernel (``model/_kernels.py``)
+and the LDL^T solve (``linalg/_ldlt.py``): after an update of ``_ldlt.py``
+alone, its cached code would still run the old solve on the new memory
+layout, and crash.
 
 :func:`configure` (run when this module is imported, which
 ``core/__init__.py`` does before anything else) therefore points numba's
 cache at a directory named by a hash of every core module that defines
-compiled functions: any change to one of them means a fresh compilation of
-all, once.  The directory is
+compiled functions, in every subpackage (``core/**/*.py``): any change to
+one of them means a fresh compilation of all, once.  The directory is
 ``core/__pycache__/numba-<hash>`` when the package directory is writable,
 else ``$XDG_CACHE_HOME/bellow_ancf_ros/numba-<hash>`` (``~/.cache`` by
 default), or under ``$NUMBA_CACHE_DIR`` when that is set.  Directories of
@@ -25,18 +26,22 @@ import os
 import shutil
 from pathlib import Path
 
-__all__ = ["configure", "cache_dir", "source_tag", "CACHE_DIR"]
+__all__ = ["configure", "cache_dir", "compiled_modules", "source_tag", "CACHE_DIR"]
 
 _CORE = Path(__file__).resolve().parent
 
 
+def compiled_modules(core: Path = _CORE) -> list[Path]:
+    """The modules under ``core`` (subpackages included) that define compiled functions."""
+    return [p for p in sorted(Path(core).rglob("*.py"))
+            if "__pycache__" not in p.parts and b"@njit" in p.read_bytes()]
+
+
 def source_tag(core: Path = _CORE) -> str:
-    """``numba-`` and a hash of the modules in ``core`` that define compiled functions."""
+    """``numba-`` and a hash of the modules under ``core`` (any depth) with compiled functions."""
     h = hashlib.sha256()
-    for path in sorted(Path(core).glob("*.py")):
-        data = path.read_bytes()
-        if b"@njit" in data:
-            h.update(path.name.encode() + b"\0" + data + b"\0")
+    for path in sorted(compiled_modules(core)):
+        h.update(path.relative_to(core).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return "numba-" + h.hexdigest()[:16]
 
 

@@ -5,7 +5,8 @@
 * :mod:`.forward_kinetostatic_node` -- pressures -> ``predicted_pose`` and
   ``predicted_shape`` (RViz markers).
 * :mod:`.trajectory_publisher` -- the paper's trajectories on ``target_pose``.
-* :mod:`.common` -- message-free helpers (no rclpy import) shared by the nodes.
+* :mod:`.contract` -- the message contract and the pressure safety gate (no rclpy import);
+* :mod:`.worker` -- the latest-only solve worker and solve statistics (no rclpy import).
 * :mod:`.ros_util` -- rclpy helpers: QoS, checked parameter declaration,
   one-line start-up errors, the acknowledged vent, the executor and the
   main / spin / signal idiom.

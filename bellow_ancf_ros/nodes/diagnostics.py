@@ -16,7 +16,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from . import common
+from . import worker
 from .ros_util import WARN_THROTTLE_S
 
 __all__ = [
@@ -112,8 +112,8 @@ class Heartbeat:
         self.published += 1
 
 
-def solve_values(stats: common.SolveStats) -> dict:
-    """Heartbeat key/values of a :class:`common.SolveStats` (times in ms, age in s)."""
+def solve_values(stats: worker.SolveStats) -> dict:
+    """Heartbeat key/values of a :class:`worker.SolveStats` (times in ms, age in s)."""
     s = stats.summary()
 
     def ms(v):

@@ -2,7 +2,7 @@
 
 The first step of calibrating a robot (README: record, calibrate, use): this
 node drives the actuators directly (no controller) through
-:func:`bellow_ancf_ros.core.excitation.excitation_sequence`: the paper's
+:func:`bellow_ancf_ros.core.fit.excitation_sequence`: the paper's
 workspace schemes (section VI.B) at ``points_per_scheme`` points each, then
 ``n_random`` random in-limit vectors (seed ``seed``).  Each step is held for
 ``dwell_s`` seconds and republished at ``rate_hz`` (a repeated command is not a
@@ -16,7 +16,7 @@ calibrate's ``--settle-s``.
 Publishes ``pressure_command`` (std_msgs/Float64MultiArray, reliable, keep-last
 5, unit ``pressure_unit`` with the labelled layout of the other nodes) and
 ``/diagnostics`` (step count).  Every published vector passes
-:func:`~bellow_ancf_ros.nodes.common.safe_pressures`.
+:func:`~bellow_ancf_ros.nodes.contract.safe_pressures`.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from ..core import load_robot
-from ..core.excitation import excitation_sequence
-from . import common
+from ..core.fit import excitation_sequence
+from . import contract
 from .diagnostics import publish_diagnostic
 from .ros_util import (
     command_qos,
@@ -85,7 +85,7 @@ class ExcitationPublisher(Node):
             self.cfg, int(self.get_parameter('points_per_scheme').value),
             int(self.get_parameter('n_random').value), int(self.get_parameter('seed').value))
         for p in self.sequence:       # refuse at start-up rather than mid-run
-            common.safe_pressures(p, self.cfg.p_min, self.cfg.p_max, self.cfg.n_actuators_total)
+            contract.safe_pressures(p, self.cfg.p_min, self.cfg.p_max, self.cfg.n_actuators_total)
         self.dwell = float(self.get_parameter('dwell_s').value)
         self.step = -1
         self.published = 0
@@ -101,8 +101,8 @@ class ExcitationPublisher(Node):
             f'{self.dwell:g} s ({len(self.sequence) * self.dwell:.0f} s), then vent')
 
     def _publish(self, pressures_pa) -> None:
-        p = common.safe_pressures(pressures_pa, self.cfg.p_min, self.cfg.p_max,
-                                  self.cfg.n_actuators_total)
+        p = contract.safe_pressures(pressures_pa, self.cfg.p_min, self.cfg.p_max,
+                                    self.cfg.n_actuators_total)
         self._pub.publish(pressure_message(p, self.get_parameter('pressure_unit').value))
         self.published += 1
 
@@ -132,8 +132,8 @@ class ExcitationPublisher(Node):
         """Publish the vent command (0 Pa gauge on every actuator) once."""
         if self.vented:
             return
-        self._publish(common.vent_pressures(self.cfg.n_actuators_total, self.cfg.p_min,
-                                            self.cfg.p_max))
+        self._publish(contract.vent_pressures(self.cfg.n_actuators_total, self.cfg.p_min,
+                                              self.cfg.p_max))
         self.vented = True
         self._diag(DiagnosticStatus.OK, f'{why}: vented')
         self.get_logger().info(f'{why}: vent command (0 Pa gauge) published')

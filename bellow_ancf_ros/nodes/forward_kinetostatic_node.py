@@ -54,7 +54,8 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward
-from . import common
+from ..core import geometry
+from . import contract, worker
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, solve_values
 from .ros_util import (
     WARN_THROTTLE_S,
@@ -93,7 +94,7 @@ def shape_markers(fw, frame_id: str, stamp, n_points: int = 20) -> MarkerArray:
         arr.markers.append(m)
     for k, (seg, _frac, pos, R) in enumerate(fw.plate_poses()):
         seg_cfg = cfg.segments[int(seg)]
-        q = common.quaternion_from_rotation(R)
+        q = geometry.quaternion_from_rotation(R)
         m = Marker()
         m.header.frame_id = frame_id
         m.header.stamp = stamp
@@ -127,7 +128,7 @@ class ForwardKinetostaticNode(Node):
             read_only=True, constraints='a shipped robot name or a robot YAML path'))
         declare(self, 'payload_kg', 0.0, descriptor(
             'Payload mass at the end effector [kg]; may be changed at run time.', D,
-            lo=0.0, hi=common.PAYLOAD_MAX_KG))
+            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
         declare(self, 'base_frame', 'base', descriptor(
             'Frame of predicted_pose and predicted_shape (robot base).', S,
             constraints='a non-empty frame name'))
@@ -149,14 +150,14 @@ class ForwardKinetostaticNode(Node):
                 str(exc)) from None
         self.model = RobotModel(self.cfg)
         self._lock = threading.Lock()
-        self._warm = solve_forward(self.model, common.vent_pressures(
+        self._warm = solve_forward(self.model, contract.vent_pressures(
             self.model.A, self.cfg.p_min, self.cfg.p_max))
         if not self._warm.success:
             self._warm = None
         self.stats = {'received': 0, 'refused': 0, 'solved': 0, 'published': 0, 'failed': 0}
         self.last_refusal_reason = ''
         self._refusals = Refusals(self, 'pressures', self._publish_diag)
-        self.solve_stats = common.SolveStats()
+        self.solve_stats = worker.SolveStats()
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'predicted_pose', qos)
         self._pub_shape = self.create_publisher(MarkerArray, 'predicted_shape', qos)
@@ -165,7 +166,7 @@ class ForwardKinetostaticNode(Node):
                                        f'{self.get_name()}: forward kinetostatics')
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self.cfg.name)
-        self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
+        self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='forward-solver')
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_pressures, qos)
@@ -194,10 +195,10 @@ class ForwardKinetostaticNode(Node):
         self.stats['received'] += 1
         label = msg.layout.dim[0].label if len(msg.layout.dim) else None
         try:
-            p = common.validate_pressure_input(
+            p = contract.validate_pressure_input(
                 msg.data, self.get_parameter('pressure_unit').value, self.model.A,
                 self.cfg.p_min, self.cfg.p_max, label)
-        except common.InputError as exc:
+        except contract.InputError as exc:
             self._refuse(str(exc))
             return
         self._worker.submit(p)
@@ -243,7 +244,8 @@ class ForwardKinetostaticNode(Node):
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(R))):
             self._publish_diag(DiagnosticStatus.ERROR, 'non-finite pose from the solver', values)
             return
-        self._pub_pose.publish(pose_message(pos, common.quaternion_from_rotation(R), frame, stamp))
+        quat = geometry.quaternion_from_rotation(R)
+        self._pub_pose.publish(pose_message(pos, quat, frame, stamp))
         self._pub_shape.publish(shape_markers(fw, frame, stamp,
                                               int(self.get_parameter('backbone_points').value)))
         self.stats['published'] += 1

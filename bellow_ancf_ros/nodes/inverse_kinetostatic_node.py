@@ -41,7 +41,7 @@ reliable, keep-last 10.
 Latest target only
 ------------------
 The subscription callback only validates a target and stores it in a
-one-item slot (:class:`~bellow_ancf_ros.nodes.common.LatestWorker`); a worker
+one-item slot (:class:`~bellow_ancf_ros.nodes.worker.LatestWorker`); a worker
 thread solves the newest stored target, warm-started from the previous
 solution, with solve starts at least ``1/max_rate_hz`` apart.  Targets that
 arrive while a solve runs overwrite each other: stale ones are dropped,
@@ -66,7 +66,7 @@ Parameter ``feedback`` (``none``, the default, the paper's feedforward; or
 ``integral``): with ``integral`` the node also subscribes ``measured_pose``
 (geometry_msgs/PoseStamped in ``base_frame``) and hands the inverse a target
 shifted by an integral correction of the measured task-space error
-(:mod:`bellow_ancf_ros.core.feedback`, wired by
+(:mod:`bellow_ancf_ros.core.control`, wired by
 :class:`~bellow_ancf_ros.nodes.measured_feedback.FeedbackLink`); the newest
 target is re-solved at ``feedback_rate_hz``.  ``commanded_pose`` is then the
 model's pose for the shifted target.  Stale or implausible measurements:
@@ -92,7 +92,7 @@ Lifecycle and safety
 * A bad start-up parameter (outside its range, wrong type, unknown unit) ends
   the process with one line naming the parameter, the value and what is
   allowed (exit status 2).
-* Every published pressure passes :func:`~bellow_ancf_ros.nodes.common.safe_pressures`:
+* Every published pressure passes :func:`~bellow_ancf_ros.nodes.contract.safe_pressures`:
   never NaN, inf or outside ``[p_min, p_max]`` of the robot file.
 * Refused targets (wrong frame, NaN/inf position, zero or non-finite
   quaternion when the orientation is used): throttled warning, diagnostics
@@ -123,10 +123,10 @@ from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 from std_msgs.msg import Float64MultiArray
 
-from ..core import ConfigError, RobotModel, load_robot, solve_forward, solve_inverse
-from ..core.inverse import ITERATION_BUDGET, TIME_BUDGET, precompute_corners
-from ..core.inverse_warm import warm_up
-from . import common
+from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, precompute_corners,
+                    solve_forward, solve_inverse, warm_up)
+from ..core import geometry
+from . import contract, worker
 from .measured_feedback import FeedbackLink
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
@@ -169,7 +169,7 @@ class InverseKinetostaticNode(LifecycleNode):
         declare(self, 'payload_kg', 0.0, descriptor(
             'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
             'on the next solve. Negative or larger values than the range are refused.', D,
-            lo=0.0, hi=common.PAYLOAD_MAX_KG))
+            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
         declare(self, 'base_frame', 'base', descriptor(
             'Frame of targets and outputs (robot base). Targets in any other frame are refused '
             '(no tf2 transform).', S, constraints='a non-empty frame name'))
@@ -194,7 +194,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._model: RobotModel | None = None
         self._cfg = None
         self._warm = None
-        self._worker: common.LatestWorker | None = None
+        self._worker: worker.LatestWorker | None = None
         self._pub_cmd = self._pub_pose = None
         self._sub = None
         self._said_orientation_ignored = False
@@ -205,7 +205,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
                       'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0,
                       'over_budget': 0}
-        self.solve_stats = common.SolveStats()
+        self.solve_stats = worker.SolveStats()
         self._last_item, self._continuations = None, 0   # budget slices of one target
         # diagnostics in every lifecycle state: per-solve statuses and the 1 Hz heartbeat
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
@@ -246,8 +246,8 @@ class InverseKinetostaticNode(LifecycleNode):
         if param.name not in CONFIGURE_PARAMETERS or not self._configured:
             return ''
         state = 'active' if self._active else 'inactive'
-        return common.configure_time_refusal(param.name, self._node_path(), state,
-                                             self.get_parameter(param.name).value)
+        return contract.configure_time_refusal(param.name, self._node_path(), state,
+                                               self.get_parameter(param.name).value)
 
     def _feedback_heartbeat(self):
         """Feedback state for the heartbeat; WARN while it falls back to feedforward."""
@@ -265,14 +265,14 @@ class InverseKinetostaticNode(LifecycleNode):
             cfg = load_robot(name)
             model = RobotModel(cfg)
             # straight robot at vent pressure: first warm start (also warms caches)
-            fw0 = solve_forward(model, common.vent_pressures(model.A, cfg.p_min, cfg.p_max))
+            fw0 = solve_forward(model, contract.vent_pressures(model.A, cfg.p_min, cfg.p_max))
             # the corners of the pressure box, needed by the first unreachable target
             precompute_corners(model, float(self.get_parameter('payload_kg').value))
             warm_up(model)  # the warm-started path's kernels compiled (or loaded) now
         except (ConfigError, ValueError, OSError) as exc:
             self._configure_error = f'robot_config {name!r}: {exc}'
             self.get_logger().error(f'configure failed: {self._configure_error}')
-            self.get_logger().error(common.configure_failed_hint(self._node_path()))
+            self.get_logger().error(contract.configure_failed_hint(self._node_path()))
             self.heartbeat.publish()
             return TransitionCallbackReturn.FAILURE
         self._configure_error = ''
@@ -283,7 +283,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
-        self._worker = common.LatestWorker(self._solve, self._min_period, self._on_worker_error,
+        self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='inverse-solver')
         self._feedback.configure(cfg, self._worker.submit)
         self._configured = True
@@ -332,7 +332,7 @@ class InverseKinetostaticNode(LifecycleNode):
             if self._worker is not None:
                 self._worker.clear()
             cfg = self._cfg
-            vent = common.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
+            vent = contract.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
             msg = pressure_message(vent, self._unit())
             self.last_command_pa = vent
             self.stats['vents'] += 1
@@ -403,7 +403,7 @@ class InverseKinetostaticNode(LifecycleNode):
         elif self._configure_error:
             level = DiagnosticStatus.ERROR
             message = (f'unconfigured: configure failed ({self._configure_error}); '
-                       + common.configure_failed_hint(self._node_path()))
+                       + contract.configure_failed_hint(self._node_path()))
         else:
             level, message = DiagnosticStatus.WARN, f'{state}: no pressure commands'
         return level, message, values
@@ -437,11 +437,11 @@ class InverseKinetostaticNode(LifecycleNode):
                                    '(position control only)')
         o = msg.pose.orientation
         try:
-            pos, z = common.validate_target(
+            pos, z = contract.validate_target(
                 (msg.pose.position.x, msg.pose.position.y, msg.pose.position.z),
                 (o.x, o.y, o.z, o.w), msg.header.frame_id,
                 self.get_parameter('base_frame').value, use_orientation)
-        except common.InputError as exc:
+        except contract.InputError as exc:
             self._refuse(str(exc))
             return
         item = (pos, z, msg.header.stamp, time.monotonic())
@@ -489,13 +489,13 @@ class InverseKinetostaticNode(LifecycleNode):
         dt = time.perf_counter() - t0
         self.stats['solved'] += 1
         fw = inv.forward
-        usable = fw is not None and fw.converged and fw.stable is not False
+        usable = fw is not None and fw.success
         self.solve_stats.record(dt, ok=usable)
         p, unsafe = None, None
         if usable:
             try:
-                p = common.safe_pressures(inv.pressures_pa, cfg.p_min, cfg.p_max, model.A)
-            except common.UnsafePressureError as exc:
+                p = contract.safe_pressures(inv.pressures_pa, cfg.p_min, cfg.p_max, model.A)
+            except contract.UnsafePressureError as exc:
                 unsafe = exc
         unit = self._unit()
         if p is not None:   # the command first, the diagnostics after it
@@ -507,7 +507,7 @@ class InverseKinetostaticNode(LifecycleNode):
                     stamp = self.get_clock().now().to_msg()
                 self._pub_cmd.publish(pressure_message(p, unit))
                 self._pub_pose.publish(pose_message(
-                    fw.position, common.quaternion_from_rotation(fw.rotation),
+                    fw.position, geometry.quaternion_from_rotation(fw.rotation),
                     self.get_parameter('base_frame').value, stamp))
                 self.last_command_pa = p
                 self.stats['published'] += 1
@@ -537,8 +537,8 @@ class InverseKinetostaticNode(LifecycleNode):
             self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
             self._publish_diag(DiagnosticStatus.ERROR, msg, values)
             return
-        values['pressures'] = ' '.join(f'{v:.6g}' for v in common.to_unit(p, unit))
-        if inv.status in (TIME_BUDGET, ITERATION_BUDGET):
+        values['pressures'] = ' '.join(f'{v:.6g}' for v in contract.to_unit(p, unit))
+        if inv.status in (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET):
             self.stats['over_budget'] += 1
             self._continuations = self._continuations + 1 if item is self._last_item else 1
             self._last_item = item

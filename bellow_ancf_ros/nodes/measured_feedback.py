@@ -4,7 +4,7 @@
 ``feedback`` (``none``, the default and the paper's feedforward, or
 ``integral``): it declares the feedback parameters, and when feedback is on
 it subscribes ``measured_pose`` (geometry_msgs/PoseStamped in ``base_frame``),
-feeds :class:`~bellow_ancf_ros.core.feedback.IntegralFeedback` (the control
+feeds :class:`~bellow_ancf_ros.core.control.IntegralFeedback` (the control
 law, plain Python in the core) and re-submits the newest target at
 ``feedback_rate_hz`` so that a held target keeps being corrected.  Measured
 poses in another frame, with NaN/inf or (two or more segments) an
@@ -27,8 +27,9 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..core.feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
-from . import common
+from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
+from ..core import geometry
+from . import contract
 from .diagnostics import Refusals
 from .ros_util import QOS_DEPTH, descriptor
 
@@ -152,14 +153,15 @@ class FeedbackLink:
         p, o = msg.pose.position, msg.pose.orientation
         try:
             if msg.header.frame_id != self._frame:
-                raise common.InputError(f'measured pose frame {msg.header.frame_id!r} is not the '
-                                        f'base frame {self._frame!r} (no tf2 transform is done)')
+                raise contract.InputError(
+                    f'measured pose frame {msg.header.frame_id!r} is not the '
+                    f'base frame {self._frame!r} (no tf2 transform is done)')
             pos = np.array([p.x, p.y, p.z], dtype=float)
             if not np.all(np.isfinite(pos)):
-                raise common.InputError(f'measured position is not finite: {pos.tolist()}')
-            z = (common.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
+                raise contract.InputError(f'measured position is not finite: {pos.tolist()}')
+            z = (geometry.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
                  if self._use_orientation else None)
-        except common.InputError as exc:
+        except contract.InputError as exc:
             self.refused += 1
             self._refusals.report(str(exc), self.refused)
             return

@@ -4,7 +4,7 @@ QoS profiles, checked parameter declaration, message builders, the
 vent-acknowledgement wait, and the start-up / spin / shutdown idiom of every
 node executable.  Diagnostics (statuses, the 1 Hz heartbeat) live in
 :mod:`bellow_ancf_ros.nodes.diagnostics`, the pure (rclpy-free) helpers in
-:mod:`bellow_ancf_ros.nodes.common`.
+:mod:`bellow_ancf_ros.nodes.contract`.
 """
 
 from __future__ import annotations
@@ -37,9 +37,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ..core import ConfigError
-from ..core.solver import limit_blas_threads
-from . import common
+from ..core import ConfigError, limit_blas_threads
+from . import contract
 
 __all__ = [
     'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT', 'VENT_ACK_TIMEOUT_S',
@@ -169,7 +168,7 @@ def guard_parameters(node, names: Sequence[str],
                      extra_check: Callable[[Any], str] | None = None) -> None:
     """Check the start-up values of ``names``; refuse bad run-time changes of any parameter.
 
-    Uses :func:`common.parameter_problem`.  A bad start-up value raises
+    Uses :func:`contract.parameter_problem`.  A bad start-up value raises
     :class:`StartupParameterError`; a refused ``ros2 param set`` fails with
     the reason (and a warning in the log) and the old value stays.
     ``extra_check(parameter)`` may refuse further changes (returns the reason,
@@ -178,14 +177,14 @@ def guard_parameters(node, names: Sequence[str],
     """
     for name in names:
         value = node.get_parameter(name).value
-        reason = common.parameter_problem(name, value)
+        reason = contract.parameter_problem(name, value)
         if reason:
             d = _descriptor_of(node, name)
             raise StartupParameterError(name, value, allowed_values(d) if d else '', reason)
 
     def on_set(params) -> SetParametersResult:
         for p in params:
-            reason = common.parameter_problem(p.name, p.value)
+            reason = contract.parameter_problem(p.name, p.value)
             if not reason and extra_check is not None:
                 reason = extra_check(p)
             if reason:
@@ -212,9 +211,9 @@ def pose_message(position: Any, quaternion: Any, frame_id: str, stamp) -> PoseSt
 
 def pressure_message(pressures_pa: Any, unit: str) -> Float64MultiArray:
     """Float64MultiArray of pressures (given in Pa) in ``unit`` with a labelled layout."""
-    values = common.to_unit(pressures_pa, unit)
+    values = contract.to_unit(pressures_pa, unit)
     msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=common.pressure_label(unit), size=len(values),
+    msg.layout.dim = [MultiArrayDimension(label=contract.pressure_label(unit), size=len(values),
                                           stride=len(values))]
     msg.layout.data_offset = 0
     msg.data = [float(v) for v in values]

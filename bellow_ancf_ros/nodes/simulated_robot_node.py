@@ -1,6 +1,6 @@
 """Simulated robot node: plays the real robot (regulators, physics, motion capture).
 
-The physics is :class:`~bellow_ancf_ros.core.simulated_robot.SimulatedRobot`
+The physics is :class:`~bellow_ancf_ros.core.control.SimulatedRobot`
 (core, no ROS): pressure regulators (first-order lag, slew limit, hardware
 limits) drive the quasi-static equilibrium of the node's *own* robot file,
 by default the shipped ``one_segment_mismatched`` ("a robot that is not the
@@ -44,8 +44,9 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from ..core import load_robot
-from ..core.simulated_robot import SimulatedRobot
-from . import common
+from ..core.control import SimulatedRobot
+from ..core import geometry
+from . import contract
 from .diagnostics import Refusals, publish_diagnostic
 from .ros_util import (
     command_qos,
@@ -77,7 +78,7 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('n_elements', 0, d)
         self.declare_parameter('payload_kg', 0.0, descriptor(
             'Payload the simulated robot carries [kg] (settable at run time).', D,
-            lo=0.0, hi=common.PAYLOAD_MAX_KG))
+            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
         self.declare_parameter('base_frame', 'base', descriptor(
             'frame_id of measured_pose.', S, **ro))
         self.declare_parameter('pressure_unit', 'Pa', descriptor(
@@ -103,13 +104,13 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('seed', -1, d)
         g = self.get_parameter
         unit = g('pressure_unit').value
-        common.check_unit(unit)
+        contract.check_unit(unit)
         cfg = load_robot(g('robot_config').value)   # ConfigError: the node does not start
         seed = int(g('seed').value)
         n_el = int(g('n_elements').value)
         self.robot = SimulatedRobot(
             cfg, n_elements=n_el or None,
-            payload_kg=common.validate_payload(g('payload_kg').value),
+            payload_kg=contract.validate_payload(g('payload_kg').value),
             time_constant_s=float(g('regulator_time_constant_s').value),
             slew_rate_pa_per_s=1e3 * float(g('regulator_slew_rate_kpa_per_s').value),
             position_noise_m=1e-3 * float(g('position_noise_mm').value),
@@ -143,7 +144,7 @@ class SimulatedRobotNode(Node):
     def _on_set_parameters(self, params) -> SetParametersResult:
         for p in params:
             if p.name == 'payload_kg':
-                reason = common.parameter_problem('payload_kg', p.value)
+                reason = contract.parameter_problem('payload_kg', p.value)
                 if reason:
                     self.get_logger().warning(f'refused parameter change: {reason}')
                     return SetParametersResult(successful=False, reason=reason)
@@ -155,9 +156,9 @@ class SimulatedRobotNode(Node):
         self.stats['received'] += 1
         label = msg.layout.dim[0].label if len(msg.layout.dim) else None
         try:
-            p = common.validate_pressure_input(msg.data, self._unit, self.robot.model.A,
-                                               self.cfg.p_min, self.cfg.p_max, label)
-        except common.InputError as exc:
+            p = contract.validate_pressure_input(msg.data, self._unit, self.robot.model.A,
+                                                 self.cfg.p_min, self.cfg.p_max, label)
+        except contract.InputError as exc:
             self.stats['refused'] += 1
             self.last_refusal_reason = str(exc)
             self._refusals.report(str(exc), self.stats['refused'])
@@ -193,7 +194,7 @@ class SimulatedRobotNode(Node):
 
     def _mocap(self) -> None:
         pos, R = self.robot.measure()   # reads the newest complete state (no lock needed)
-        self._pub_pose.publish(pose_message(pos, common.quaternion_from_rotation(R), self._frame,
+        self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), self._frame,
                                             self.get_clock().now().to_msg()))
         self.stats['published_poses'] += 1
 
@@ -201,7 +202,7 @@ class SimulatedRobotNode(Node):
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK
         p, solves, payload = self.robot.pressures_pa, self.robot.solves, self.robot.payload_kg
         values = dict(self.stats, solves=solves, payload_kg=payload,
-                      pressures=' '.join(f'{v:.6g}' for v in common.to_unit(p, self._unit)))
+                      pressures=' '.join(f'{v:.6g}' for v in contract.to_unit(p, self._unit)))
         self._publish_diag(level, 'simulating', values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:

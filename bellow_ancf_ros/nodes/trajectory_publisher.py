@@ -2,7 +2,7 @@
 
 Publishes ``target_pose`` (geometry_msgs/PoseStamped, reliable, keep-last 5)
 in ``base_frame`` at ``rate_hz``, following
-:func:`bellow_ancf_ros.core.trajectories.trajectory`: ``space_spiral``,
+:func:`bellow_ancf_ros.core.experiments.trajectory`: ``space_spiral``,
 ``space_rose``, ``planar_circle``, ``planar_spiral``, ``planar_rose`` and,
 for robots with two or more segments, ``bending_circle`` (constant bending
 angle ``bending_angle_deg``, paper: 0, 10 or 20 deg).  For one segment the
@@ -33,8 +33,8 @@ from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
 
 from ..core import ConfigError, load_robot
-from ..core.trajectories import TRAJECTORY_NAMES, trajectory, trajectory_parameters
-from . import common
+from ..core.experiments import TRAJECTORY_NAMES, trajectory, trajectory_parameters
+from ..core import geometry
 from .diagnostics import Heartbeat
 from .ros_util import (
     StartupParameterError,
@@ -174,7 +174,7 @@ class TrajectoryPublisher(Node):
         kw = dict(self._kwargs)
         name = kw.pop('name')
         pos, z = trajectory(name, t, self.cfg, **kw)
-        q = np.array([0.0, 0.0, 0.0, 1.0]) if z is None else common.quaternion_from_z_axis(z[0])
+        q = np.array([0.0, 0.0, 0.0, 1.0]) if z is None else geometry.quaternion_from_z_axis(z[0])
         return pos[0], q
 
     def _period(self) -> float:

@@ -17,7 +17,7 @@ import os
 import numpy as np
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, solve_inverse
-from bellow_ancf_ros.core.solver import limit_blas_threads
+from bellow_ancf_ros.core import limit_blas_threads
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "solver_baseline.npz")

@@ -1,0 +1,29 @@
+"""Fitting the model to a robot (paper section V) and calibrating it from recordings.
+
+* :mod:`.identification`: stiffness, effective diameter and actuator
+  distance from the paper's test rigs (eqs. 31-33);
+* :class:`Cantilever`: the cantilever rig's beam model;
+* :class:`Recording` and its readers and writers (CSV, rosbag2 through
+  ``rosbags``);
+* :mod:`.calibration`: a robot file's parameters and the base-in-mocap
+  transform from recorded pressures and poses;
+* :func:`excitation_sequence`, :func:`simulate_recording`: what to record.
+"""
+
+from . import calibration, identification
+from ._cantilever import Cantilever, CantileverResult
+from ._excitation import excitation_sequence, random_pressures, simulate_recording
+from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_TOPIC, PRESSURE_TOPIC, Recording,
+                          RecordingError, csv_header, pressure_unit, read_bag, read_csv,
+                          read_recording, settled_samples, write_bag, write_csv)
+from ._sensitivities import RecordingModel
+from .calibration import CalibrationError, CalibrationResult, calibrate
+
+__all__ = [
+    "CalibrationError", "CalibrationResult", "Cantilever", "CantileverResult",
+    "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_TOPIC", "PRESSURE_TOPIC", "Recording",
+    "RecordingError", "RecordingModel", "calibrate", "calibration", "csv_header",
+    "excitation_sequence", "identification", "pressure_unit", "random_pressures", "read_bag",
+    "read_csv", "read_recording", "settled_samples", "simulate_recording", "write_bag",
+    "write_csv",
+]

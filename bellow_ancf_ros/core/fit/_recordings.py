@@ -1,0 +1,400 @@
+"""Calibration recordings: CSV files and rosbag2 directories (read and write).
+
+A recording is a list of quasi-static *samples*: the gauge pressures of all
+actuators (Pa, the project's actuator order: segment by segment, actuator 1,
+2, 3 within a segment) and the end-effector pose measured by the motion-capture
+system, in the motion-capture system's own frame (position in m, orientation
+as a unit quaternion ``x, y, z, w``).
+
+* CSV (:func:`read_csv`, :func:`write_csv`): header
+  ``t_s,p1_kpa,...,pN_kpa,x_m,y_m,z_m,qx,qy,qz,qw``, one row per settled
+  sample, pressures in kPa gauge.
+* rosbag2 (:func:`read_bag`, :func:`write_bag`), sqlite3 or mcap storage, as
+  ``ros2 bag record /pressure_command /measured_pose`` writes it; read and
+  written with the pure-Python ``rosbags`` library (no ROS install needed).
+  ``pressure_command`` is ``std_msgs/Float64MultiArray`` whose
+  ``layout.dim[0].label`` names the unit (``actuator_pressure_gauge_pa`` or
+  ``..._kpa``; no label: Pa), ``measured_pose`` is
+  ``geometry_msgs/PoseStamped`` in the motion-capture frame.  Times are the
+  bag's receive times.  :func:`settled_samples` turns the two streams into
+  samples: a command that repeats the previous one continues its step; poses
+  within ``settle_s`` after a command change are dropped, the rest of the step
+  is averaged (position mean, sign-aligned normalised quaternion mean); a step
+  whose poses still drift (first half and second half of the kept poses differ
+  by more than ``drift_tol_m``) is dropped as not settled.
+
+Every problem is a :class:`RecordingError` (a ``ValueError``) with a one-line
+message naming the file, line or topic.  No ROS import.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..geometry import quaternion_mean
+
+__all__ = [
+    'RecordingError', 'Recording', 'csv_header', 'read_csv', 'write_csv', 'settled_samples',
+    'read_bag', 'write_bag', 'read_recording', 'PRESSURE_TOPIC', 'POSE_TOPIC',
+    'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit',
+]
+
+PRESSURE_TOPIC = 'pressure_command'
+POSE_TOPIC = 'measured_pose'
+FLOAT64_MULTI_ARRAY = 'std_msgs/msg/Float64MultiArray'
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+_UNITS = {'Pa': 1.0, 'kPa': 1e3}
+_POSE_COLUMNS = ('x_m', 'y_m', 'z_m', 'qx', 'qy', 'qz', 'qw')
+_MIN_QUAT_NORM = 1e-6
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be used (one-line message naming the problem)."""
+
+
+@dataclass
+class Recording:
+    """Quasi-static samples: pressures [Pa] and measured poses in the mocap frame.
+
+    ``quaternions_xyzw`` are unit quaternions; ``times_s`` the time of each
+    sample (CSV: the file's ``t_s``; bag: the start of the averaged window).
+    ``notes`` say what a reader dropped.
+    """
+
+    pressures_pa: np.ndarray
+    positions_m: np.ndarray
+    quaternions_xyzw: np.ndarray
+    times_s: np.ndarray
+    source: str = ''
+    notes: list = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.pressures_pa = np.atleast_2d(np.asarray(self.pressures_pa, dtype=float))
+        self.positions_m = np.asarray(self.positions_m, dtype=float).reshape(-1, 3)
+        self.quaternions_xyzw = np.asarray(self.quaternions_xyzw, dtype=float).reshape(-1, 4)
+        self.times_s = np.asarray(self.times_s, dtype=float).ravel()
+        n = len(self.positions_m)
+        if not (len(self.pressures_pa) == len(self.quaternions_xyzw) == len(self.times_s) == n):
+            raise RecordingError('pressures, positions, quaternions and times differ in length')
+
+    def __len__(self) -> int:
+        return len(self.positions_m)
+
+    @property
+    def n_actuators(self) -> int:
+        """Number of pressures per sample."""
+        return self.pressures_pa.shape[1]
+
+    def subset(self, index) -> 'Recording':
+        """The samples ``index`` (array of indices or a boolean mask)."""
+        return Recording(self.pressures_pa[index], self.positions_m[index],
+                         self.quaternions_xyzw[index], self.times_s[index], self.source,
+                         list(self.notes))
+
+
+# ------------------------------------------------------------------- CSV
+def csv_header(n_actuators: int) -> list[str]:
+    """``t_s, p1_kpa, ..., pN_kpa, x_m, y_m, z_m, qx, qy, qz, qw``."""
+    return ['t_s'] + [f'p{i + 1}_kpa' for i in range(n_actuators)] + list(_POSE_COLUMNS)
+
+
+def _unit_quaternions(q: np.ndarray, where) -> np.ndarray:
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(~(norm > _MIN_QUAT_NORM))
+    if bad.size:
+        raise RecordingError(f'{where(int(bad[0]))}: the orientation quaternion is zero')
+    return q / norm[:, None]
+
+
+def read_csv(path, n_actuators: int | None = None) -> Recording:
+    """Read a CSV recording (see the module doc); ``n_actuators`` checks the header."""
+    label = str(path)
+    try:
+        fh = open(path, newline='', encoding='utf-8-sig')
+    except OSError as exc:
+        raise RecordingError(f'{label}: cannot read file: {exc.strerror or exc}') from None
+    rows, lines = [], []
+    with fh:
+        reader = csv.reader(fh)
+        header = None
+        try:
+            for row in reader:
+                cells = [c.strip() for c in row]
+                if not any(cells) or cells[0].startswith('#'):
+                    continue
+                if header is None:
+                    header = [c.lower() for c in cells]
+                    _check_header(header, n_actuators, label, reader.line_num)
+                    continue
+                line = reader.line_num
+                if len(cells) != len(header):
+                    raise RecordingError(f'{label}, line {line}: expected {len(header)} fields, '
+                                         f'got {len(cells)}')
+                try:
+                    values = [float(c) for c in cells]
+                except ValueError:
+                    raise RecordingError(f'{label}, line {line}: not a number in '
+                                         f'{",".join(cells)!r}') from None
+                bad = [header[i] for i, v in enumerate(values) if not math.isfinite(v)]
+                if bad:
+                    raise RecordingError(f'{label}, line {line}: not a finite number in column '
+                                         f'{bad[0]} (NaN or inf)')
+                rows.append(values)
+                lines.append(line)
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise RecordingError(f'{label}, line {reader.line_num}: malformed CSV: '
+                                 f'{exc}') from None
+    if header is None:
+        raise RecordingError(f'{label}: the file is empty (expected the header '
+                             f'{",".join(csv_header(n_actuators or 3))})')
+    if not rows:
+        raise RecordingError(f'{label}: no data rows after the header')
+    data = np.array(rows)
+    n_p = len(header) - 1 - len(_POSE_COLUMNS)
+    quat = _unit_quaternions(data[:, 1 + n_p + 3:], lambda i: f'{label}, line {lines[i]}')
+    return Recording(data[:, 1:1 + n_p] * 1e3, data[:, 1 + n_p:1 + n_p + 3], quat, data[:, 0],
+                     source=label)
+
+
+def _check_header(header, n_actuators, label, line) -> None:
+    n_p = len(header) - 1 - len(_POSE_COLUMNS)
+    expected = csv_header(n_actuators if n_actuators is not None else max(n_p, 1))
+    if header != expected:
+        raise RecordingError(f'{label}, line {line}: expected the header {",".join(expected)}, '
+                             f'got {",".join(header)}')
+
+
+def write_csv(path, recording: Recording) -> None:
+    """Write ``recording`` as a CSV file (kPa, m, quaternion x y z w)."""
+    with open(path, 'w', newline='', encoding='utf-8') as fh:
+        w = csv.writer(fh)
+        w.writerow(csv_header(recording.n_actuators))
+        for t, p, x, q in zip(recording.times_s, recording.pressures_pa, recording.positions_m,
+                              recording.quaternions_xyzw):
+            w.writerow([repr(float(t))] + [repr(float(v)) for v in p / 1e3]
+                       + [repr(float(v)) for v in x] + [repr(float(v)) for v in q])
+
+
+# --------------------------------------------------------- settled samples
+def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float = 0.5,
+                    drift_tol_m: float = 0.5e-3, source: str = '') -> Recording:
+    """Average the poses of every command step after ``settle_s`` (see the module doc).
+
+    ``cmd_t`` (n,), ``cmd_p`` (n, A) in Pa; ``pose_t`` (m,), ``pose_pos`` (m, 3),
+    ``pose_quat`` (m, 4, x y z w).  Raises :class:`RecordingError` when no
+    step has settled poses.
+    """
+    cmd_t = np.asarray(cmd_t, dtype=float)
+    cmd_p = np.asarray(cmd_p, dtype=float).reshape(len(cmd_t), -1)
+    pose_t = np.asarray(pose_t, dtype=float)
+    pose_pos = np.asarray(pose_pos, dtype=float).reshape(-1, 3)
+    pose_quat = np.asarray(pose_quat, dtype=float).reshape(-1, 4)
+    if not math.isfinite(settle_s) or settle_s < 0:
+        raise RecordingError(f'settle time must be a non-negative number of seconds, '
+                             f'got {settle_s}')
+    order = np.argsort(cmd_t, kind='stable')
+    cmd_t, cmd_p = cmd_t[order], cmd_p[order]
+    order = np.argsort(pose_t, kind='stable')
+    pose_t, pose_pos, pose_quat = pose_t[order], pose_pos[order], pose_quat[order]
+    # steps: a command equal to the previous one continues the step
+    starts = [0] + [k for k in range(1, len(cmd_t)) if not np.array_equal(cmd_p[k], cmd_p[k - 1])]
+    ends = list(cmd_t[starts[1:]]) + [np.inf]
+    out_p, out_x, out_q, out_t = [], [], [], []
+    no_pose = drifting = nonfinite = 0
+    for k, end in zip(starts, ends):
+        if not np.all(np.isfinite(cmd_p[k])):
+            nonfinite += 1
+            continue
+        t0 = cmd_t[k] + settle_s
+        sel = np.flatnonzero((pose_t >= t0) & (pose_t < end))
+        if sel.size:
+            ok = (np.all(np.isfinite(pose_pos[sel]), axis=1)
+                  & np.all(np.isfinite(pose_quat[sel]), axis=1))
+            ok &= np.linalg.norm(pose_quat[sel], axis=1) > _MIN_QUAT_NORM
+            sel = sel[ok]
+        if sel.size == 0:
+            no_pose += 1
+            continue
+        half = sel.size // 2
+        if half >= 1:
+            drift = np.linalg.norm(pose_pos[sel[half:]].mean(0) - pose_pos[sel[:half]].mean(0))
+            if drift > drift_tol_m:
+                drifting += 1
+                continue
+        q = pose_quat[sel] / np.linalg.norm(pose_quat[sel], axis=1)[:, None]
+        out_p.append(cmd_p[k])
+        out_x.append(pose_pos[sel].mean(axis=0))
+        out_q.append(quaternion_mean(q))
+        out_t.append(t0)
+    notes = []
+    if no_pose:
+        notes.append(f'{no_pose} command step(s) without poses later than {settle_s:g} s '
+                     f'after the change dropped')
+    if drifting:
+        notes.append(f'{drifting} command step(s) whose poses still moved by more than '
+                     f'{drift_tol_m * 1e3:g} mm dropped (not settled)')
+    if nonfinite:
+        notes.append(f'{nonfinite} command(s) with NaN or inf pressures dropped')
+    if not out_p:
+        raise RecordingError(
+            f'{source}: the poses never settle: none of the {len(starts)} command steps has '
+            f'steady poses later than --settle-s {settle_s:g} s after its command change'
+            + (f' ({"; ".join(notes)})' if notes else ''))
+    return Recording(np.array(out_p), np.array(out_x), np.array(out_q), np.array(out_t),
+                     source=source, notes=notes)
+
+
+# ----------------------------------------------------------------- bags
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _find_topic(topics: dict, name: str, label: str, option: str) -> str:
+    """The bag topic for ``name`` (exact, with a leading '/', or a unique namespaced match)."""
+    if name in topics:
+        return name
+    if '/' + name.lstrip('/') in topics:
+        return '/' + name.lstrip('/')
+    tail = [t for t in topics if t.endswith('/' + name.lstrip('/'))]
+    if len(tail) == 1:
+        return tail[0]
+    have = ', '.join(f'{t} ({topics[t]})' for t in sorted(topics)) or 'none'
+    if len(tail) > 1:
+        raise RecordingError(f'{label}: topic {name!r} is ambiguous ({", ".join(tail)}); '
+                             f'give it in full with {option}')
+    raise RecordingError(f'{label}: the bag has no topic {name!r} (topics: {have}); '
+                         f'choose one with {option}')
+
+
+def pressure_unit(msg, label: str) -> float:
+    """Pascal per unit of a ``Float64MultiArray`` pressure message, from its layout label.
+
+    ``..._kpa`` means kPa; ``..._pa`` or no label means Pa; any other label
+    is refused (:class:`RecordingError` naming ``label``, where the message came from).
+    """
+    dims = list(getattr(msg.layout, 'dim', []) or [])
+    lab = (dims[0].label if dims else '').strip().lower()
+    if lab.endswith('_kpa') or lab == 'kpa':
+        return _UNITS['kPa']
+    if not lab or lab.endswith('_pa') or lab == 'pa':
+        return _UNITS['Pa']
+    raise RecordingError(f'{label}: pressure array label {dims[0].label!r} names no known unit '
+                         f'(expected actuator_pressure_gauge_pa or actuator_pressure_gauge_kpa)')
+
+
+def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_TOPIC,
+             settle_s: float = 0.5, n_actuators: int | None = None,
+             drift_tol_m: float = 0.5e-3) -> Recording:
+    """Read a rosbag2 directory (sqlite3 or mcap) into settled samples (module doc)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
+    label = str(path)
+    if not Path(path).exists():
+        raise RecordingError(f'{label}: no such bag directory')
+    store = _typestore()
+    try:
+        with Reader(path) as reader:
+            topics = {c.topic: c.msgtype for c in reader.connections}
+            p_topic = _find_topic(topics, pressure_topic, label, '--pressure-topic')
+            x_topic = _find_topic(topics, pose_topic, label, '--pose-topic')
+            for topic, want in ((p_topic, FLOAT64_MULTI_ARRAY), (x_topic, POSE_STAMPED)):
+                if topics[topic] != want:
+                    raise RecordingError(f'{label}: topic {topic} has type {topics[topic]}, '
+                                         f'expected {want}')
+            cmd_t, cmd_p, pose_t, pose_x, pose_q = [], [], [], [], []
+            conns = [c for c in reader.connections if c.topic in (p_topic, x_topic)]
+            for conn, stamp, raw in reader.messages(connections=conns):
+                msg = store.deserialize_cdr(raw, conn.msgtype)
+                if conn.topic == p_topic:
+                    values = np.asarray(msg.data, dtype=float)
+                    where = f'{label}: {p_topic} message {len(cmd_t) + 1}'
+                    if n_actuators is not None and values.size != n_actuators:
+                        raise RecordingError(f'{where}: {values.size} pressures, the robot has '
+                                             f'{n_actuators} actuators')
+                    if cmd_p and values.size != len(cmd_p[0]):
+                        raise RecordingError(f'{where}: {values.size} pressures, earlier '
+                                             f'messages had {len(cmd_p[0])}')
+                    cmd_t.append(stamp * 1e-9)
+                    cmd_p.append(values * pressure_unit(msg, where))
+                else:
+                    p, o = msg.pose.position, msg.pose.orientation
+                    pose_t.append(stamp * 1e-9)
+                    pose_x.append((p.x, p.y, p.z))
+                    pose_q.append((o.x, o.y, o.z, o.w))
+    except RecordingError:
+        raise
+    except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
+        raise RecordingError(f'{label}: cannot read the bag: '
+                             f'{type(exc).__name__}: {exc}') from None
+    if not cmd_t:
+        raise RecordingError(f'{label}: topic {p_topic} holds no messages')
+    if not pose_t:
+        raise RecordingError(f'{label}: topic {x_topic} holds no messages')
+    return settled_samples(cmd_t, cmd_p, pose_t, pose_x, pose_q, settle_s, drift_tol_m, label)
+
+
+def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3',
+              pressure_topic: str = '/' + PRESSURE_TOPIC, pose_topic: str = '/' + POSE_TOPIC,
+              unit: str = 'Pa', frame_id: str = 'mocap') -> None:
+    """Write a rosbag2 directory (``storage`` 'sqlite3' or 'mcap') without ROS.
+
+    ``commands``: ``(t_s, pressures_pa)`` pairs; ``poses``: ``(t_s, position_m,
+    quaternion_xyzw)`` triples (the pose header stamp is ``t_s`` too).  Pressures
+    are written in ``unit`` with the layout label the nodes use.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugins = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
+    if storage not in plugins:
+        raise ValueError(f'storage must be one of {sorted(plugins)}, got {storage!r}')
+    if unit not in _UNITS:
+        raise ValueError(f'unit must be one of {sorted(_UNITS)}, got {unit!r}')
+    store = _typestore()
+    T = store.types
+    events = [(float(t), 0, np.asarray(p, dtype=float)) for t, p in commands]
+    events += [(float(t), 1, (np.asarray(x, dtype=float), np.asarray(q, dtype=float)))
+               for t, x, q in poses]
+    events.sort(key=lambda e: (e[0], e[1]))
+    with Writer(path, version=9, storage_plugin=plugins[storage]) as writer:
+        c_cmd = writer.add_connection(pressure_topic, FLOAT64_MULTI_ARRAY, typestore=store)
+        c_pose = writer.add_connection(pose_topic, POSE_STAMPED, typestore=store)
+        for t, kind, value in events:
+            ns = int(round(t * 1e9))
+            if kind == 0:
+                values = value / _UNITS[unit]
+                dim = T['std_msgs/msg/MultiArrayDimension'](
+                    label=f'actuator_pressure_gauge_{unit.lower()}', size=len(values),
+                    stride=len(values))
+                msg = T[FLOAT64_MULTI_ARRAY](
+                    layout=T['std_msgs/msg/MultiArrayLayout'](dim=[dim], data_offset=0),
+                    data=values.astype(np.float64))
+                writer.write(c_cmd, ns, store.serialize_cdr(msg, FLOAT64_MULTI_ARRAY))
+            else:
+                x, q = value
+                stamp = T['builtin_interfaces/msg/Time'](sec=ns // 1_000_000_000,
+                                                         nanosec=ns % 1_000_000_000)
+                msg = T[POSE_STAMPED](
+                    header=T['std_msgs/msg/Header'](stamp=stamp, frame_id=frame_id),
+                    pose=T['geometry_msgs/msg/Pose'](
+                        position=T['geometry_msgs/msg/Point'](x=x[0], y=x[1], z=x[2]),
+                        orientation=T['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2],
+                                                                      w=q[3])))
+                writer.write(c_pose, ns, store.serialize_cdr(msg, POSE_STAMPED))
+
+
+def read_recording(csv_path=None, bag_path=None, n_actuators: int | None = None,
+                   **bag_options) -> Recording:
+    """Read a CSV file or a bag directory (exactly one of the two)."""
+    if (csv_path is None) == (bag_path is None):
+        raise RecordingError('give exactly one of a CSV file and a bag directory')
+    if csv_path is not None:
+        return read_csv(csv_path, n_actuators)
+    return read_bag(bag_path, n_actuators=n_actuators, **bag_options)

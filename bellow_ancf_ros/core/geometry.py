@@ -1,0 +1,178 @@
+"""Rotations, quaternions and angles: the one copy the core, the nodes and the demos use.
+
+Quaternions are in ROS order ``(x, y, z, w)`` everywhere in this package
+(``geometry_msgs/Quaternion``, scipy's ``Rotation.as_quat``), ``w`` the
+scalar part.  A rotation matrix's columns are the rotated frame's x, y and z
+axes in the reference frame; the end effector's z-axis is the third column.
+Rotation vectors are axis times angle [rad].
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = [
+    "QUATERNION_MIN_NORM", "angle_between", "hat", "kabsch", "left_jacobian_so3",
+    "quaternion_from_rotation", "quaternion_from_z_axis", "quaternion_mean",
+    "quaternion_to_rotation", "rotation_between", "rotation_from_vector", "rotation_z",
+    "unit_quaternion", "z_axis_from_quaternion",
+]
+
+#: A quaternion shorter than this is refused: it names no rotation (a zeroed message).
+QUATERNION_MIN_NORM = 1e-6
+
+
+def unit_quaternion(q: Sequence[float]) -> np.ndarray:
+    """``q`` (x, y, z, w) normalised; ValueError when it has not 4 finite components or is ~0."""
+    arr = np.array(q, dtype=float).ravel()
+    if arr.size != 4:
+        raise ValueError(f'a quaternion has 4 components, got {arr.size}')
+    if not np.all(np.isfinite(arr)):
+        raise ValueError('quaternion has NaN or inf components')
+    nrm = float(np.linalg.norm(arr))
+    if not math.isfinite(nrm) or nrm < QUATERNION_MIN_NORM:
+        raise ValueError(f'quaternion cannot be normalised (norm {nrm:.3g})')
+    return arr / nrm
+
+
+def quaternion_to_rotation(q: Sequence[float]) -> np.ndarray:
+    """Rotation matrix (columns = rotated x, y, z axes) of a quaternion ``(x, y, z, w)``.
+
+    The quaternion is normalised; zero, NaN or inf ones raise ValueError.
+    """
+    x, y, z, w = unit_quaternion(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def z_axis_from_quaternion(q: Sequence[float]) -> np.ndarray:
+    """The local z-axis (third column of the rotation) of ``(x, y, z, w)``, unit length."""
+    x, y, z, w = unit_quaternion(q)
+    v = np.array([2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)])
+    return v / np.linalg.norm(v)
+
+
+def quaternion_from_rotation(R: Any) -> np.ndarray:
+    """Quaternion ``(x, y, z, w)`` (``w >= 0``) of a rotation matrix (Shepperd's method)."""
+    m = np.asarray(R, dtype=float).reshape(3, 3)
+    if not np.all(np.isfinite(m)):
+        raise ValueError('rotation matrix has NaN or inf entries')
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(max(1.0 + m[0, 0] - m[1, 1] - m[2, 2], 1e-300))
+        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(max(1.0 + m[1, 1] - m[0, 0] - m[2, 2], 1e-300))
+        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
+    else:
+        s = 2.0 * math.sqrt(max(1.0 + m[2, 2] - m[0, 0] - m[1, 1], 1e-300))
+        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
+def quaternion_from_z_axis(z_axis: Any) -> np.ndarray:
+    """Quaternion ``(x, y, z, w)`` of the smallest rotation taking base ``z`` onto ``z_axis``."""
+    v = np.asarray(z_axis, dtype=float).reshape(3)
+    n = float(np.linalg.norm(v))
+    if not math.isfinite(n) or n < 1e-12:
+        raise ValueError('z-axis must be a finite non-zero vector')
+    v = v / n
+    c = float(v[2])
+    if c < -1.0 + 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])  # half turn about x
+    # rotation axis e_z x v, angle acos(c): q = (sin(a/2) axis, cos(a/2))
+    w = math.sqrt(0.5 * (1.0 + c))
+    s = 0.5 / w
+    return np.array([-v[1] * s, v[0] * s, 0.0, w])
+
+
+def quaternion_mean(q: np.ndarray) -> np.ndarray:
+    """Mean of nearby unit quaternions (rows; signs aligned to the first), normalised."""
+    q = np.asarray(q, dtype=float)
+    signs = np.where(q @ q[0] < 0.0, -1.0, 1.0)
+    m = (q * signs[:, None]).mean(axis=0)
+    return m / np.linalg.norm(m)
+
+
+def angle_between(a: Any, b: Any):
+    """Angle between vectors [rad], robust near 0 and pi; rows of ``(..., 3)`` give an array."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    ang = np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+    return float(ang) if np.ndim(ang) == 0 else ang
+
+
+def hat(v: np.ndarray) -> np.ndarray:
+    """Skew matrices ``[v]x`` of vectors ``(..., 3)``: ``[v]x u`` is the cross product ``v x u``."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def rotation_from_vector(v: Any) -> np.ndarray:
+    """Rotation matrix of the rotation vector ``v`` (axis times angle, Rodrigues' formula)."""
+    v = np.asarray(v, dtype=float).reshape(3)
+    theta = float(np.linalg.norm(v))
+    if theta < 1e-15:
+        return np.eye(3)
+    K = hat(v / theta)
+    return np.eye(3) + math.sin(theta) * K + (1.0 - math.cos(theta)) * (K @ K)
+
+
+def rotation_between(z_from: Any, z_to: Any) -> np.ndarray:
+    """Rotation vector (axis * angle, rad) of the smallest rotation ``z_from`` -> ``z_to``."""
+    a = np.asarray(z_from, dtype=float).reshape(3)
+    b = np.asarray(z_to, dtype=float).reshape(3)
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s = float(np.linalg.norm(axis))
+    angle = math.atan2(s, float(a @ b))
+    if s < 1e-15:
+        return np.zeros(3)
+    return axis / s * angle
+
+
+def rotation_z(theta):
+    """Rotation matrix about z by ``theta`` [rad]."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def left_jacobian_so3(w: np.ndarray) -> np.ndarray:
+    """Left Jacobian of SO(3): ``exp([w + d]) = exp([J_l(w) d]) exp([w])`` to first order."""
+    w = np.asarray(w, dtype=float)
+    th = float(np.linalg.norm(w))
+    W = hat(w)
+    if th < 1e-8:
+        return np.eye(3) + 0.5 * W
+    return np.eye(3) + (1 - math.cos(th)) / th**2 * W + (th - math.sin(th)) / th**3 * (W @ W)
+
+
+def kabsch(a: np.ndarray, b: np.ndarray, dirs_a=None, dirs_b=None, dir_weight: float = 0.0):
+    """Rotation ``R`` and translation ``t`` minimising ``sum |R a_i + t - b_i|^2``.
+
+    Optional unit directions add ``dir_weight * sum |R u_i - v_i|^2`` (no translation).
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    ca, cb = a.mean(0), b.mean(0)
+    H = (a - ca).T @ (b - cb)
+    if dirs_a is not None:
+        H = H + dir_weight * np.asarray(dirs_a, float).T @ np.asarray(dirs_b, float)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, cb - R @ ca

@@ -1,0 +1,186 @@
+"""Run node processes and record their topics: the machinery of the ROS demos.
+
+Used by :mod:`bellow_ancf_ros.demos.closed_loop` (the main job) and
+:mod:`bellow_ancf_ros.demos.wiring_check`.  Every node runs as a separate
+process (``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``) in its
+own session, on an isolated ``ROS_DOMAIN_ID`` with
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; :class:`Recorder` subscribes in
+this process with rclpy and stores every message with its arrival time.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'wait_until']
+
+
+class NodeProcess:
+    """One node as a child process (``params``: name -> value, ``remaps``: from -> to)."""
+
+    def __init__(self, module: str, params: dict, env: dict, log_dir: Path,
+                 remaps: dict | None = None, tag: str = '') -> None:
+        """Start ``python -m bellow_ancf_ros.nodes.<module>``; its log goes to ``log_dir``."""
+        self.module = module
+        self._interrupted = False
+        self.log_path = log_dir / f'{tag}{module}.log'
+        cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args']
+        for k, v in params.items():
+            cmd += ['-p', f'{k}:={v}']
+        for k, v in (remaps or {}).items():
+            cmd += ['-r', f'{k}:={v}']
+        with open(self.log_path, 'w') as log:
+            self.proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                         stdin=subprocess.DEVNULL, start_new_session=True)
+
+    def alive(self) -> bool:
+        """True while the process runs."""
+        return self.proc.poll() is None
+
+    def interrupt(self) -> None:
+        """SIGINT to the process group (Ctrl-C) once, without waiting."""
+        if self.proc.poll() is None and not self._interrupted:
+            self._interrupted = True
+            try:
+                os.killpg(self.proc.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGINT to the process group, wait, then SIGKILL; returns the exit code."""
+        if self.proc.poll() is None:
+            self.interrupt()
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                print(f'  {self.module} did not stop on SIGINT within {timeout:g} s: SIGKILL')
+                try:
+                    os.killpg(self.proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                self.proc.wait(5.0)
+        return self.proc.returncode
+
+    def tail(self, n: int = 15) -> str:
+        """The last ``n`` lines of the node's log."""
+        try:
+            return '\n'.join(self.log_path.read_text().splitlines()[-n:])
+        except OSError:
+            return ''
+
+
+def child_env(domain: int) -> dict:
+    """Environment of the node processes: domain, localhost discovery, this package first."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(domain)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['PYTHONUNBUFFERED'] = '1'
+    # the package as imported here (source checkout or install) for the children too
+    pkg_parent = str(Path(__file__).resolve().parents[1])
+    env['PYTHONPATH'] = pkg_parent + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH')
+                                      else '')
+    return env
+
+
+def record_qos():
+    """Record everything: a deep reliable queue, so that a busy recorder loses nothing."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=1000)
+
+
+class SpunNode:
+    """rclpy in this process: a node in its own context on ``domain``, spun in a thread.
+
+    Subclasses create their publishers and subscriptions on ``self.node``,
+    then call :meth:`start`; ``self.lock`` guards what callbacks store.
+    """
+
+    def __init__(self, domain: int, name: str) -> None:
+        """Own context and node; not spinning until :meth:`start`."""
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.rclpy = rclpy
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.ctx)
+        self.lock = threading.Lock()
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+
+    def start(self) -> None:
+        """Spin the node in its thread."""
+        self.thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: BLE001 - shut down
+            pass
+
+    def close(self) -> None:
+        """Stop spinning and shut the context down."""
+        self.executor.shutdown(timeout_sec=2.0)
+        if self.thread.is_alive():
+            self.thread.join(5.0)
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.ctx)
+
+
+class Recorder(SpunNode):
+    """rclpy in this process: records ``topics`` (name -> message type) with arrival times."""
+
+    def __init__(self, domain: int, topics: dict, name: str = 'ros_demo_recorder') -> None:
+        """Own context on ``domain``, one subscription per topic, spun in a thread."""
+        super().__init__(domain, name)
+        qos = record_qos()
+        self.msgs = {t: [] for t in topics}
+        self.subs = {}
+        for topic, typ in topics.items():
+            self.subs[topic] = self.node.create_subscription(
+                typ, topic, lambda m, topic=topic: self._store(topic, m), qos)
+        self.start()
+
+    def _store(self, topic: str, msg) -> None:
+        with self.lock:
+            self.msgs[topic].append((time.monotonic(), msg))
+
+    def publishers(self, topic: str) -> int:
+        """Number of publishers matched on ``topic``."""
+        return self.subs[topic].get_publisher_count()
+
+    def count(self, topic: str) -> int:
+        """Messages recorded on ``topic`` so far."""
+        with self.lock:
+            return len(self.msgs[topic])
+
+    def snapshot(self) -> dict:
+        """A copy of everything recorded: topic -> [(arrival time, message), ...]."""
+        with self.lock:
+            return {k: list(v) for k, v in self.msgs.items()}
+
+    def clear(self) -> None:
+        """Forget everything recorded so far."""
+        with self.lock:
+            for v in self.msgs.values():
+                v.clear()
+
+
+def wait_until(pred, timeout: float) -> bool:
+    """Poll ``pred`` every 10 ms until true (True) or ``timeout`` seconds passed (False)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return False

@@ -1,0 +1,206 @@
+"""The nodes' solve loop helpers (no rclpy import): the latest-only worker and solve statistics.
+
+* :class:`LatestWorker`: a worker thread that always processes the newest
+  item only (older ones are overwritten, so memory stays bounded) at a
+  bounded rate;
+* :class:`SolveStats`: solve-time statistics and the age of the last solve
+  for the status heartbeat.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+__all__ = ['LatestWorker', 'SolveStats']
+
+
+# ------------------------------------------------------------ latest-only
+class LatestWorker:
+    """Process only the newest submitted item, in a worker thread, at a bounded rate.
+
+    ``submit(item)`` stores ``item`` in a single slot (overwriting an item not
+    yet processed, which counts as dropped) and wakes the worker.  The worker
+    calls ``process(item)`` for the newest item, and starts two calls at least
+    ``min_period()`` seconds apart.  Memory is one item, whatever the input rate.
+    Exceptions from ``process`` are passed to ``on_error`` (default: ignored) and
+    the worker keeps running.
+    """
+
+    def __init__(self, process: Callable[[Any], None],
+                 min_period: Callable[[], float] = lambda: 0.0,
+                 on_error: Callable[[BaseException], None] | None = None,
+                 name: str = 'latest-worker') -> None:
+        self._process = process
+        self._min_period = min_period
+        self._on_error = on_error
+        self._cond = threading.Condition()
+        self._item: Any = None
+        self._has_item = False
+        self._stop = False
+        self._busy = False
+        self._last_start = -math.inf
+        self.submitted = 0
+        self.dropped = 0
+        self.processed = 0
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, item: Any) -> None:
+        with self._cond:
+            if self._has_item:
+                self.dropped += 1
+            self._item = item
+            self._has_item = True
+            self.submitted += 1
+            self._cond.notify_all()
+
+    def resubmit(self, item: Any) -> bool:
+        """Queue ``item`` again unless a newer item is pending; return whether queued."""
+        with self._cond:
+            if self._has_item or self._stop:
+                return False
+            self._item = item
+            self._has_item = True
+            self._cond.notify_all()
+            return True
+
+    def clear(self) -> None:
+        """Drop a pending item (not yet started)."""
+        with self._cond:
+            if self._has_item:
+                self.dropped += 1
+            self._item = None
+            self._has_item = False
+
+    @property
+    def pending(self) -> bool:
+        with self._cond:
+            return self._has_item
+
+    def idle(self) -> bool:
+        """True when no item is pending and none is being processed."""
+        with self._cond:
+            return not self._has_item and not self._busy
+
+    def wait_idle(self, timeout: float) -> bool:
+        """Wait until :meth:`idle` (or ``timeout`` seconds); return whether idle."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while self._has_item or self._busy:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(min(left, 0.05))
+            return True
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._has_item and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                # bounded rate: wait until min_period after the last start;
+                # newer items arriving meanwhile replace the pending one
+                while not self._stop:
+                    period = max(0.0, float(self._min_period()))
+                    left = self._last_start + period - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
+                if self._stop:
+                    return
+                if not self._has_item:
+                    continue
+                item = self._item
+                self._item = None
+                self._has_item = False
+                self._busy = True
+                self._last_start = time.monotonic()
+            try:
+                self._process(item)
+            except BaseException as exc:  # noqa: BLE001 - the worker must survive
+                if self._on_error is not None:
+                    try:
+                        self._on_error(exc)
+                    except Exception:  # noqa: BLE001
+                        pass
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self.processed += 1
+                    self._cond.notify_all()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the worker (a running ``process`` call is waited for up to ``timeout``)."""
+        with self._cond:
+            self._stop = True
+            self._item = None
+            self._has_item = False
+            self._cond.notify_all()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+
+
+# ------------------------------------------------------------ statistics
+class SolveStats:
+    """Solve-time statistics over the last ``window`` solves, and the age of the last one.
+
+    ``record(seconds, ok)`` after every solve; :meth:`summary` gives the count,
+    the last/median/95th-percentile/maximum solve time over the window [s],
+    the age of the last solve [s] (None before the first) and whether it
+    succeeded.  Memory is bounded by ``window``.  Thread-safe.
+    """
+
+    def __init__(self, window: int = 1000, clock: Callable[[], float] = time.monotonic) -> None:
+        self._times: deque = deque(maxlen=int(window))
+        self._clock = clock
+        self._lock = threading.Lock()
+        self.count = 0
+        self.failures = 0
+        self._last_end: float | None = None
+        self._last_ok: bool | None = None
+
+    def record(self, seconds: float, ok: bool = True) -> None:
+        """Record one solve that took ``seconds`` and ended now."""
+        with self._lock:
+            self._times.append(float(seconds))
+            self.count += 1
+            self.failures += 0 if ok else 1
+            self._last_end = self._clock()
+            self._last_ok = bool(ok)
+
+    def times(self) -> list:
+        """The solve times in the window [s], oldest first."""
+        with self._lock:
+            return list(self._times)
+
+    def summary(self) -> dict:
+        """Statistics as a dict (None where there is no solve yet).
+
+        Keys: ``count``, ``failures``, ``window``, ``last_s``, ``median_s``,
+        ``p95_s``, ``max_s``, ``last_solve_age_s``, ``last_ok``.
+        """
+        with self._lock:
+            t = np.array(self._times, dtype=float)
+            last_end, last_ok = self._last_end, self._last_ok
+            count, failures = self.count, self.failures
+        empty = t.size == 0
+        return {
+            'count': count,
+            'failures': failures,
+            'window': int(t.size),
+            'last_s': None if empty else float(t[-1]),
+            'median_s': None if empty else float(np.median(t)),
+            'p95_s': None if empty else float(np.percentile(t, 95)),
+            'max_s': None if empty else float(t.max()),
+            'last_solve_age_s': None if last_end is None else self._clock() - last_end,
+            'last_ok': last_ok,
+        }

@@ -1,0 +1,130 @@
+"""``bellow-ancf calibrate``: CSV and bags (sqlite3, mcap) in; robot file, JSON, plot out."""
+
+import json
+
+import numpy as np
+import pytest
+
+import calibration_data as cd
+from bellow_ancf_ros import cli
+from bellow_ancf_ros.core import load_robot
+from bellow_ancf_ros.core.fit._excitation import excitation_sequence
+from bellow_ancf_ros.core.fit._recordings import csv_header, write_bag, write_csv
+
+pytest.importorskip('rosbags')
+
+
+@pytest.fixture(scope='module')
+def recorded(one_cfg):
+    """A small recording of the mismatched one-segment robot (and the true robot)."""
+    true_cfg, _ = cd.mismatch(one_cfg)
+    rec, _, _ = cd.recording(true_cfg, excitation_sequence(one_cfg, 2, 6, seed=3))
+    return rec.subset(slice(None, None, 3))
+
+
+def _run(capsys, *argv):
+    code = cli.main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _bag(path, rec, storage, unit='Pa'):
+    commands = [(k * 2.0, p) for k, p in enumerate(rec.pressures_pa)]
+    poses = [(k * 2.0 + dt, x + (0.02 if dt < 0.5 else 0.0), q)
+             for k, (x, q) in enumerate(zip(rec.positions_m, rec.quaternions_xyzw))
+             for dt in (0.2, 1.0, 1.5)]
+    write_bag(path, commands, poses, storage=storage, unit=unit)
+    return path
+
+
+def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
+    csv_path = tmp_path / 'rec.csv'
+    write_csv(csv_path, recorded)
+    out, png = tmp_path / 'cal.yaml', tmp_path / 'res.png'
+    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment',
+                             '--csv', str(csv_path), '--out', str(out), '--plot', str(png),
+                             '--json')
+    assert code == 0, err
+    d = json.loads(stdout.strip().splitlines()[-1])
+    assert set(d['parameters']) == {'segments[0].pitch_radius_mm', 'actuator.d_a_mm',
+                                    'actuator.d_eff_mm', 'stiffness_scale'}
+    for p in d['parameters'].values():
+        assert set(p) >= {'value', 'std_error'} and p['std_error'] > 0
+    assert d['samples'] == len(recorded)
+    assert d['rmse_after_mm'] < d['rmse_before_mm']
+    np.testing.assert_allclose(d['frame']['translation_m'], cd.FRAME_T, atol=1e-3)
+    assert abs(np.linalg.norm(d['frame']['quaternion_xyzw']) - 1) < 1e-12
+    # the robot file loads (nodes use load_robot for robot_config) and carries provenance
+    cfg = load_robot(out)
+    text = out.read_text()
+    assert str(csv_path) in text and 'RMSE' in text
+    assert cfg.segments[0].pitch_radius * 1e3 == pytest.approx(
+        d['parameters']['segments[0].pitch_radius_mm']['value'], rel=1e-12)
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # the stage-1 coupling of D_eff and the stiffness scale is named on stderr
+    assert 'warning: actuator.d_eff_mm and stiffness_scale cannot be separated' in err
+
+
+@pytest.mark.parametrize('storage, unit', [('sqlite3', 'kPa'), ('mcap', 'Pa')])
+def test_bag_storages(tmp_path, capsys, recorded, storage, unit):
+    bag = _bag(tmp_path / 'bag', recorded, storage, unit)
+    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag', str(bag),
+                             '--fit', 'actuator.d_a_mm', '--json')
+    assert code == 0, err
+    d = json.loads(stdout.strip().splitlines()[-1])
+    assert d['samples'] == len(recorded)
+    assert d['rmse_after_mm'] < d['rmse_before_mm']
+    np.testing.assert_allclose(d['frame']['translation_m'], cd.FRAME_T, atol=1e-3)
+
+
+def test_table_output(tmp_path, capsys, recorded):
+    csv_path = tmp_path / 'rec.csv'
+    write_csv(csv_path, recorded)
+    code, stdout, _ = _run(capsys, 'calibrate', '--config', 'one_segment', '--csv', str(csv_path),
+                           '--fit', 'actuator.d_a_mm')
+    assert code == 0
+    assert 'actuator.d_a_mm' in stdout and 'position RMSE' in stdout and '95 % interval' in stdout
+
+
+def _bad_csv(tmp_path, text):
+    p = tmp_path / 'bad.csv'
+    p.write_text(text)
+    return ['--csv', str(p)]
+
+
+HEADER = ','.join(csv_header(3)) + '\n'
+
+
+@pytest.mark.parametrize('make, match', [
+    (lambda tp, rec: _bad_csv(tp, ''), 'empty'),
+    (lambda tp, rec: _bad_csv(tp, 'a,b\n1,2\n'), 'expected the header'),
+    (lambda tp, rec: _bad_csv(tp, HEADER + '0,1,2\n'), 'line 2: expected 11 fields'),
+    (lambda tp, rec: _bad_csv(tp, HEADER + '0,0,0,0,0,0,nan,0,0,0,1\n'), 'line 2: not a finite'),
+    (lambda tp, rec: _bad_csv(tp, HEADER + '0,0,0,0,0,0,0.1,0,0,0,1\n' * 9), 'need at least 10'),
+    (lambda tp, rec: ['--bag', str(tp / 'nothing')], 'no such bag'),
+    (lambda tp, rec: ['--bag', str(_bag(tp / 'b', rec, 'sqlite3')), '--pose-topic', 'tip'],
+     "no topic 'tip'"),
+    (lambda tp, rec: ['--bag', str(_bag(tp / 'b', rec, 'mcap')), '--settle-s', '5'],
+     'never settle'),
+    (lambda tp, rec: ['--csv', 'x.csv', '--fit', 'actuator.nope'], 'not a scalar parameter'),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, recorded, make, match):
+    code, stdout, err = _run(capsys, 'calibrate', '--config', 'one_segment',
+                             *make(tmp_path, recorded))
+    assert code == 2
+    assert match in err
+    assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
+    assert err.startswith('bellow-ancf: error: ')
+
+
+def test_bag_without_the_topics(tmp_path, capsys):
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Writer(tmp_path / 'other', version=9) as w:
+        c = w.add_connection('/chatter', 'std_msgs/msg/String', typestore=store)
+        w.write(c, 1, store.serialize_cdr(store.types['std_msgs/msg/String'](data='hi'),
+                                          'std_msgs/msg/String'))
+    code, _, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag',
+                        str(tmp_path / 'other'))
+    assert code == 2 and "no topic 'pressure_command'" in err and '/chatter' in err

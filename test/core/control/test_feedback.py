@@ -1,0 +1,296 @@
+"""Tests of the integral feedback law (core/feedback.py), closed around the simulated robot.
+
+The loop of the ROS pipeline without ROS: a control step every 50 ms (inverse
+kinetostatics on the default model, warm-started), physics every 20 ms
+(regulators, equilibrium of the mismatched robot), motion capture every
+10 ms (0.15 mm noise unless a test says otherwise), in simulated time.
+"""
+
+import math
+
+import numpy as np
+
+from bellow_ancf_ros.core.geometry import rotation_between, rotation_from_vector
+import pytest
+
+from bellow_ancf_ros.core import solve_forward, solve_inverse
+from bellow_ancf_ros.core.control._feedback import (
+    JUMP,
+    SATURATED,
+    STALE,
+    TRACKING,
+    FeedbackSettings,
+    IntegralFeedback,
+)
+from bellow_ancf_ros.core.control._simulated_robot import SimulatedRobot
+
+CTRL_S, PHYS_S, MOCAP_S = 0.05, 0.02, 0.01
+
+
+class Loop:
+    """Controller (model + optional feedback) closed around a simulated robot."""
+
+    def __init__(self, model, robot, feedback=None):
+        self.model, self.robot, self.fb = model, robot, feedback
+        self.t = 0.0
+        self.inv = None
+        self.measuring = True
+        self.corrupt = None          # callable(position) -> position, for one sample
+        self.handed = None           # last target handed to the inverse
+        self.pressures = []
+
+    def control(self, pos, z):
+        if self.fb is not None:
+            pc, zc = self.fb.corrected_target(self.t, pos, z)
+        else:
+            pc, zc = pos, z
+        self.handed = (pc, zc)
+        self.inv = solve_inverse(self.model, pc, zc, warm_start=self.inv)
+        fw = self.inv.forward
+        assert fw is not None and fw.converged
+        if self.fb is not None:
+            self.fb.report(self.inv.reachable, bool(np.any(self.inv.active_limits)),
+                           fw.position, fw.z_axis)
+        p = self.inv.pressures_pa
+        assert np.all(np.isfinite(p))
+        assert np.all(p >= self.model.cfg.p_min) and np.all(p <= self.model.cfg.p_max)
+        self.pressures.append(p)
+        self.robot.command(p)
+
+    def run(self, duration, pos, z=None):
+        """Hold target ``(pos, z)`` for ``duration`` s; returns the measured samples."""
+        samples = []
+        n = int(round(duration / MOCAP_S))
+        for i in range(n):
+            if i % int(round(CTRL_S / MOCAP_S)) == 0:
+                self.control(pos, z)
+            if i % int(round(PHYS_S / MOCAP_S)) == 0:
+                self.robot.step(PHYS_S)
+            self.t += MOCAP_S
+            if self.measuring:
+                mp, mR = self.robot.measure()
+                if self.corrupt is not None:
+                    mp, self.corrupt = self.corrupt(mp), None
+                samples.append((mp, mR[:, 2]))
+                if self.fb is not None:
+                    self.fb.measurement(self.t, mp, mR[:, 2])
+        return samples
+
+    def true_error(self, pos, z=None):
+        p, R = self.robot.true_pose()
+        ang = None if z is None else math.degrees(np.linalg.norm(rotation_between(R[:, 2], z)))
+        return np.linalg.norm(p - pos), ang
+
+
+def reachable_target(model, pressures):
+    fw = solve_forward(model, pressures)
+    return fw.position, fw.z_axis
+
+
+@pytest.fixture
+def loop1(one):
+    def make(feedback=True, noise=True, payload=None, settings=None):
+        robot = SimulatedRobot('one_segment_mismatched', seed=7, payload_kg=payload,
+                               position_noise_m=0.15e-3 if noise else 0.0,
+                               angle_noise_rad=math.radians(0.1) if noise else 0.0)
+        fb = IntegralFeedback(settings, use_orientation=False) if feedback else None
+        return Loop(one, robot, fb)
+    return make
+
+
+# ------------------------------------------------------------------ held targets
+def test_feedforward_misses_and_integral_converges_one_segment(loop1, one):
+    target, _ = reachable_target(one, [70e3, 10e3, -30e3])
+    ff = loop1(feedback=False)
+    ff.run(1.5, target)
+    ff_err, _ = ff.true_error(target)
+    assert ff_err > 1.0e-3, 'the mismatched robot must miss under feedforward'
+    cl = loop1(feedback=True)
+    samples = cl.run(3.0, target)
+    err, _ = cl.true_error(target)
+    assert err < 0.2e-3, f'true steady-state error {err * 1e3:.3f} mm'
+    # what the motion capture sees: mean over the last second within 0.3 mm
+    mean_meas = np.mean([s[0] for s in samples[-100:]], axis=0)
+    assert np.linalg.norm(mean_meas - target) <= 0.3e-3
+    assert cl.fb.state == TRACKING
+    # the correction is the mismatch the integrator learned, bounded by the clamp
+    assert 0.5 * ff_err < np.linalg.norm(cl.fb.correction_m) <= cl.fb.settings.max_correction_m
+
+
+def test_integral_converges_two_segments_position_and_axis(two):
+    robot = SimulatedRobot('two_segment_mismatched', seed=11)
+    fb = IntegralFeedback(use_orientation=True)
+    loop = Loop(two, robot, fb)
+    target, z = reachable_target(two, [60e3, 20e3, 0.0, 10e3, 40e3, 20e3])
+    samples = loop.run(3.0, target, z)
+    err, ang = loop.true_error(target, z)
+    assert err <= 0.5e-3 and ang <= 0.5, (err * 1e3, ang)
+    mean_p = np.mean([s[0] for s in samples[-100:]], axis=0)
+    mean_z = np.mean([s[1] for s in samples[-100:]], axis=0)
+    assert np.linalg.norm(mean_p - target) <= 0.5e-3
+    assert math.degrees(np.linalg.norm(rotation_between(mean_z, z))) <= 0.5
+    ff = Loop(two, SimulatedRobot('two_segment_mismatched', seed=11))
+    ff.run(1.0, target, z)
+    ff_err, ff_ang = ff.true_error(target, z)
+    assert ff_err > 2e-3 and ff_ang > 0.5   # feedforward alone is far off
+
+
+def test_noise_does_not_destabilise_and_averages_out(loop1, one):
+    target, _ = reachable_target(one, [40e3, 60e3, 0.0])
+    cl = loop1(feedback=True, noise=True)
+    cl.run(2.5, target)
+    corrections = []
+    for _ in range(10):
+        cl.run(0.1, target)
+        corrections.append(cl.fb.correction_m.copy())
+    # jitter of the learned correction over 1 s: far below the noise of one sample
+    assert np.max(np.std(corrections, axis=0)) < 0.05e-3
+    assert cl.true_error(target)[0] < 0.15e-3
+
+
+# ------------------------------------------------------------------ outage and jumps
+def test_measurement_outage_falls_back_and_recovers(loop1, one):
+    target, _ = reachable_target(one, [70e3, 10e3, -30e3])
+    cl = loop1(feedback=True)
+    cl.run(2.5, target)
+    cl.measuring = False
+    cl.run(0.06, target)   # the next control step integrates the last sample, once
+    c_held = cl.fb.correction_m.copy()
+    cl.run(cl.fb.settings.measured_pose_timeout_s + 0.2, target)
+    assert cl.fb.state == STALE and cl.fb.fallback
+    np.testing.assert_array_equal(cl.fb.correction_m, c_held)     # integrator frozen
+    np.testing.assert_allclose(cl.handed[0], target)              # pure feedforward
+    ff_err, _ = cl.true_error(target)
+    assert ff_err > 1e-3                                          # the robot drifts back
+    cl.measuring = True
+    cl.run(2.0, target)
+    assert cl.fb.state == TRACKING
+    assert cl.true_error(target)[0] < 0.2e-3   # with 0.15 mm measurement noise
+
+
+def test_implausible_jump_is_refused_and_loop_recovers(loop1, one):
+    target, _ = reachable_target(one, [70e3, 10e3, -30e3])
+    cl = loop1(feedback=True, noise=False)
+    cl.run(2.0, target)
+    cl.corrupt = lambda p: p + np.array([0.05, 0.0, 0.0])   # a 50 mm glitch
+    cl.run(0.01, target)   # a control step, then the glitch arrives
+    assert cl.fb.rejected == 1
+    c_before = cl.fb.correction_m.copy()
+    cl.run(0.01, target)   # a control step sees it: feedforward, frozen
+    assert cl.fb.state == JUMP
+    np.testing.assert_allclose(cl.handed[0], target)
+    np.testing.assert_array_equal(cl.fb.correction_m, c_before)
+    cl.run(1.0, target)
+    assert cl.fb.rejected == 2 and cl.fb.state == TRACKING   # spike cost two samples
+    assert cl.true_error(target)[0] < 0.1e-3
+
+
+def test_large_target_jump_resets_correction(loop1, one):
+    a, _ = reachable_target(one, [70e3, 10e3, -30e3])
+    b, _ = reachable_target(one, [-20e3, 60e3, 90e3])
+    assert np.linalg.norm(a - b) > 0.01
+    cl = loop1(feedback=True, noise=False)
+    cl.run(2.0, a)
+    assert np.linalg.norm(cl.fb.correction_m) > 1e-3
+    cl.run(0.05, b)
+    assert cl.fb.resets == 1
+    cl.run(3.0, b)
+    assert cl.true_error(b)[0] < 0.1e-3
+
+
+# ------------------------------------------------------------------ limits
+def test_unreachable_target_keeps_correction_bounded_then_converges(loop1, one):
+    reach, _ = reachable_target(one, [70e3, 10e3, -30e3])
+    cl = loop1(feedback=True)
+    cl.run(2.0, reach)
+    far = reach + np.array([0.03, 0.0, 0.0])     # 30 mm further out: beyond the workspace
+    cl.run(2.0, far)
+    assert cl.fb.state == SATURATED and not cl.inv.reachable
+    assert np.linalg.norm(cl.fb.correction_m) <= cl.fb.settings.max_correction_m + 1e-12
+    assert cl.fb.resets >= 1
+    cl.run(3.0, reach)
+    assert cl.fb.state == TRACKING and cl.inv.reachable
+    assert cl.true_error(reach)[0] < 0.2e-3
+    # every pressure of the run was finite and in the limits (checked in Loop.control)
+    assert len(cl.pressures) > 100
+
+
+def test_unreachable_by_a_little_winds_nothing_up(loop1, one):
+    """A target just outside the workspace: the correction stays bounded, no creeping."""
+    edge = solve_forward(one, [150e3, -50e3, -50e3]).position
+    target = edge + np.array([0.002, 0.0, 0.0])
+    cl = loop1(feedback=True, noise=False)
+    cl.run(2.0, target)
+    c1 = np.linalg.norm(cl.fb.correction_m)
+    cl.run(2.0, target)
+    c2 = np.linalg.norm(cl.fb.correction_m)
+    assert c2 <= c1 + 1e-6 and c2 <= cl.fb.settings.max_correction_m
+
+
+# ------------------------------------------------------------------ payload
+def test_unknown_payload_is_corrected(loop1, one):
+    target, _ = reachable_target(one, [70e3, 10e3, -30e3])
+    cl = loop1(feedback=True, noise=False)
+    cl.run(2.0, target)
+    cl.robot.set_payload(0.05)       # the robot carries 50 g the model does not know
+    cl.run(0.3, target)
+    assert cl.true_error(target)[0] > 0.2e-3
+    cl.run(3.0, target)
+    assert cl.true_error(target)[0] < 0.1e-3
+
+
+# ------------------------------------------------------------------ the law alone
+def test_integral_law_against_a_constant_offset_plant():
+    """Plant = target + offset: the correction converges to -offset at rate gain_per_s."""
+    s = FeedbackSettings(gain_per_s=2.0)
+    fb = IntegralFeedback(s)
+    offset = np.array([1e-3, -2e-3, 0.5e-3])
+    target = np.array([0.0, 0.0, 0.1])
+    t, handed = 0.0, target
+    for _ in range(200):             # 2 s in 10 ms steps
+        fb.measurement(t, handed + offset)
+        t += 0.01
+        handed, _ = fb.corrected_target(t, target)
+        fb.report(True, False)
+    expected = -offset * (1 - (1 - 0.02) ** 199)   # discrete integrator, k dt = 0.02
+    np.testing.assert_allclose(fb.correction_m, expected, rtol=1e-2)
+
+
+def test_settings_are_validated():
+    with pytest.raises(ValueError, match='gain_per_s'):
+        FeedbackSettings(gain_per_s=-1.0)
+    with pytest.raises(ValueError, match='measured_pose_timeout_s'):
+        FeedbackSettings(measured_pose_timeout_s=float('nan'))
+
+
+def test_rotation_error_takes_one_axis_to_the_other():
+    a = np.array([0.1, 0.2, 1.0])
+    b = np.array([-0.2, 0.1, 0.9])
+    r = rotation_between(a, b)
+    np.testing.assert_allclose(rotation_from_vector(r) @ (a / np.linalg.norm(a)),
+                               b / np.linalg.norm(b), atol=1e-12)
+    np.testing.assert_array_equal(rotation_between(a, a), np.zeros(3))
+
+
+def test_delayed_measurements_are_compared_with_the_target_then():
+    """A perfect plant seen 0.2 s late on a moving target: no spurious correction.
+
+    Compared with the newest target, the delay would look like an error of
+    speed * delay (2 mm here) and the integrator would lead the target by it.
+    """
+    fb = IntegralFeedback(FeedbackSettings(gain_per_s=3.0))
+    speed = np.array([0.01, 0.0, 0.0])          # 10 mm/s
+    delay = 0.2
+    handed = []
+    t = 0.0
+    for _ in range(300):                        # 3 s, 10 ms steps
+        target = np.array([0.0, 0.0, 0.1]) + speed * t
+        p, _ = fb.corrected_target(t, target)
+        fb.report(True, False)
+        handed.append((t, p))
+        past = [h for h in handed if h[0] <= t - delay]
+        if past:
+            fb.measurement(past[-1][0], past[-1][1])   # taken then, arrives now
+        t += 0.01
+    assert np.linalg.norm(fb.correction_m) < 1e-9
+    assert fb.state == TRACKING

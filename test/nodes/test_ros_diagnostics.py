@@ -1,0 +1,76 @@
+"""nodes.diagnostics: per-solve statuses throttled to 10 Hz, news at once, the newest flushed."""
+
+import threading
+import time
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+
+from bellow_ancf_ros.nodes.diagnostics import STATUS_PERIOD_S, ThrottledStatus  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import diagnostics_qos  # noqa: E402
+from bellow_ancf_ros.demos.pipeline import wait_until  # noqa: E402
+
+
+@pytest.fixture
+def spun(ros_context):
+    """A node publishing statuses and a recorder of /diagnostics, spun in a thread."""
+    node = rclpy.create_node('status_source', namespace='/throttle', context=ros_context)
+    pub = node.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+    got, lock = [], threading.Lock()
+
+    def record(arr):
+        with lock:
+            got.extend(s for s in arr.status if s.name == 'solver')
+    node.create_subscription(DiagnosticArray, '/diagnostics', record, diagnostics_qos())
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    thread = threading.Thread(target=ex.spin, daemon=True)
+    thread.start()
+    assert wait_until(lambda: pub.get_subscription_count() >= 1, 10.0)
+
+    def statuses():
+        with lock:
+            return list(got)
+    yield node, pub, statuses
+    ex.shutdown(timeout_sec=2.0)
+    thread.join(5.0)
+    node.destroy_node()
+
+
+def _values(s):
+    return {v.key: v.value for v in s.values}
+
+
+def test_repeats_are_throttled_news_go_at_once_and_the_newest_arrives(spun):
+    node, pub, statuses = spun
+    st = ThrottledStatus(node, pub, 'solver')
+    OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
+    t0 = time.monotonic()
+    for i in range(200):  # a burst far faster than 10 Hz, all "target reached"
+        st.submit('robot', OK, 'target reached', {'i': str(i)})
+    burst_s = time.monotonic() - t0
+    assert wait_until(lambda: any(_values(s)['i'] == '199' for s in statuses()), 10.0)
+    ok = statuses()
+    assert _values(ok[0])['i'] == '0'  # the first at once
+    assert _values(ok[-1])['i'] == '199'  # the newest flushed by the timer
+    # at most one per period while the burst lasted, plus the flush
+    assert len(ok) <= 2 + burst_s / STATUS_PERIOD_S, [_values(s)['i'] for s in ok]
+    assert st.deferred >= 200 - len(ok)
+    # a new level goes out at once (published inside submit), a repeat right after it waits
+    n, published = len(statuses()), st.published
+    st.submit('robot', WARN, 'target unreachable', {'i': 'w'})
+    assert st.published == published + 1
+    st.submit('robot', WARN, 'target unreachable', {'i': 'w2'})
+    assert st.published == published + 1
+    assert wait_until(lambda: len(statuses()) >= n + 2, 10.0)
+    assert [(s.level, _values(s)['i']) for s in statuses()[n:]] == [(WARN, 'w'), (WARN, 'w2')]
+    # and statuses slower than the period are each published
+    for i in range(3):
+        time.sleep(STATUS_PERIOD_S * 1.2)
+        st.submit('robot', WARN, 'target unreachable', {'i': f's{i}'})
+    assert wait_until(
+        lambda: [_values(s)['i'] for s in statuses()][-3:] == ['s0', 's1', 's2'], 10.0)

@@ -1,0 +1,414 @@
+"""Node executables as a user meets them: start-up errors, recovery, Ctrl-C.
+
+Each node runs as ``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``
+in its own session with SIGINT at its default action (a process started from
+a non-interactive shell inherits SIGINT ignored), on a random ROS_DOMAIN_ID
+with LOCALHOST discovery.  The test talks to it with rclpy: lifecycle and
+parameter services, topics.  Waits poll with deadlines.
+"""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from lifecycle_msgs.msg import Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from bellow_ancf_ros.nodes import ros_util  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+STARTUP_TIMEOUT = 30.0
+TIMEOUT = 15.0
+INVERSE = '/inverse_kinetostatic_node'
+
+
+def wait_for(pred, timeout=TIMEOUT, what='condition'):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return
+        time.sleep(0.01)
+    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+
+
+def _default_sigint():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGQUIT, signal.SIG_DFL)
+
+
+class Proc:
+    """A node executable in its own session, output captured in a file."""
+
+    def __init__(self, module, args, env, log_path):
+        self.log_path = log_path
+        cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args', *args]
+        with open(log_path, 'w') as log:
+            self.proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                         stdin=subprocess.DEVNULL, start_new_session=True,
+                                         preexec_fn=_default_sigint)
+
+    def log(self):
+        return self.log_path.read_text()
+
+    def signal(self, sig):
+        os.killpg(self.proc.pid, sig)
+
+    def wait(self, timeout=TIMEOUT):
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            raise AssertionError(f'process did not exit within {timeout} s:\n{self.log()}')
+
+    def kill(self):
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGCONT)
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.proc.wait(5.0)
+
+
+@pytest.fixture(scope='module')
+def env():
+    e = dict(os.environ)
+    e['ROS_DOMAIN_ID'] = str(random.randint(0, 101))
+    e['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    e['PYTHONPATH'] = str(REPO) + os.pathsep + e.get('PYTHONPATH', '')
+    e['PYTHONUNBUFFERED'] = '1'
+    return e
+
+
+class Client:
+    """rclpy in this process on the nodes' domain: records commands and diagnostics."""
+
+    def __init__(self, domain):
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=domain)
+        self.node = rclpy.create_node('startup_test_client', context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.lock = threading.Lock()
+        self.cmds, self.diags = [], []
+        self.node.create_subscription(Float64MultiArray, 'pressure_command',
+                                      lambda m: self._add(self.cmds, m), command_qos())
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda m: self._add(self.diags, m), command_qos())
+        self.targets = self.node.create_publisher(PoseStamped, 'target_pose', command_qos())
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _add(self, lst, m):
+        with self.lock:
+            lst.append(m)
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: BLE001 - shut down
+            pass
+
+    def statuses(self, name_part):
+        with self.lock:
+            return [s for arr in self.diags for s in arr.status if name_part in s.name]
+
+    def n_cmds(self):
+        with self.lock:
+            return len(self.cmds)
+
+    def last_cmd(self):
+        with self.lock:
+            return list(self.cmds[-1].data)
+
+    def call(self, srv_type, name, req):
+        cli = self.node.create_client(srv_type, name)
+        assert cli.wait_for_service(timeout_sec=STARTUP_TIMEOUT), name
+        res = cli.call(req, timeout_sec=TIMEOUT)
+        assert res is not None, f'{name} timed out'
+        return res
+
+    def transition(self, tid):
+        req = ChangeState.Request()
+        req.transition.id = tid
+        return self.call(ChangeState, INVERSE + '/change_state', req).success
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(5.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def client(env):
+    c = Client(int(env['ROS_DOMAIN_ID']))
+    yield c
+    c.close()
+
+
+def kv(status):
+    return {v.key: v.value for v in status.values}
+
+
+def target(z=0.1, x=0.004):
+    m = PoseStamped()
+    m.header.frame_id = 'base'
+    m.pose.position.x, m.pose.position.z = x, z
+    m.pose.orientation.w = 1.0
+    return m
+
+
+# ------------------------------------------------------------------ tests
+BAD_STARTUP = [
+    ('inverse_kinetostatic_node', 'payload_kg:=-1.0', 'payload_kg', '-1.0', 'from 0 to 1'),
+    ('inverse_kinetostatic_node', 'max_rate_hz:=-5.0', 'max_rate_hz', '-5.0', 'from 0.1 to 1000'),
+    ('inverse_kinetostatic_node', 'pressure_unit:=bar', 'pressure_unit', "'bar'", "'kPa'"),
+    ('inverse_kinetostatic_node', 'payload_kg:=1', 'payload_kg', '1', 'floating-point'),
+    ('forward_kinetostatic_node', 'robot_config:=nonexistent', 'robot_config', "'nonexistent'",
+     'shipped robots: one_segment, one_segment_mismatched, two_segment'),
+    ('forward_kinetostatic_node', 'backbone_points:=1', 'backbone_points', '1', 'from 2 to 200'),
+    ('trajectory_publisher', 'trajectory:=figure_eight', 'trajectory', "'figure_eight'",
+     'planar_circle'),
+]
+
+
+def test_bad_startup_parameter_one_line_and_exit_2(env, tmp_path):
+    procs = [Proc(mod, ['-p', arg], env, tmp_path / f'{i}.log')
+             for i, (mod, arg, *_rest) in enumerate(BAD_STARTUP)]
+    for p, (mod, arg, name, value, allowed) in zip(procs, BAD_STARTUP):
+        code = p.wait(STARTUP_TIMEOUT)
+        out = p.log()
+        lines = [line for line in out.splitlines() if line.strip()]
+        assert code == 2, (arg, out)
+        assert 'Traceback' not in out, out
+        assert len(lines) == 1, (arg, out)
+        line = lines[0]
+        assert f'parameter {name} = {value}' in line, line
+        assert 'allowed' in line and allowed in line, line
+
+
+def test_bad_executor_name_one_line_and_exit_2(env, tmp_path):
+    p = Proc('inverse_kinetostatic_node', [], {**env, ros_util.EXECUTOR_ENV: 'fast'},
+             tmp_path / 'bad.log')
+    code = p.wait(STARTUP_TIMEOUT)
+    lines = [line for line in p.log().splitlines() if line.strip()]
+    assert code == 2, p.log()
+    assert len(lines) == 1 and 'Traceback' not in p.log(), p.log()
+    assert "environment variable BELLOW_ANCF_EXECUTOR = 'fast'" in lines[0], lines[0]
+    assert 'allowed: events, single_threaded' in lines[0], lines[0]
+
+
+def test_nonexistent_robot_stays_unconfigured_then_recovers_and_vents(env, tmp_path, client):
+    node = Proc('inverse_kinetostatic_node', ['-p', 'robot_config:=nonexistent'], env,
+                tmp_path / 'inverse.log')
+    try:
+        wait_for(lambda: 'stays unconfigured' in node.log(), STARTUP_TIMEOUT, 'hint in the log')
+        log = node.log()
+        assert "configure failed: robot_config 'nonexistent'" in log
+        assert f'ros2 param set {INVERSE} robot_config' in log
+        assert f'ros2 lifecycle set {INVERSE} configure' in log
+        # the heartbeat says so too, every second, while it waits
+        wait_for(lambda: any(kv(s).get('lifecycle_state') == 'unconfigured'
+                             for s in client.statuses('inverse_kinetostatic_node: status')),
+                 STARTUP_TIMEOUT, 'heartbeat while unconfigured')
+        st = [s for s in client.statuses('inverse_kinetostatic_node: status')][-1]
+        assert st.level == DiagnosticStatus.ERROR and 'ros2 param set' in st.message
+        assert node.proc.poll() is None
+
+        # recovery as the hint says: set the parameter, configure, activate
+        res = client.call(SetParameters, INVERSE + '/set_parameters', SetParameters.Request(
+            parameters=[Parameter('robot_config', value='one_segment').to_parameter_msg()]))
+        assert res.results[0].successful, res.results[0].reason
+        assert client.transition(Transition.TRANSITION_CONFIGURE)
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        wait_for(lambda: client.targets.get_subscription_count() >= 1, STARTUP_TIMEOUT,
+                 'target_pose subscribed')
+        n0 = client.n_cmds()
+        deadline = time.monotonic() + TIMEOUT
+        while client.n_cmds() == n0 and time.monotonic() < deadline:
+            client.targets.publish(target())
+            time.sleep(0.2)
+        assert client.n_cmds() > n0, node.log()
+        assert client.last_cmd() != [0.0, 0.0, 0.0]
+
+        # Ctrl-C: the vent arrives and the node says it was acknowledged
+        n1 = client.n_cmds()
+        node.signal(signal.SIGINT)
+        assert node.wait() == 0, node.log()
+        wait_for(lambda: client.n_cmds() > n1, 5.0, 'vent command')
+        assert client.last_cmd() == [0.0, 0.0, 0.0]
+        assert "vent command (0 Pa gauge) acknowledged by all" in node.log(), node.log()
+    finally:
+        node.kill()
+
+
+def _active_inverse(env, path, client):
+    node = Proc('inverse_kinetostatic_node', [], env, path)
+    return _first_command(node, client)
+
+
+def _first_command(node, client):
+    wait_for(lambda: client.targets.get_subscription_count() >= 1, STARTUP_TIMEOUT,
+             'inverse node subscribed')
+    deadline = time.monotonic() + TIMEOUT
+    while client.n_cmds() == 0 and time.monotonic() < deadline:
+        client.targets.publish(target())
+        time.sleep(0.2)
+    assert client.n_cmds() > 0, node.log()
+    return node
+
+
+SIGINT_AT_EXECUTOR = """
+import signal
+from rclpy.node import Node
+from bellow_ancf_ros.nodes import ros_util
+
+make_executor = ros_util.make_executor
+
+def executor():
+    signal.raise_signal(signal.SIGINT)  # Ctrl-C after the constructor, before the spin
+    return make_executor()
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__('startup_sigint_probe')
+
+ros_util.make_executor = executor
+ros_util.main_for(Probe, before_destroy=lambda node: print('VENT', flush=True))()
+print('CLEAN EXIT', flush=True)
+"""
+
+
+def test_sigint_between_constructor_and_spin_exits_cleanly_and_vents(env):
+    """Regression: a Ctrl-C while the executor was being built gave a traceback, no vent."""
+    res = subprocess.run([sys.executable, '-c', SIGINT_AT_EXECUTOR], env=env, cwd=REPO,
+                         capture_output=True, text=True, timeout=60,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, out
+    assert 'VENT' in res.stdout and 'CLEAN EXIT' in res.stdout, out
+    assert 'Traceback' not in out, out
+
+
+HANGING_TEARDOWN = """
+import sys, time
+from rclpy.node import Node
+from bellow_ancf_ros.nodes import ros_util
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__('hanging_teardown_probe')
+        print('UP', flush=True)
+
+    def destroy_node(self):
+        if sys.argv[1] == 'teardown':
+            time.sleep(60)  # a teardown that hangs
+        return super().destroy_node()
+
+def vent(node):
+    if sys.argv[1] == 'vent':
+        time.sleep(60)  # a vent step that hangs
+
+ros_util.main_for(Probe, before_destroy=vent)()
+print('RETURNED', flush=True)
+"""
+
+
+def test_a_hanging_shutdown_still_ends_the_process_by_the_deadline(env, tmp_path):
+    """Whatever hangs after Ctrl-C, the process exits STOP_DEADLINE_S later, and says so."""
+    procs = {}
+    for where in ('teardown', 'vent'):
+        log = open(tmp_path / f'{where}.log', 'w')
+        procs[where] = (subprocess.Popen(
+            [sys.executable, '-c', HANGING_TEARDOWN, where], env=env, cwd=REPO, stdout=log,
+            stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=_default_sigint), log)
+    for where, (proc, _) in procs.items():
+        wait_for(lambda: 'UP' in (tmp_path / f'{where}.log').read_text(), STARTUP_TIMEOUT,
+                 f'{where} probe up')
+    t0 = time.monotonic()
+    for proc, _ in procs.values():
+        os.killpg(proc.pid, signal.SIGINT)
+    for where, (proc, log) in procs.items():
+        try:
+            code = proc.wait(ros_util.STOP_DEADLINE_S + 10.0)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            log.close()
+        out = (tmp_path / f'{where}.log').read_text()
+        assert time.monotonic() - t0 >= ros_util.STOP_DEADLINE_S - 0.5, out
+        assert code == (0 if where == 'teardown' else 1), out
+        assert f'shutdown did not finish within {ros_util.STOP_DEADLINE_S:g} s' in out, out
+        assert 'RETURNED' not in out
+
+
+@pytest.mark.parametrize('executor', ros_util.EXECUTORS)
+def test_double_sigint_still_vents(env, tmp_path, client, executor):
+    """Terminal and ``ros2 launch`` both send SIGINT: the second must not cut the vent.
+
+    With either executor (``BELLOW_ANCF_EXECUTOR``): commands, then the vent.
+    """
+    node = _first_command(Proc('inverse_kinetostatic_node', [],
+                               {**env, ros_util.EXECUTOR_ENV: executor},
+                               tmp_path / 'inverse.log'), client)
+    try:
+        n = client.n_cmds()
+        node.signal(signal.SIGINT)
+        node.signal(signal.SIGINT)
+        time.sleep(0.05)
+        node.signal(signal.SIGINT)
+        assert node.wait() == 0, node.log()
+        wait_for(lambda: client.n_cmds() > n, 5.0, 'vent command')
+        assert client.last_cmd() == [0.0, 0.0, 0.0]
+        assert 'acknowledged by all' in node.log()
+    finally:
+        node.kill()
+
+
+def test_vent_not_acknowledged_by_a_stopped_subscriber_is_logged(env, tmp_path, client):
+    node = _active_inverse(env, tmp_path / 'inverse.log', client)
+    # a second subscriber of pressure_command (the forward node), then frozen (SIGSTOP)
+    listener = Proc('forward_kinetostatic_node', [], env, tmp_path / 'forward.log')
+    try:
+        preds = []
+        client.node.create_subscription(PoseStamped, 'predicted_pose', preds.append,
+                                        command_qos())
+        # matched with the inverse node once a command of it produced a prediction
+        deadline = time.monotonic() + STARTUP_TIMEOUT
+        while not preds and time.monotonic() < deadline:
+            client.targets.publish(target(x=0.002 + 0.001 * random.random()))
+            time.sleep(0.3)
+        assert preds, listener.log()
+        listener.signal(signal.SIGSTOP)
+        n = client.n_cmds()
+        t0 = time.monotonic()
+        node.signal(signal.SIGINT)
+        assert node.wait() == 0, node.log()
+        elapsed = time.monotonic() - t0
+        log = node.log()
+        assert 'NOT acknowledged by all 2 matched subscriber(s) within 4 s' in log, log
+        assert elapsed < 10.0          # the wait is bounded (4 s)
+        # the running subscriber got the vent all the same
+        wait_for(lambda: client.n_cmds() > n, 5.0, 'vent command')
+        assert client.last_cmd() == [0.0, 0.0, 0.0]
+    finally:
+        listener.kill()
+        node.kill()

@@ -1,0 +1,97 @@
+"""nodes.worker: the latest-only worker and the solve statistics (no ROS needed)."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.nodes import worker
+
+
+# ------------------------------------------------------------------ latest-only worker
+def _wait(pred, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.002)
+    return False
+
+
+def test_latest_worker_processes_only_the_newest():
+    gate = threading.Event()
+    seen = []
+
+    def process(item):
+        seen.append(item)
+        if item == 0:
+            gate.wait(5.0)      # block on the first item while more arrive
+
+    w = worker.LatestWorker(process)
+    try:
+        w.submit(0)
+        assert _wait(lambda: seen == [0])
+        for i in range(1, 1001):
+            w.submit(i)
+        assert w.pending
+        gate.set()
+        assert _wait(lambda: w.idle())
+        assert seen == [0, 1000]
+        assert w.submitted == 1001 and w.processed == 2 and w.dropped == 999
+    finally:
+        w.stop()
+
+
+def test_latest_worker_bounds_the_rate():
+    starts = []
+    w = worker.LatestWorker(lambda item: starts.append(time.monotonic()), min_period=lambda: 0.05)
+    try:
+        for i in range(5):
+            w.submit(i)
+            assert _wait(lambda: w.idle())
+        assert len(starts) == 5
+        assert np.min(np.diff(starts)) >= 0.05 - 1e-3
+    finally:
+        w.stop()
+
+
+def test_latest_worker_survives_exceptions_and_stops():
+    errors, seen = [], []
+
+    def process(item):
+        if item == 'boom':
+            raise RecursionError('deep')
+        seen.append(item)
+
+    w = worker.LatestWorker(process, on_error=errors.append)
+    w.submit('boom')
+    assert _wait(lambda: w.idle() and errors)
+    assert isinstance(errors[0], RecursionError)
+    w.submit('ok')
+    assert _wait(lambda: seen == ['ok'])
+    assert w.wait_idle(1.0)
+    w.stop()
+    assert not w._thread.is_alive()
+    w.submit('after stop')        # harmless, never processed
+    time.sleep(0.05)
+    assert seen == ['ok']
+
+
+# ------------------------------------------------------------ solve statistics
+def test_solve_stats_summary_window_and_age():
+    now = [100.0]
+    stats = worker.SolveStats(window=4, clock=lambda: now[0])
+    s = stats.summary()
+    assert s['count'] == 0 and s['last_solve_age_s'] is None and s['median_s'] is None
+    for dt in (0.001, 0.002, 0.003, 0.004, 0.010):
+        now[0] += 1.0
+        stats.record(dt, ok=dt < 0.01)
+    now[0] += 0.25
+    s = stats.summary()
+    assert s['count'] == 5 and s['failures'] == 1 and s['window'] == 4   # oldest dropped
+    assert s['last_s'] == 0.010 and s['max_s'] == 0.010 and s['last_ok'] is False
+    assert s['median_s'] == pytest.approx(0.0035)
+    assert s['p95_s'] == pytest.approx(np.percentile([0.002, 0.003, 0.004, 0.010], 95))
+    assert s['last_solve_age_s'] == pytest.approx(0.25)
+    assert stats.times() == [0.002, 0.003, 0.004, 0.010]
