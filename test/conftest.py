@@ -17,6 +17,18 @@ sys.path.insert(0, str(TEST_DIR / 'support'))
 limit_blas_threads()
 
 
+#: Test modules that start ROS 2 nodes, node processes or launch files (marker ``ros``).
+ROS_MODULES = ('test_launch.py', 'test_readme_examples.py')
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark ROS tests ``ros`` (``test_ros_*.py`` and :data:`ROS_MODULES`): ``-m "not ros"``."""
+    for item in items:
+        name = item.path.name
+        if name.startswith('test_ros_') or name in ROS_MODULES:
+            item.add_marker(pytest.mark.ros)
+
+
 @pytest.fixture(scope="session")
 def one():
     """The default one-segment robot model."""

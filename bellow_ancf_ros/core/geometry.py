@@ -114,7 +114,7 @@ def angle_between(a: Any, b: Any):
 
 
 def hat(v: np.ndarray) -> np.ndarray:
-    """Skew matrices ``[v]x`` of vectors ``(..., 3)``: ``[v]x u`` is the cross product ``v x u``."""
+    """Skew matrices ``[v]x`` of vectors ``(..., 3)``: ``[v]x u`` is the cross product."""
     v = np.asarray(v, dtype=float)
     out = np.zeros(v.shape[:-1] + (3, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]

@@ -54,7 +54,7 @@ class _MocapRecorder(SpunNode):
         from geometry_msgs.msg import PoseStamped
         from std_msgs.msg import Float64MultiArray
 
-        from .nodes.ros_util import command_qos
+        from ..nodes.ros_util import command_qos
 
         super().__init__(domain, 'calibration_demo')
         qos = record_qos()

@@ -144,7 +144,7 @@ class Run:
 
         from ..core.experiments import trajectory
         from ..core.geometry import quaternion_from_z_axis
-        from .nodes.ros_util import command_qos, pose_message
+        from ..nodes.ros_util import command_qos, pose_message
         case = self.case
         kw = {'period': case.period_s}
         if case.bending_angle_deg is not None:

@@ -161,7 +161,7 @@ class FeedbackLink:
                 raise contract.InputError(f'measured position is not finite: {pos.tolist()}')
             z = (geometry.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
                  if self._use_orientation else None)
-        except contract.InputError as exc:
+        except ValueError as exc:  # contract.InputError, or a bad quaternion (core.geometry)
             self.refused += 1
             self._refusals.report(str(exc), self.refused)
             return

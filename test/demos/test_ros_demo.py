@@ -41,7 +41,7 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from bellow_ancf_ros import ros_demo, ros_demo_plot
+    from bellow_ancf_ros.demos import closed_loop as ros_demo, closed_loop_plot as ros_demo_plot
 
     t = np.linspace(0.0, 20.0, 400, endpoint=False)
     circle = np.column_stack([0.02 * np.cos(t / 20 * 2 * np.pi),

@@ -773,7 +773,8 @@ def test_trajectory_publisher_bending_circle(h, two):
     assert node.get_parameter('trajectory').value == 'bending_circle'
     res = node.set_parameters([Parameter('bending_angle_deg', value=10.0)])
     assert res[0].successful
-    pos, z = trajectories.trajectory('bending_circle', 1.0, two.cfg, bending_angle_deg=10.0, period=4.0)
+    pos, z = trajectories.trajectory('bending_circle', 1.0, two.cfg, bending_angle_deg=10.0,
+                                     period=4.0)
     ppos, _ = node.pose_at(1.0)
     np.testing.assert_allclose(ppos, pos[0], atol=1e-15)
 

@@ -352,7 +352,7 @@ def compare_pcc(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05, 0.1
             progress(done, total, f'payload {m:g} kg: {sc.name}')
             for step, fw in enumerate(sweep_scheme(model, sc, n_points, m)):
                 pc = pcc.forward(fw.pressures_pa)
-                ok = bool(fw.converged and fw.stable is not False)
+                ok = fw.success
                 d = fw.position - pc.position if ok else np.full(3, np.nan)
                 ang = angle_between(fw.z_axis, pc.z_axis) if ok else float('nan')
                 rows.append(dict(payload_kg=float(m), category=cat, scheme_name=sc.name, step=step,
@@ -494,7 +494,7 @@ def tracking_study(model: RobotModel, name: str, n_points: int = 100, payload_kg
             fw = solve_forward(model, P[k], payload_kg)
         prev_fw = fw if fw.converged else None
         if fw.converged:
-            succ[k] = bool(ok and fw.stable is not False)
+            succ[k] = bool(ok and fw.success)
             pred[k] = fw.position
             pred_z[k] = fw.z_axis
             perr[k] = float(np.linalg.norm(fw.position - pos[k]))

@@ -46,8 +46,11 @@ class WarmState:
 class ForwardResult:
     """Converged (or not) configuration of the robot; SI units throughout.
 
-    ``success`` is true only for a converged *and* stable equilibrium: only
-    such a result is a usable configuration.
+    ``success`` (:func:`~bellow_ancf_ros.core.status.usable`) is true for a
+    converged equilibrium that was not found unstable: with the stability
+    check (the default) a converged and stable one; with
+    ``check_stability=False`` (``stable`` None) any converged one.
+    ``status`` is a :class:`~bellow_ancf_ros.core.status.ForwardStatus`.
     """
 
     model: RobotModel
@@ -87,6 +90,7 @@ class ForwardResult:
 
     @property
     def success(self) -> bool:
+        """A usable configuration: converged, and not found unstable (class docstring)."""
         return usable(self.converged, self.stable)
 
     @property

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import solve_forward, solve_inverse
-from bellow_ancf_ros.core.solve import _inverse_limits as inverse_limits
 from bellow_ancf_ros.core import InverseStatus, precompute_corners
 from bellow_ancf_ros.core.solve import MAX_TARGET_LENGTHS
 
