@@ -50,6 +50,6 @@ def test_results_carry_enum_statuses_and_plain_json():
     far = solve_inverse(model, fw.position + [0.0, 0.0, 1.0])
     assert far.status == InverseStatus.UNREACHABLE and not far.success
     assert far.message.startswith(InverseStatus.UNREACHABLE.message)
-    heavy = solve_forward(model, [-50e3, -50e3, -50e3], payload_kg=0.4)
+    heavy = solve_forward(RobotModel(load_robot('two_segment')), [0.0] * 6, payload_kg=0.25)
     assert heavy.status is ForwardStatus.UNSTABLE and not heavy.success
     assert heavy.message.startswith(ForwardStatus.UNSTABLE.message)

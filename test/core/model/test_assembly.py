@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import solve_forward
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "../..", "data"))
 from make_solver_baseline import eval_state, model_for  # noqa: E402  (the baseline's cases)
@@ -90,3 +90,26 @@ def test_constraint_jacobian_has_full_row_rank_at_a_bent_solution(name):
     s = np.linalg.svd(Cq, compute_uv=False)
     assert s.min() > 1e-6 * s.max()
     assert np.linalg.matrix_rank(Cq) == model.nc
+
+
+def test_a_model_and_what_solvers_cached_with_it_are_freed_together():
+    """One per-model cache (RobotModel.cached): corners, cold solves, patterns go with the model.
+
+    Regression: module-level WeakKeyDictionaries whose values (ForwardResults)
+    held their model kept every model alive (a leak per node configure).
+    """
+    import gc
+    import weakref
+
+    from bellow_ancf_ros.core import precompute_corners, solve_inverse
+
+    model = RobotModel(load_robot("one_segment"))
+    assert precompute_corners(model, 0.0)
+    fw = solve_forward(model, [50e3, 0.0, 0.0])
+    inv = solve_inverse(model, fw.position + [0.0, 0.0, 0.5])  # unreachable: the corners
+    assert not inv.reachable
+    assert model.cached("corner_solutions", lambda m: None)  # filled
+    ref = weakref.ref(model)
+    del model, fw, inv
+    gc.collect()
+    assert ref() is None
