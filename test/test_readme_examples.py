@@ -1,17 +1,23 @@
-"""Every command the README documents works.
+"""Every command the README and the pages of ``docs/`` document works.
+
+Commands are collected from the code blocks of ``README.md`` and of every
+``docs/*.md`` page.
 
 * ``bellow-ancf ...`` lines: concrete ones (no placeholder left once the
   optional ``[...]`` parts are dropped) run and exit 0, except the long
   studies listed in ``SLOW`` (tested with smaller inputs in
-  ``test/test_cli_tools.py``); for every line each documented option is in
+  ``test/cli/test_cli_tools.py``); for every line each documented option is in
   the subcommand's ``--help``.
 * ``.venv/bin/python -m bellow_ancf_ros.nodes...`` lines start as processes,
   come up and stop cleanly on Ctrl-C.
 * ``ros2 run`` lines (a ROS install is needed for the ``ros2`` command):
   the same node class starts with the same ``--ros-args`` and the
   parameters given there are in effect; ``ros2 param set`` values are
-  accepted; the ``ros2 topic pub`` target is reachable on the robot the
-  block's inverse node runs.  ``ros2 launch`` lines: ``test/test_launch.py``.
+  accepted; ``ros2 lifecycle set`` transitions succeed; the ``ros2 topic pub``
+  target is reachable on the robot the block's inverse node (``ros2 run`` or
+  ``ros2 launch`` line) runs.  ``ros2 launch`` lines:
+  ``test/nodes/test_launch.py``, which reads the README's; a page's launch
+  line must therefore also be in the README.
 """
 
 import os
@@ -30,6 +36,7 @@ import yaml
 rclpy = pytest.importorskip('rclpy')
 
 from rclpy.context import Context  # noqa: E402
+from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse  # noqa: E402
@@ -42,6 +49,8 @@ from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # no
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / 'README.md'
+#: the documents whose code blocks hold commands: the README, then every page of docs/
+DOCUMENTS = [README, *sorted((REPO / 'docs').glob('*.md'))]
 NODES = {'inverse_kinetostatic_node': InverseKinetostaticNode,
          'forward_kinetostatic_node': ForwardKinetostaticNode,
          'trajectory_publisher': TrajectoryPublisher,
@@ -58,16 +67,21 @@ STARTED = {'inverse_kinetostatic_node': 'active: pressure commands enabled',
            'simulated_robot_node': 'simulating robot'}
 
 
-def code_lines():
-    """Commands in the README's code blocks (continuation lines joined), in order."""
-    text = README.read_text()
-    blocks = re.findall(r'```[a-z]*\n(.*?)```', text, re.S)
+def code_lines(documents=None):
+    """Commands in the documents' code blocks (continuation lines joined), in order.
+
+    Each comes with its block, ``(document name, block number)``.
+    """
     lines = []
-    for b, block in enumerate(blocks):
-        for line in block.replace('\\\n', ' ').splitlines():
-            line = line.split('  #')[0].strip()
-            if line:
-                lines.append((b, ' '.join(line.split())))
+    for doc in DOCUMENTS if documents is None else documents:
+        text = doc.read_text()
+        blocks = re.findall(r'```[a-z]*\n(.*?)```', text, re.S)
+        for b, block in enumerate(blocks):
+            for line in block.replace('\\\n', ' ').splitlines():
+                line = line.split('  #')[0].strip()
+                if line:
+                    lines.append(((doc.relative_to(REPO).as_posix(), b),
+                                  ' '.join(line.split())))
     return lines
 
 
@@ -94,6 +108,18 @@ def test_readme_has_the_examples_this_file_checks():
     assert sum(line.startswith('ros2 run bellow_ancf_ros ') for line in lines) >= 4
     assert any(line.startswith('ros2 topic pub') for line in lines)
     assert any(line.startswith('ros2 param set') for line in lines)
+    assert any(line.startswith('ros2 lifecycle set') for line in lines)
+    assert {doc for (doc, _), _ in code_lines()} >= {'README.md', 'docs/ros.md', 'docs/cli.md'}
+
+
+def test_every_documented_launch_line_is_one_test_launch_runs():
+    """``test/nodes/test_launch.py`` runs the README's ``ros2 launch`` lines."""
+    readme = {line for _, line in code_lines([README])
+              if line.startswith('ros2 launch bellow_ancf_ros ')}
+    assert readme
+    for (doc, _), line in code_lines():
+        if line.startswith('ros2 launch'):
+            assert line in readme, (doc, line)
 
 
 def test_every_documented_cli_option_exists(capsys):
@@ -241,12 +267,21 @@ def test_ros2_run_lines_start_with_their_parameters():
             _stop(node, ctx)
 
 
+def _block_robots():
+    """The robot of each block's inverse node (its ``ros2 run`` or ``ros2 launch`` line)."""
+    out = {}
+    for block, line in code_lines():
+        args = shlex.split(line)
+        if line.startswith('ros2 run bellow_ancf_ros inverse_kinetostatic_node'):
+            out[block] = _given_parameters(args[4:], args[3]).get('robot_config', 'one_segment')
+        elif line.startswith('ros2 launch bellow_ancf_ros ') and block not in out:
+            given = dict(a.split(':=', 1) for a in args[4:] if ':=' in a)
+            out[block] = given.get('robot_config', 'one_segment')
+    return out
+
+
 def test_ros2_param_set_and_topic_pub_examples():
-    block_robot = {}
-    for block, exe, ros_args in _ros2_run_lines():
-        if exe == 'inverse_kinetostatic_node':
-            given = _given_parameters(ros_args, exe)
-            block_robot[block] = given.get('robot_config', 'one_segment')
+    block_robot = _block_robots()
     checked = 0
     for block, line in code_lines():
         args = shlex.split(line)
@@ -272,3 +307,27 @@ def test_ros2_param_set_and_topic_pub_examples():
             assert inv.reachable and inv.success, (line, inv.message)
             checked += 1
     assert checked >= 2
+
+
+def test_ros2_lifecycle_set_examples():
+    """Each block's ``ros2 lifecycle set`` transitions, in order, on its inverse node."""
+    block_robot = _block_robots()
+    transitions = {}
+    for block, line in code_lines():
+        if line.startswith('ros2 lifecycle set'):
+            args = shlex.split(line)
+            assert args[3] == '/inverse_kinetostatic_node', line
+            transitions.setdefault(block, []).append(args[4])
+    assert transitions
+    for block, names in transitions.items():
+        node, ctx = _start(InverseKinetostaticNode, ['--ros-args', '-p',
+                                                     f'robot_config:={block_robot[block]}'])
+        try:
+            assert node.is_active
+            for name in names:
+                done = getattr(node, f'trigger_{name}')()
+                assert done == TransitionCallbackReturn.SUCCESS, (block, name, done)
+                if name in ('activate', 'deactivate'):
+                    assert node.is_active == (name == 'activate'), (block, name)
+        finally:
+            _stop(node, ctx)
