@@ -66,7 +66,7 @@ def missing_paths(text):
 
 
 def slug(heading):
-    """GitHub's anchor of a markdown heading."""
+    """Anchor of a markdown heading, as GitHub makes it."""
     text = re.sub(r'[^\w\- ]', '', heading.strip().lower())
     return text.replace(' ', '-')
 
