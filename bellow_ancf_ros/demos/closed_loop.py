@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
 from .pipeline import NodeProcess, Recorder, child_env, wait_until
@@ -294,10 +295,6 @@ def _pose(msg):
     return np.array([p.x, p.y, p.z]), z_axis_from_quaternion((o.x, o.y, o.z, o.w))
 
 
-def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
-
-
 def analyse(run: dict, cfg) -> dict:
     """Errors of the measured pose against the target, steady state, model error, safety."""
     rec = run['rec']
@@ -317,7 +314,8 @@ def analyse(run: dict, cfg) -> dict:
         res['target'] = np.array([r[1] for r in rows])
         res['measured'] = np.array([r[3] for r in rows])
         res['pos_err'] = np.linalg.norm(res['measured'] - res['target'], axis=1)
-        res['ang_err'] = _angle(np.array([r[2] for r in rows]), np.array([r[4] for r in rows]))
+        res['ang_err'] = angle_between(np.array([r[2] for r in rows]),
+                                       np.array([r[4] for r in rows]))
     # steady state: the last target, held; mean of the measured poses over the last half
     last = [i for i, t in enumerate(tt) if t <= run['hold']]
     held = [(p, z) for t, p, z in meas if 0.5 * (run['hold'] + run['end']) <= t <= run['end']]
@@ -326,7 +324,7 @@ def analyse(run: dict, cfg) -> dict:
         mp = np.mean([h[0] for h in held], axis=0)
         mz = np.mean([h[1] for h in held], axis=0)
         res['steady_mm'] = float(np.linalg.norm(mp - tp) * 1e3)
-        res['steady_deg'] = float(np.degrees(_angle(tz, mz / np.linalg.norm(mz))))
+        res['steady_deg'] = float(np.degrees(angle_between(tz, mz / np.linalg.norm(mz))))
     # the model's own error: prediction from measured pressures vs the measured pose
     mt = np.array([m[0] for m in meas])
     model_err = []

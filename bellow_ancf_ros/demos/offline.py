@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from ..core import RobotModel, load_robot, solve_forward, solve_inverse
+from ..core.geometry import angle_between
 
 
 def _timed(func, *args, **kwargs):
@@ -30,7 +31,7 @@ def _mm(position_m) -> str:
 
 def _tilt_deg(z_axis) -> float:
     """Bending angle: angle between the end-effector z-axis and the base z-axis."""
-    return float(np.degrees(np.arccos(np.clip(z_axis[2], -1.0, 1.0))))
+    return float(np.degrees(angle_between(z_axis, [0.0, 0.0, 1.0])))
 
 
 def _state(result) -> str:

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.geometry import angle_between
 from .pipeline import NodeProcess, Recorder, child_env, wait_until
 
 ROBOT = 'two_segment'
@@ -111,7 +112,7 @@ def analyse(rec: dict, t_start: float, t_end: float) -> dict:
         pp = np.array([r[3] for r in rows])
         pz = np.array([r[4] for r in rows])
         pos_err = np.linalg.norm(pp - tp, axis=1)
-        ang_err = np.arctan2(np.linalg.norm(np.cross(tz, pz), axis=1), np.sum(tz * pz, axis=1))
+        ang_err = angle_between(tz, pz)
         out.update(t=t, target=tp, predicted=pp, pos_err=pos_err, ang_err=ang_err)
     solve = {'inverse': [], 'forward': []}
     levels = {'inverse': [0, 0, 0], 'forward': [0, 0, 0]}
