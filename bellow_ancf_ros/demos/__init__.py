@@ -6,14 +6,14 @@ Each runs as ``python -m bellow_ancf_ros.demos.<module>``:
   as separate processes against a mismatched simulated robot, feedforward
   then integral feedback, one and two segments, next to the paper's
   figures; a plot.
-* :mod:`.calibration` -- ``make demo-calibrate`` (RUNTIME_CALIBRATE): excitation
+* :mod:`.calibration` -- ``make demo-calibrate`` (about 2.5 min): excitation
   -> simulated robot seen by an offset motion capture -> rosbag2 ->
   ``bellow-ancf calibrate`` -> tracking with the nominal and the
   calibrated robot files.
-* :mod:`.offline` -- ``make demo-offline`` (RUNTIME_OFFLINE): the core alone, forward
+* :mod:`.offline` -- ``make demo-offline`` (about 2 s): the core alone, forward
   and inverse problems printed, no ROS.
 * :mod:`.wiring_check` -- run shortened by ``test/nodes/test_ros_e2e.py``
-  (RUNTIME_WIRING): every topic of the launch file wired as documented.
+  (about 40 s in full): every topic of the launch file wired as documented.
 
 Helpers: :mod:`.pipeline` (node processes, recorders, waiting with a
 deadline) and :mod:`.closed_loop_plot` (the main job's figure).
