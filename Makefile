@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 # Keep ROS 2 discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 
-.PHONY: all venv demo demo-offline demo-calibrate test bench bench-calibrate readme-speed clean
+.PHONY: all venv demo demo-offline demo-calibrate test bench bench-calibrate readme-speed soak clean
 
 all: test
 
@@ -51,6 +51,8 @@ bench: $(STAMP)
 	fi; rc=$$?; rm -rf $$base; exit $$rc
 	$(VENV)/bin/python bench/fuzz_bench.py
 	$(VENV)/bin/python bench/budget_bench.py
+	$(VENV)/bin/python bench/stream_latency.py one_segment
+	$(VENV)/bin/python bench/stream_latency.py two_segment
 
 # puts bench/speed_table.md (from the last `make bench`) into README.md between its markers
 readme-speed:
@@ -59,6 +61,12 @@ readme-speed:
 # calibration of ~200 samples, one and two segments (target: under a minute)
 bench-calibrate: $(STAMP)
 	$(VENV)/bin/python bench/calibration_bench.py
+
+# the closed loop for SOAK_MINUTES with faults injected: growth, latency, bad outputs, recovery
+# (not part of `make test`)
+SOAK_MINUTES ?= 10
+soak: $(STAMP)
+	$(VENV)/bin/python bench/soak.py --minutes $(SOAK_MINUTES)
 
 clean:
 	rm -rf $(VENV)

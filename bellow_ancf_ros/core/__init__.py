@@ -33,8 +33,8 @@ from .fit import (CalibrationError, CalibrationResult, Recording, RecordingError
 from .linalg import limit_blas_threads
 from .model import (ConfigError, PccModel, RobotConfig, RobotModel, SegmentConfig, Stage1,
                     load_robot, parameter_keys, robot_from_dict)
-from .solve import (ForwardResult, InverseResult, precompute_corners, solve_forward,
-                    solve_inverse, warm_up)
+from .solve import (ForwardResult, InverseResult, payload_problem, precompute_corners,
+                    solve_forward, solve_inverse, warm_up)
 from .status import ForwardStatus, InverseStatus
 
 __all__ = [
@@ -43,7 +43,7 @@ __all__ = [
     "PccModel", "PressureRegulators", "Recording", "RecordingError", "RobotConfig", "RobotModel",
     "SegmentConfig", "SimulatedRobot", "Stage1", "calibrate", "calibration", "control",
     "experiments", "fit", "geometry", "identification", "limit_blas_threads", "linalg",
-    "load_robot", "model", "parameter_keys", "precompute_corners", "read_recording",
-    "robot_from_dict", "solve", "solve_forward", "solve_inverse", "status", "studies",
-    "trajectories", "warm_up",
+    "load_robot", "model", "parameter_keys", "payload_problem", "precompute_corners",
+    "read_recording", "robot_from_dict", "solve", "solve_forward", "solve_inverse", "status",
+    "studies", "trajectories", "warm_up",
 ]

@@ -123,8 +123,8 @@ from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 from std_msgs.msg import Float64MultiArray
 
-from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, precompute_corners,
-                    solve_forward, solve_inverse, warm_up)
+from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_problem,
+                    precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
 from . import contract, worker
 from .measured_feedback import FeedbackLink
@@ -148,6 +148,8 @@ __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_
 #: Parameters read on configure (a change needs cleanup + configure).
 CONFIGURE_PARAMETERS = ('robot_config',)
 BUDGET_PERIODS = 5.0   # wall-clock budget of one solve, in periods of max_rate_hz
+PAYLOAD_CHECK_BUDGET_S = 1.0  # wall-clock budget of the buckling check of a new payload_kg
+BUDGET_STATUSES = (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET)
 MAX_CONTINUATIONS = 40  # budget slices one target may take before the node gives up on it
 
 
@@ -188,6 +190,8 @@ class InverseKinetostaticNode(LifecycleNode):
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
+        self._solve_lock = threading.Lock()   # one solve of the model at a time (worker, checks)
+        self._last_target = None   # newest accepted target (position, z-axis), uncorrected
         self._active = False
         self._configured = False
         self._configure_error = ''
@@ -207,6 +211,7 @@ class InverseKinetostaticNode(LifecycleNode):
                       'over_budget': 0}
         self.solve_stats = worker.SolveStats()
         self._last_item, self._continuations = None, 0   # budget slices of one target
+        self._resume = None   # (item, unusable budget-limited answer): its next slice goes on
         # diagnostics in every lifecycle state: per-solve statuses and the 1 Hz heartbeat
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         # per-solve statuses: a new level or message at once, an unchanged one at most at 10 Hz
@@ -242,12 +247,33 @@ class InverseKinetostaticNode(LifecycleNode):
         return 'active' if self._active else 'inactive' if self._configured else 'unconfigured'
 
     def _configure_time_check(self, param) -> str:
-        """Refuse a change of a parameter read on configure unless unconfigured."""
+        """Refuse a change of a parameter read on configure unless unconfigured.
+
+        Also refuses a ``payload_kg`` the configured robot cannot carry at
+        the current target (or the current command), where the model can
+        tell (core :func:`~bellow_ancf_ros.core.payload_problem`).
+        """
+        if param.name == 'payload_kg':
+            return self._payload_check(float(param.value))
         if param.name not in CONFIGURE_PARAMETERS or not self._configured:
             return ''
         state = 'active' if self._active else 'inactive'
         return contract.configure_time_refusal(param.name, self._node_path(), state,
                                                self.get_parameter(param.name).value)
+
+    def _payload_check(self, payload: float) -> str:
+        """Why the configured robot cannot carry ``payload`` where it is, or ''."""
+        with self._lock:
+            model, warm, target = self._model, self._warm, self._last_target
+            command = self.last_command_pa
+        if model is None:
+            return ''
+        with self._solve_lock:
+            if target is not None:
+                return payload_problem(model, payload, target[0], target[1], warm_start=warm,
+                                       time_budget_s=PAYLOAD_CHECK_BUDGET_S)
+            return payload_problem(model, payload, pressures=command,
+                                   time_budget_s=PAYLOAD_CHECK_BUDGET_S)
 
     def _feedback_heartbeat(self):
         """Feedback state for the heartbeat; WARN while it falls back to feedforward."""
@@ -363,6 +389,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 setattr(self, attr, None)
         with self._lock:
             self._model = self._cfg = self._warm = None
+            self._last_target = None
 
     def vent_and_shutdown(self) -> None:
         """Shutdown transition from any primary state (vents if configured)."""
@@ -445,6 +472,8 @@ class InverseKinetostaticNode(LifecycleNode):
             self._refuse(str(exc))
             return
         item = (pos, z, msg.header.stamp, time.monotonic())
+        with self._lock:
+            self._last_target = (pos, z)
         self._feedback.remember(item)
         self._worker.submit(item)
         # hand the GIL to the solver thread now: else it waits for the executor's own Python
@@ -470,12 +499,16 @@ class InverseKinetostaticNode(LifecycleNode):
             model, cfg, warm, active = self._model, self._cfg, self._warm, self._active
         if model is None or not active:
             return
+        resume, self._resume = self._resume, None
+        if resume is not None and resume[0] is item:
+            warm = resume[1]   # the next slice of a solve with no usable answer yet
         payload = float(self.get_parameter('payload_kg').value)
         t0 = time.perf_counter()
         try:
             pos, z = self._feedback.correct(pos, z)   # closed loop: the shifted target
-            inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
-                                time_budget_s=self._time_budget())
+            with self._solve_lock:
+                inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
+                                    time_budget_s=self._time_budget())
         except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
             dt = time.perf_counter() - t0
             self.solve_stats.record(dt, ok=False)
@@ -524,7 +557,23 @@ class InverseKinetostaticNode(LifecycleNode):
         values = inverse_values(inv, dt, payload, unit)
         if usable:
             self._feedback.after_solve(inv)
+        else:
+            self._feedback.no_command()   # nothing goes out: the integrator freezes
         values.update(self._feedback.status())
+        if not usable and inv.status in BUDGET_STATUSES:
+            # no usable answer yet: the next slice goes on from the progress it made, so that
+            # the solve ends with its cause (e.g. an unstable equilibrium) instead of a budget
+            more = self._next_slice(item)
+            if more:
+                self._resume = (item, inv)
+            msg = (f'no usable answer within the solve budget, last command kept'
+                   f'{", continuing" if more else ""}: {inv.message}')
+            self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
+            self._publish_diag(DiagnosticStatus.WARN if more else DiagnosticStatus.ERROR,
+                               msg, values)
+            if not more:
+                self.stats['failed'] += 1
+            return
         if not usable:
             self.stats['failed'] += 1
             msg = f'solve failed ({inv.message}); last command kept'
@@ -532,18 +581,16 @@ class InverseKinetostaticNode(LifecycleNode):
             self._publish_diag(DiagnosticStatus.ERROR, msg, values)
             return
         if unsafe is not None:
+            self._feedback.no_command()
             self.stats['failed'] += 1
             msg = f'solver output refused by the safety gate ({unsafe}); last command kept'
             self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
             self._publish_diag(DiagnosticStatus.ERROR, msg, values)
             return
         values['pressures'] = ' '.join(f'{v:.6g}' for v in contract.to_unit(p, unit))
-        if inv.status in (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET):
+        if inv.status in BUDGET_STATUSES:
             self.stats['over_budget'] += 1
-            self._continuations = self._continuations + 1 if item is self._last_item else 1
-            self._last_item = item
-            more = (self._continuations < MAX_CONTINUATIONS and self._worker is not None
-                    and self._worker.resubmit(item))
+            more = self._next_slice(item)
             msg = (f'solve budget used up, best in-limit pressures so far sent'
                    f'{", continuing" if more else ""}: {inv.message}')
             self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
@@ -560,6 +607,13 @@ class InverseKinetostaticNode(LifecycleNode):
             self._publish_diag(DiagnosticStatus.WARN,
                                f'target unreachable, best reachable pressures sent: {inv.message}',
                                values)
+
+    def _next_slice(self, item) -> bool:
+        """Queue the next budget slice of ``item`` (at most ``MAX_CONTINUATIONS``); queued."""
+        self._continuations = self._continuations + 1 if item is self._last_item else 1
+        self._last_item = item
+        return (self._continuations < MAX_CONTINUATIONS and self._worker is not None
+                and self._worker.resubmit(item))
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
         cfg = self._cfg

@@ -112,11 +112,15 @@ class FeedbackLink:
         self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
                                                   self._on_measured, measured_pose_qos())
 
+        period = 1.0 / g('feedback_rate_hz').value
+
         def tick():
+            # a held target keeps being corrected; a target stream is solved anyway, and a
+            # re-solve would only take the next target's slot of the rate limit
             item = self._last_item
-            if item is not None:
+            if item is not None and time.monotonic() - item[3] >= period:
                 resubmit(item)
-        self._timer = self.node.create_timer(1.0 / g('feedback_rate_hz').value, tick)
+        self._timer = self.node.create_timer(period, tick)
         self.node.get_logger().info(
             f'feedback: integral on measured_pose (gain {s.gain_per_s:g} /s, clamp '
             f'{s.max_correction_m * 1e3:g} mm, timeout {s.measured_pose_timeout_s:g} s)')
@@ -145,7 +149,11 @@ class FeedbackLink:
 
     # ------------------------------------------------------------ data flow
     def remember(self, item: Any) -> None:
-        """The newest accepted target item (re-submitted at ``feedback_rate_hz``)."""
+        """The newest accepted target item (re-submitted at ``feedback_rate_hz`` while held).
+
+        ``item[3]``: its arrival time (``time.monotonic()``); no re-solve
+        within one feedback period of it.
+        """
         self._last_item = item
 
     def _on_measured(self, msg: PoseStamped) -> None:
@@ -192,6 +200,12 @@ class FeedbackLink:
             if self._law is not None and fw is not None:
                 self._law.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
                                  fw.position, fw.z_axis)
+
+    def no_command(self) -> None:
+        """No command went out for the corrected target: the integrator freezes until one does."""
+        with self._lock:
+            if self._law is not None:
+                self._law.no_command()
 
     @property
     def fallback(self) -> bool:

@@ -18,7 +18,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['LatestWorker', 'SolveStats']
+__all__ = ['BURST', 'LatestWorker', 'SolveStats']
+
+#: Starts the latest-only worker may make back to back after an idle period (token bucket).
+BURST = 2
 
 
 # ------------------------------------------------------------ latest-only
@@ -27,8 +30,17 @@ class LatestWorker:
 
     ``submit(item)`` stores ``item`` in a single slot (overwriting an item not
     yet processed, which counts as dropped) and wakes the worker.  The worker
-    calls ``process(item)`` for the newest item, and starts two calls at least
-    ``min_period()`` seconds apart.  Memory is one item, whatever the input rate.
+    calls ``process(item)`` for the newest item.  Memory is one item, whatever
+    the input rate.
+
+    The rate is bounded by a token bucket: a start takes a credit, credits
+    come back one per ``min_period()`` seconds, at most :data:`BURST` held.
+    So the long-run rate is at most ``1 / min_period()``, an item arriving
+    after an idle period starts at once, and a stream at exactly the limit
+    rate (with its jitter) is answered as it comes: a fixed spacing of one
+    period after the previous *start* would instead carry every late
+    arrival's lag over to the next (a queue at full load), measured as 8.5 ms
+    median latency at 100 Hz against 1-2 ms of solve.
     Exceptions from ``process`` are passed to ``on_error`` (default: ignored) and
     the worker keeps running.
     """
@@ -46,6 +58,7 @@ class LatestWorker:
         self._stop = False
         self._busy = False
         self._last_start = -math.inf
+        self._credit, self._credit_t = float(BURST), time.monotonic()
         self.submitted = 0
         self.dropped = 0
         self.processed = 0
@@ -100,6 +113,19 @@ class LatestWorker:
                 self._cond.wait(min(left, 0.05))
             return True
 
+    def _take_credit(self) -> float:
+        """Take a start credit (returns 0), or return the seconds until one is due."""
+        period = max(0.0, float(self._min_period()))
+        now = time.monotonic()
+        if period <= 0.0:
+            return 0.0
+        self._credit = min(float(BURST), self._credit + (now - self._credit_t) / period)
+        self._credit_t = now
+        if self._credit >= 1.0:
+            self._credit -= 1.0
+            return 0.0
+        return (1.0 - self._credit) * period
+
     def _run(self) -> None:
         while True:
             with self._cond:
@@ -107,11 +133,10 @@ class LatestWorker:
                     self._cond.wait()
                 if self._stop:
                     return
-                # bounded rate: wait until min_period after the last start;
-                # newer items arriving meanwhile replace the pending one
+                # bounded rate (token bucket); newer items arriving meanwhile replace the
+                # pending one
                 while not self._stop:
-                    period = max(0.0, float(self._min_period()))
-                    left = self._last_start + period - time.monotonic()
+                    left = self._take_credit()
                     if left <= 0:
                         break
                     self._cond.wait(left)

@@ -4,6 +4,8 @@ Same idioms as test_ros_nodes.py (its Harness: isolated random domain,
 namespaced nodes, one executor thread, polling with deadlines).
 """
 
+import time
+
 import numpy as np
 import pytest
 
@@ -232,3 +234,50 @@ def test_measured_pose_from_a_best_effort_publisher_is_used(h, one):
     wait_for(lambda: (pub.publish(target_msg(target)) or True)
              and node._feedback.status()['measured_pose_age_s'] != 'none',
              what='measured pose reaches the law')
+
+
+# ------------------------------------------------------------------ a payload beyond buckling
+def inv_set(node, payload):
+    """Set the inverse node's payload_kg through rclpy: (accepted, reason)."""
+    from rclpy.parameter import Parameter
+    res = node.set_parameters([Parameter('payload_kg', value=payload)])[0]
+    return res.successful, res.reason
+
+
+def test_payload_beyond_buckling_names_the_cause_sends_nothing_and_does_not_wind_up(h, one):
+    """payload_kg 1.0 on the one-segment robot (it buckles; 0.7 kg is carried).
+
+    Started with it: every solve reports the unstable equilibrium and the
+    payload (not a budget), nothing is published, the integrator stays
+    frozen although measured poses keep coming 2 mm off.  Set at run time:
+    refused, naming the payload and the buckling.
+    """
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, feedback='integral', payload_kg=1.0)
+    target_pub = h.publisher(PoseStamped, 'target_pose')
+    meas_pub = h.publisher(PoseStamped, 'measured_pose')
+    target = solve_forward(one, [50e3, 0.0, 0.0]).position
+    wait_for(lambda: node._sub.get_publisher_count() >= 1, what='target publisher matched')
+    n_cmd = h.count('pressure_command')
+    target_pub.publish(target_msg(target))
+    for _ in range(40):    # 2 s of measured poses 2 mm beside the target, as if it had sagged
+        meas_pub.publish(target_msg(target + [0.002, 0.0, 0.0]))
+        time.sleep(0.05)
+    wait_for(lambda: node.stats['failed'] >= 3, what='3 failed solves')
+    errors = [s for s in diag_statuses(h, 'inverse') if s.level == DiagnosticStatus.ERROR]
+    assert errors and 'unstable' in errors[-1].message and '1 kg' in errors[-1].message, \
+        [s.message for s in errors[-3:]]
+    assert 'budget' not in errors[-1].message
+    assert h.count('pressure_command') == n_cmd          # nothing went out
+    assert np.linalg.norm(node._feedback._law.correction_m) < 0.1e-3   # not wound up
+    assert node._feedback._law.state.startswith('frozen')
+
+    ok, _ = inv_set(node, 0.7)            # carried: accepted, and commands go out again
+    assert ok
+    wait_for(lambda: h.count('pressure_command') > n_cmd, what='a command with 0.7 kg')
+    for c in h.msgs['pressure_command'][n_cmd:]:
+        assert_safe(np.array(c[1].data), one.cfg)
+    ok, reason = inv_set(node, 1.0)       # beyond buckling at the current target: refused
+    assert not ok and 'payload_kg 1' in reason and 'buckle' in reason, reason
+    assert node.get_parameter('payload_kg').value == pytest.approx(0.7)

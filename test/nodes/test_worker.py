@@ -44,14 +44,61 @@ def test_latest_worker_processes_only_the_newest():
 
 
 def test_latest_worker_bounds_the_rate():
+    """Token bucket: at most BURST starts back to back, then one per period."""
     starts = []
     w = worker.LatestWorker(lambda item: starts.append(time.monotonic()), min_period=lambda: 0.05)
     try:
-        for i in range(5):
+        for i in range(8):
             w.submit(i)
             assert _wait(lambda: w.idle())
-        assert len(starts) == 5
-        assert np.min(np.diff(starts)) >= 0.05 - 1e-3
+        assert len(starts) == 8
+        span = starts[-1] - starts[0]
+        # 8 starts: the first BURST free, the other 6 at least one period apart on average
+        assert span >= (8 - worker.BURST) * 0.05 - 5e-3
+        gaps = np.diff(starts)
+        assert np.all(gaps[worker.BURST - 1:] >= 0.05 - 5e-3)
+    finally:
+        w.stop()
+
+
+def test_latest_worker_answers_after_idle_at_once():
+    starts, sent = [], []
+    w = worker.LatestWorker(lambda item: starts.append(time.monotonic()), min_period=lambda: 0.05)
+    try:
+        for _ in range(3):
+            time.sleep(0.12)          # idle for more than two periods: credit is back
+            sent.append(time.monotonic())
+            w.submit(0)
+            assert _wait(lambda: w.idle())
+        lags = np.array(starts) - np.array(sent)
+        assert np.all(lags < 0.02), lags
+    finally:
+        w.stop()
+
+
+def test_latest_worker_keeps_up_with_a_jittery_stream_at_the_limit_rate():
+    """A stream at exactly the limit rate, with jitter: no lag builds up, nothing dropped.
+
+    A fixed spacing of one period after the previous start (the old rule)
+    made this a queue at full load: each late arrival's lag carried over.
+    """
+    period = 0.02
+    starts, sent = {}, {}
+    w = worker.LatestWorker(lambda item: starts.setdefault(item, time.monotonic()),
+                            min_period=lambda: period)
+    rng = np.random.default_rng(3)
+    try:
+        t0 = time.monotonic()
+        for k in range(60):
+            due = t0 + k * period + rng.uniform(-0.4, 0.4) * period
+            time.sleep(max(0.0, due - time.monotonic()))
+            sent[k] = time.monotonic()
+            w.submit(k)
+        assert _wait(lambda: w.idle())
+        answered = [k for k in sent if k in starts]
+        assert len(answered) >= 57, len(answered)      # (the old rule dropped more)
+        lags = np.array([starts[k] - sent[k] for k in answered])
+        assert np.median(lags) < 0.25 * period, np.median(lags)
     finally:
         w.stop()
 

@@ -32,6 +32,13 @@ Safeguards
   correction is also cut back to the part the model could realise
   (back-calculation).  The correction can therefore never wind up beyond
   the clamp, and an unreachable target leaves it bounded.
+* **No command, no integration**: when the inverse gives no usable answer
+  for the corrected target (a failed or unstable solve, e.g. a payload
+  beyond the buckling load: nothing is sent, the last command stands), the
+  caller says so (:meth:`IntegralFeedback.no_command`) and the integrator is
+  frozen (state ``HELD``) until a solve's answer goes out again
+  (:meth:`IntegralFeedback.report`): the robot did not move because of the
+  correction, so its error says nothing about the correction.
 * **Reset**: a target jump larger than ``reset_jump_m`` (or
   ``reset_jump_rad``) clears the correction (the old one belongs elsewhere
   in the workspace).
@@ -76,6 +83,7 @@ TRACKING = 'integrating'
 SATURATED = 'holding (pressure limit or unreachable target)'
 STALE = 'fallback to feedforward: measured_pose too old'
 JUMP = 'fallback to feedforward: measured_pose jumped implausibly'
+HELD = 'frozen: no command went out for the corrected target'
 
 
 @dataclass(frozen=True)
@@ -137,6 +145,7 @@ class IntegralFeedback:
         self._history: deque = deque()    # (time, target position, target z-axis)
         self._target_p = self._target_z = None
         self._saturated = False
+        self._held = False
         self.state = WAITING
 
     @property
@@ -209,6 +218,9 @@ class IntegralFeedback:
             self.state = JUMP
         elif age > s.measured_pose_timeout_s:
             self.state = STALE
+        elif self._held:
+            self.state = HELD
+            self._last_t, self._used_meas_t = float(t), self._meas_t   # nothing to catch up
         elif self._meas_t != self._used_meas_t:
             # each measurement is integrated once, over the time since the last integration
             dt = 0.0 if self._last_t is None else min(max(float(t) - self._last_t, 0.0),
@@ -268,6 +280,7 @@ class IntegralFeedback:
         an unreachable target the correction is cut back to what it realised.
         """
         self._saturated = bool((not reachable) or at_limit)
+        self._held = False
         if reachable or self.fallback or achieved_position is None or self._target_p is None:
             return
         s = self.settings
@@ -278,6 +291,14 @@ class IntegralFeedback:
             r_real = rotation_between(self._target_z, achieved_z_axis)
             if np.linalg.norm(r_real) < np.linalg.norm(self.correction_rad):
                 self.correction_rad = _clamp(r_real, s.max_correction_rad)
+
+    def no_command(self) -> None:
+        """No command went out for the last corrected target: freeze the integrator.
+
+        Kept (and still applied to the target) but not integrated until the
+        next :meth:`report` of an answer that went out.
+        """
+        self._held = True
 
     def status(self, t: float) -> dict:
         """Diagnostics values: state, correction, measurement age, counters."""

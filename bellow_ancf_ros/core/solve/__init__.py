@@ -7,6 +7,8 @@
   (eqs. 28-30), warm-started along paths, cold from the PCC arcs, the
   best in-limit answer for unreachable targets, under a wall-clock and
   forward-solve budget;
+* :func:`payload_problem`: whether the robot can carry a payload at a
+  target (or at pressures), before a controller is asked to;
 * :func:`precompute_corners`, :func:`warm_up`: what a controller does once
   at start-up so that no solve of its loop compiles or searches corners;
 * :func:`newton`, :func:`continuation`, :func:`deadline_after`,
@@ -18,6 +20,7 @@ Statuses are :class:`~bellow_ancf_ros.core.status.ForwardStatus` and
 
 from ._forward import ForwardResult, ResumeState, assess_stability, check_pressures, solve_forward
 from ._inverse import MAX_TARGET_LENGTHS, InverseResult, precompute_corners, solve_inverse
+from ._loads import payload_problem
 from ._newton import NewtonResult, ReducedHessian, continuation, deadline_after, expired, newton
 from ._stability import StabilityCheck
 from ._warmup import warm_up
@@ -25,6 +28,6 @@ from ._warmup import warm_up
 __all__ = [
     "ForwardResult", "InverseResult", "MAX_TARGET_LENGTHS", "NewtonResult", "ReducedHessian",
     "ResumeState", "StabilityCheck", "assess_stability", "check_pressures", "continuation",
-    "deadline_after", "expired", "newton", "precompute_corners", "solve_forward",
-    "solve_inverse", "warm_up",
+    "deadline_after", "expired", "newton", "payload_problem", "precompute_corners",
+    "solve_forward", "solve_inverse", "warm_up",
 ]

@@ -289,10 +289,14 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
         warm = warm_start.resume_state  # continue a solve that ran out of budget
     res, resume = _stage2(model, lam, payload, warm, tol, max_iter, int(iteration_budget),
                           deadline)
+    message = res.message
+    if res.status == ForwardStatus.STEP_TOO_SMALL and payload > 0:
+        message += (f"; a limit point of the load path to the payload of {payload:g} kg: "
+                    "the robot may buckle under it")
     out = ForwardResult(
         model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
         converged=res.converged, stable=None, status=res.status,
-        message=res.message, iterations=res.iterations, residual_norm=res.residual_norm,
+        message=message, iterations=res.iterations, residual_norm=res.residual_norm,
         history=res.history, jacobian=res.jacobian, resume_state=resume,
     )
     if res.converged and check_stability:

@@ -459,10 +459,13 @@ def _result(model, lam, fw, reached, iters, position, z_axis, status=None, note=
     errors = f"position error {pe * 1e3:.4g} mm" + (
         "" if ae is None else f", angle error {np.degrees(ae):.4g} deg"
     )
+    buckled = f"the robot would buckle under a payload of {fw.payload_kg:g} kg"
     if status is not None:
         msg = f"{note}; best pressures so far: {errors}"
+        if not fw.stable:
+            msg += f"; every equilibrium so far is unstable ({buckled}?)"
     elif not fw.stable:
-        status, msg = InverseStatus.UNSTABLE, fw.message
+        status, msg = InverseStatus.UNSTABLE, f"{fw.message}; {buckled} at the best pressures"
     elif reached:
         status, msg = InverseStatus.REACHED, InverseStatus.REACHED.message
     else:

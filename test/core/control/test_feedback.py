@@ -240,6 +240,45 @@ def test_unknown_payload_is_corrected(loop1, one):
 
 
 # ------------------------------------------------------------------ the law alone
+def test_no_command_freezes_the_integrator_until_an_answer_goes_out():
+    """A failed solve sends nothing: the error then says nothing about the correction.
+
+    Regression (payload beyond the buckling load): the integrator kept
+    integrating while no command went out and wound up to its clamp.
+    """
+    fb = IntegralFeedback(FeedbackSettings(gain_per_s=2.0))
+    target = np.array([0.0, 0.0, 0.1])
+    offset = np.array([2e-3, 0.0, 0.0])      # the robot stays 2 mm off: nothing moves it
+    t = 0.0
+    for _ in range(50):                       # 0.5 s of normal integration
+        fb.measurement(t, target + offset)
+        t += 0.01
+        fb.corrected_target(t, target)
+        fb.report(True, False)
+    # the first failed solve: its correction was integrated before the failure was known
+    fb.measurement(t, target + offset)
+    t += 0.01
+    fb.corrected_target(t, target)
+    fb.no_command()
+    held = fb.correction_m.copy()
+    assert np.linalg.norm(held) > 0.1e-3
+    for _ in range(300):                      # 3 s more of failed solves
+        fb.measurement(t, target + offset)
+        t += 0.01
+        handed, _ = fb.corrected_target(t, target)
+        fb.no_command()
+        np.testing.assert_allclose(handed, target + held)   # the held correction still applies
+    assert fb.state == 'frozen: no command went out for the corrected target'
+    np.testing.assert_array_equal(fb.correction_m, held)
+    fb.report(True, False)                    # an answer went out again: integration resumes
+    fb.measurement(t, target + offset)
+    t += 0.01
+    fb.corrected_target(t, target)
+    assert np.linalg.norm(fb.correction_m) > np.linalg.norm(held)
+    # resumes without a catch-up step: one step of dt 0.01 at most
+    assert np.linalg.norm(fb.correction_m - held) <= 2.0 * 0.01 * 2e-3 + 1e-12
+
+
 def test_integral_law_against_a_constant_offset_plant():
     """Plant = target + offset: the correction converges to -offset at rate gain_per_s."""
     s = FeedbackSettings(gain_per_s=2.0)
