@@ -210,3 +210,47 @@ def test_the_public_surface_has_what_users_and_nodes_need():
                  'precompute_corners', 'limit_blas_threads', 'ForwardStatus', 'InverseStatus',
                  'geometry', 'ConfigError'):
         assert name in core.__all__ and hasattr(core, name), name
+
+
+def _resolves(dotted: str) -> bool:
+    """Whether ``dotted`` (a module, or a module's attribute path) names something real."""
+    import importlib
+
+    parts = dotted.split('.')
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module('.'.join(parts[:i]))
+        except ImportError:
+            continue
+        try:
+            for p in parts[i:]:
+                obj = getattr(obj, p)
+        except AttributeError:
+            return False
+        return True
+    return False
+
+
+def test_docstring_references_and_cited_paths_exist():
+    """``:mod:`core.x```, ``bellow_ancf_ros.x.y`` and ``bellow_ancf_ros/x.py`` in the sources.
+
+    Cross-references in docstrings and paths in comments (robot files
+    included) name modules, objects and files that exist.
+    """
+    role = re.compile(r':(?:mod|func|class|meth|data|attr):`~?((?:core|bellow_ancf_ros)[\w.]*)`')
+    dotted = re.compile(r'\bbellow_ancf_ros(?:\.\w+)+')
+    path = re.compile(r'(?<![\w/])bellow_ancf_ros/[\w/]+\.(?:py|yaml)\b')  # not share/...
+    files = [p for p in PKG.rglob('*.py') if '__pycache__' not in p.parts]
+    files += sorted((REPO / 'config').glob('*.yaml')) + sorted((REPO / 'launch').glob('*.py'))
+    bad = []
+    for f in files:
+        text = f.read_text()
+        names = {m if m.startswith(NAME) else f'{NAME}.{m}' for m in role.findall(text)}
+        names |= {m for m in dotted.findall(text) if not m.endswith('.py')}
+        for name in sorted(names):
+            if not _resolves(name.rstrip('.')):
+                bad.append(f'{f.relative_to(REPO)}: {name}')
+        for p in sorted(set(path.findall(text))):
+            if not (REPO / p).exists():
+                bad.append(f'{f.relative_to(REPO)}: {p}')
+    assert not bad, '\n'.join(bad)

@@ -67,7 +67,7 @@ The rig of paper V.C: one actuator clamped horizontally at ``lam = 1`` (base
 point fixed, base gradient parallel to the clamp axis, its length free, as at
 every plate), loaded by its own weight (linear density ``rho0`` of the robot
 file) and an end mass, discretised with 20 elements
-(:class:`~bellow_ancf_ros.core.cantilever.Cantilever`), ``k_t = k(1)*l0``
+(:class:`~bellow_ancf_ros.core.fit._cantilever.Cantilever`), ``k_t = k(1)*l0``
 (eq. 2), ``k_b = D_a**2*l0*k(1)/8`` (eq. 4, ``lam = 1``).  The tip drop
 decreases strictly with ``D_a``; the paper's optimisation (31) is therefore a
 root-finding problem ``drop(D_a) = measured``, solved by a bracketing root

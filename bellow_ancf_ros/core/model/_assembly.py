@@ -5,7 +5,7 @@ segments with ``n_a`` actuators each:
 
 * every actuator is a chain of ``n`` gradient-deficient ANCF elements of
   length ``le = lam*l0/n`` (eqs. 5-7, 19); elastic forces from
-  :mod:`bellow_ancf_ros.core.ancf` (eqs. 17, 18), gravity of the actuators
+  :mod:`bellow_ancf_ros.core.model._ancf` (eqs. 17, 18), gravity of the actuators
   (eqs. 15, 16, linear density ``rho0/lam``) and point forces (eq. 14) are
   summed over elements (eqs. 20, 21);
 * every plate except the fixed base plate is a rigid body with *natural
@@ -91,8 +91,8 @@ class RobotModel:
     n_elements : int, optional
         ANCF elements per actuator (default: ``cfg.n_elements``).  A count
         that cannot carry the plates is refused with a
-        :class:`~bellow_ancf_ros.core.config.ConfigError` naming the smallest
-        count that works (:func:`~bellow_ancf_ros.core.config.plate_support_problem`).
+        :class:`~bellow_ancf_ros.core.model._config.ConfigError` naming the smallest
+        count that works (:func:`~bellow_ancf_ros.core.model._config.plate_support_problem`).
     """
 
     def __init__(self, cfg: RobotConfig, n_elements: int | None = None):
@@ -434,7 +434,7 @@ class RobotModel:
     def evaluate(self, x, lam, load_scale=1.0, payload=0.0, jacobian=True, lam_derivative=False):
         """Residual of eq. (25) at ``x = [q, alpha]``; Jacobian eq. (27); ``dR/dlam`` (eq. 30).
 
-        Computed by the compiled kernel :func:`kernels.evaluate_kernel`; the
+        Computed by the compiled kernel :func:`core.model._kernels.evaluate_kernel`; the
         Jacobian's values go straight into the fixed CSC pattern.
         """
         nq = self.nq

@@ -1,8 +1,8 @@
 """Compiled kernels: residual (eq. 25), its Jacobian (eq. 27) and dR/dlam (eq. 30).
 
-The same mathematics as :mod:`bellow_ancf_ros.core.ancf` (element forces,
+The same mathematics as :mod:`bellow_ancf_ros.core.model._ancf` (element forces,
 eqs. 17, 18, five Gauss points) and the constraint rows of
-:mod:`bellow_ancf_ros.core.assembly` (attachments, parallel gradients,
+:mod:`bellow_ancf_ros.core.model._assembly` (attachments, parallel gradients,
 orthonormal plate axes), written as loops compiled by numba.  The Jacobian
 values are summed straight into the CSC storage of the KKT pattern that the
 model builds once (``RobotModel._build_pattern``): its COO order is the order

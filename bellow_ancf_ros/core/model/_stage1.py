@@ -177,7 +177,7 @@ class Stage1:
 
     @classmethod
     def from_config(cls, cfg: Any) -> 'Stage1':
-        """Build from a :class:`~bellow_ancf_ros.core.config.RobotConfig`."""
+        """Build from a :class:`~bellow_ancf_ros.core.model._config.RobotConfig`."""
         return cls(cfg.stiffness_coeffs, cfg.l0, cfg.d_eff, cfg.p_min, cfg.p_max)
 
     def __repr__(self) -> str:

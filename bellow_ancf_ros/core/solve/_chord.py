@@ -1,6 +1,6 @@
 """Chord steps of the warm-started inverse solve, compiled (eqs. 25, 28-30).
 
-Along a trajectory, :func:`core.inverse_warm.full_space_newton` first
+Along a trajectory, :func:`core.solve._inverse_warm.full_space_newton` first
 reuses the factorisation of the KKT matrix (eq. 27) made near an
 earlier answer: each chord step is one residual evaluation, one
 single-column solve and a few small products, so that the loop of
@@ -16,7 +16,7 @@ The loop stops when the residual is below the tolerance, when a step cuts
 it by less than ``rate``, after ``max_steps``, or when a step would leave
 the trust region or the pressure box; the caller goes on with Newton's
 method from there.  The factorisation is the envelope LDL^T of
-:mod:`core.ldlt` or, where that was refused, the banded LU of ``dgbtrf``:
+:mod:`core.linalg._ldlt` or, where that was refused, the banded LU of ``dgbtrf``:
 :func:`banded_solve` is LAPACK's ``dgbtrs`` (no transpose, one right-hand
 side) for it.
 """

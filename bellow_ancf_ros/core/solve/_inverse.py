@@ -14,7 +14,7 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
 * From a warm start (the previous solution along a trajectory) the paper's
   eq. (29) is solved for ``[lam, q, alpha]`` at once: full-space Newton with
   the bordered Jacobian (eq. 30) eliminated by its Schur complement, chord
-  steps with an earlier answer's factorisation first (:mod:`core.inverse_warm`).
+  steps with an earlier answer's factorisation first (:mod:`core.solve._inverse_warm`).
 * Otherwise, or when that path meets a pressure limit, the same equations
   are solved in reduced form: ``lam`` is the unknown, eq. (25) is solved for
   ``q(lam)`` by the forward solver (warm-started) and ``O(lam)`` is

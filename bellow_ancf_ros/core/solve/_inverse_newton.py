@@ -1,11 +1,11 @@
 """Exact solutions of the inverse problem (eqs. 28-30): objective, Newton iterations, budget.
 
-Used by :func:`bellow_ancf_ros.core.inverse.solve_inverse` (see its module
+Used by :func:`bellow_ancf_ros.core.solve._inverse.solve_inverse` (see its module
 docstring for the method): the objective ``O`` of eq. (28) as a function of
 the stretches with exact sensitivities (implicit function theorem), the
 reduced Newton / minimum-norm Gauss-Newton iteration with its active set on
 the pressure limits and the solve's budget.  The warm-started full-space
-Newton method on ``[lam, q, alpha]`` (eqs. 29, 30) is :mod:`core.inverse_warm`.
+Newton method on ``[lam, q, alpha]`` (eqs. 29, 30) is :mod:`core.solve._inverse_warm`.
 """
 
 from __future__ import annotations

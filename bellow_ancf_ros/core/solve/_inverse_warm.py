@@ -1,6 +1,6 @@
 """Warm-started inverse solve: full-space Newton on ``[lam, q, alpha]`` with chord steps.
 
-Used by :func:`bellow_ancf_ros.core.inverse.solve_inverse` as its fast path
+Used by :func:`bellow_ancf_ros.core.solve._inverse.solve_inverse` as its fast path
 along a trajectory (eqs. 29, 30).  The bordered Jacobian is eliminated by
 its Schur complement: with ``J_x`` factorised, ``W = J_x^{-1} dR/dlam``
 gives the reduced objective Jacobian ``J_O = -T W`` and the equilibrium
@@ -13,7 +13,7 @@ Per target:
 1. predictor: the linear step with the warm start's ``W``, plus along a
    steady path the last target's second-order correction
    (:func:`_second_order`);
-2. chord steps (:mod:`core.chord`, compiled) with the factorisation of an
+2. chord steps (:mod:`core.solve._chord`, compiled) with the factorisation of an
    earlier answer (``WarmState.chord``): one single-column solve
    each, linear convergence at a rate that grows with the distance to where
    it was made (measured 0.015 to 0.05 per millimetre of target motion);
@@ -118,7 +118,7 @@ class _StretchStep:
     def __call__(self, target, x, lam, w0):
         """Stretch increment at the state ``x``, ``w0 = J^{-1} R`` (None: leave the fast path).
 
-        :func:`core.chord.stretch_step`, the step of the compiled chord loop.
+        :func:`core.solve._chord.stretch_step`, the step of the compiled chord loop.
         """
         if self.inv is None:
             return None

@@ -16,9 +16,9 @@ so a successful Cholesky factorisation of the penalised matrix
 ``A(rho) = H_s - s I + rho C_s^T W C_s`` proves the equilibrium stable, and
 by Finsler's lemma some finite ``rho`` succeeds whenever it is.  ``A`` is
 sparse with the coupling of the robot's chain; in the level order of
-:mod:`core.linsolve` (unknowns by height along the robot) its fill stays in
+:mod:`core.linalg._kkt` (unknowns by height along the robot) its fill stays in
 an envelope that does not grow with the element and segment counts, and its
-factorisation (:meth:`core.ldlt.EnvelopeKKT.positive_definite`: an LDL^T
+factorisation (:meth:`core.linalg._ldlt.EnvelopeKKT.positive_definite`: an LDL^T
 whose pivots must all be positive, the operations of a Cholesky
 factorisation without the square roots) is linear in the size.  Two
 penalties are tried (``rho = 10`` and ``1e4`` times ``max|H_s|``, rows of
