@@ -61,6 +61,7 @@ setup(
             'trajectory_publisher = bellow_ancf_ros.nodes.trajectory_publisher:main',
             'excitation_publisher = bellow_ancf_ros.nodes.excitation_publisher:main',
             'simulated_robot_node = bellow_ancf_ros.nodes.simulated_robot_node:main',
+            'mocap_relay = bellow_ancf_ros.nodes.mocap_relay:main',
         ],
     },
 )

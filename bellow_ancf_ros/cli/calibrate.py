@@ -34,10 +34,20 @@ __all__ = ['register', 'robot_yaml_text', 'plot_residuals']
 
 
 # ------------------------------------------------------------ output
-def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source: str) -> str:
-    """A complete robot file of the calibrated robot, provenance in comments."""
+def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source: str,
+                    mocap_frame_id: str = 'world') -> str:
+    """A complete robot file of the calibrated robot, provenance in comments.
+
+    The fitted pose of the base in the mocap frame is its ``mocap_frame``
+    entry (``frame_id``, ``position_m``, ``quaternion_xyzw``), which the
+    nodes use to take measured poses in that frame.
+    """
     d = result.config.to_dict()
     d['name'] = f'{d["name"]}_calibrated'
+    d['mocap_frame'] = {'frame_id': mocap_frame_id,
+                        'position_m': [float(v) for v in np.round(result.translation_m, 9)],
+                        'quaternion_xyzw': [float(v) for v in
+                                            np.round(result.quaternion_xyzw, 12)]}
     lines = [
         f'# Robot description written by `bellow-ancf calibrate` on '
         f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}',
@@ -51,7 +61,8 @@ def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source:
                                       result.nominal):
         lines.append(f'#   {key} = {v:.6g} +- {s:.3g} [{lo:.6g}, {hi:.6g}]; nominal {n:.6g}')
     t, q = result.translation_m, result.quaternion_xyzw
-    lines.append(f'# Base frame in the mocap frame: translation_m {np.round(t, 6).tolist()}, '
+    lines.append(f'# Base frame in the mocap frame {mocap_frame_id!r} (mocap_frame below): '
+                 f'translation_m {np.round(t, 6).tolist()}, '
                  f'quaternion_xyzw {np.round(q, 6).tolist()}')
     for w in result.warnings:
         lines.append(f'# Warning: {w}')
@@ -147,7 +158,8 @@ def _cmd_calibrate(args) -> int:
     if args.out:
         try:
             with open(args.out, 'w', encoding='utf-8') as fh:
-                fh.write(robot_yaml_text(result, source, str(cfg.source)))
+                fh.write(robot_yaml_text(result, source, str(cfg.source),
+                                         args.mocap_frame_id or rec.frame_id or 'world'))
         except OSError as exc:
             raise UsageError(f'--out {args.out}: cannot write file: '
                              f'{exc.strerror or exc}') from None
@@ -201,7 +213,11 @@ def register(subparsers) -> None:
                    help='bag: pressure topic; default: %(default)s')
     p.add_argument('--pose-topic', default=POSE_TOPIC, metavar='T',
                    help='bag: measured pose topic; default: %(default)s')
-    p.add_argument('--out', metavar='FILE', help='write the calibrated robot file (YAML)')
+    p.add_argument('--out', metavar='FILE', help='write the calibrated robot file (YAML), with '
+                   'the fitted transform as its mocap_frame entry')
+    p.add_argument('--mocap-frame-id', metavar='NAME',
+                   help="name of the mocap frame in the robot file's mocap_frame; default: the "
+                        "bag's pose frame_id, else 'world'")
     p.add_argument('--json', action='store_true',
                    help='print one JSON object instead of the table')
     p.add_argument('--plot', metavar='FILE', help='write a PNG of the per-sample residuals')

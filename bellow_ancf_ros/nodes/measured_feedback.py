@@ -7,6 +7,9 @@ it subscribes ``measured_pose`` (geometry_msgs/PoseStamped in ``base_frame``),
 feeds :class:`~bellow_ancf_ros.core.control.IntegralFeedback` (the control
 law, plain Python in the core) and re-submits the newest target at
 ``feedback_rate_hz`` so that a held target keeps being corrected.  Measured
+poses may come in ``base_frame``, in the robot file's mocap frame
+(``mocap_frame``, written by ``bellow-ancf calibrate``) or, on a ROS install,
+any frame tf2 knows (:class:`~bellow_ancf_ros.nodes.frames.PoseFrames`);
 poses in another frame, with NaN/inf or (two or more segments) an
 orientation that cannot be normalised are refused (throttled warning,
 diagnostics WARN) and never reach the integrator.  A measured pose's stamp
@@ -31,6 +34,7 @@ from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from ..core import geometry
 from . import contract
 from .diagnostics import Refusals
+from .frames import PoseFrames
 from .ros_util import QOS_DEPTH, descriptor
 
 __all__ = ['FeedbackLink', 'measured_pose_qos']
@@ -84,7 +88,7 @@ class FeedbackLink:
         self._lock = threading.Lock()
         self._refusals = Refusals(node, 'measured poses', publish_diag)
         self._law: IntegralFeedback | None = None
-        self._sub = self._timer = None
+        self._sub = self._timer = self._frames = None
         self._frame = ''
         self._use_orientation = False
         self._last_item = None
@@ -107,6 +111,7 @@ class FeedbackLink:
             reset_jump_m=1e-3 * g('feedback_reset_jump_mm').value)
         self._use_orientation = cfg.n_segments >= 2
         self._frame = g('base_frame').value
+        self._frames = PoseFrames(self.node, self._frame, cfg.mocap_frame)
         with self._lock:
             self._law = IntegralFeedback(s, self._use_orientation)
         self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
@@ -131,7 +136,7 @@ class FeedbackLink:
             self.node.destroy_timer(self._timer)
         if self._sub is not None:
             self.node.destroy_subscription(self._sub)
-        self._sub = self._timer = self._last_item = None
+        self._sub = self._timer = self._last_item = self._frames = None
         with self._lock:
             self._law = None
 
@@ -157,18 +162,18 @@ class FeedbackLink:
         self._last_item = item
 
     def _on_measured(self, msg: PoseStamped) -> None:
+        frames = self._frames
+        if frames is None:   # released meanwhile
+            return
         self.received += 1
         p, o = msg.pose.position, msg.pose.orientation
         try:
-            if msg.header.frame_id != self._frame:
-                raise contract.InputError(
-                    f'measured pose frame {msg.header.frame_id!r} is not the '
-                    f'base frame {self._frame!r} (no tf2 transform is done)')
             pos = np.array([p.x, p.y, p.z], dtype=float)
             if not np.all(np.isfinite(pos)):
                 raise contract.InputError(f'measured position is not finite: {pos.tolist()}')
-            z = (geometry.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
-                 if self._use_orientation else None)
+            quat = (o.x, o.y, o.z, o.w) if self._use_orientation else None
+            pos, quat = frames.to_base(msg.header.frame_id, pos, quat, msg.header.stamp)
+            z = None if quat is None else geometry.z_axis_from_quaternion(quat)
         except ValueError as exc:  # contract.InputError, or a bad quaternion (core.geometry)
             self.refused += 1
             self._refusals.report(str(exc), self.refused)

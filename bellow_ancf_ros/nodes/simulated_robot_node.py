@@ -37,6 +37,8 @@ import threading
 import time
 from typing import Any
 
+import numpy as np
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import IntegerRange, ParameterType, SetParametersResult
@@ -49,6 +51,7 @@ from ..core import geometry
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
 from .ros_util import (
+    StartupParameterError,
     command_qos,
     descriptor,
     diagnostics_qos,
@@ -80,7 +83,16 @@ class SimulatedRobotNode(Node):
             'Payload the simulated robot carries [kg] (settable at run time).', D,
             lo=0.0, hi=contract.PAYLOAD_MAX_KG))
         self.declare_parameter('base_frame', 'base', descriptor(
-            'frame_id of measured_pose.', S, **ro))
+            'frame_id of measured_pose (unless mocap_frame_id is set).', S, **ro))
+        self.declare_parameter('mocap_frame_id', '', descriptor(
+            'Publish measured_pose in this motion-capture frame instead of base_frame (empty: '
+            'base_frame); the base sits in it at mocap_position_m, mocap_quaternion_xyzw.', S,
+            **ro))
+        A = ParameterType.PARAMETER_DOUBLE_ARRAY
+        self.declare_parameter('mocap_position_m', [0.0, 0.0, 0.0], descriptor(
+            'Position of the base frame in the mocap frame [m] (3 numbers).', A, **ro))
+        self.declare_parameter('mocap_quaternion_xyzw', [0.0, 0.0, 0.0, 1.0], descriptor(
+            'Orientation of the base frame in the mocap frame (x, y, z, w).', A, **ro))
         self.declare_parameter('pressure_unit', 'Pa', descriptor(
             'Unit of pressure_command and measured_pressure: Pa or kPa (gauge).', S,
             constraints="one of: 'Pa', 'kPa'", **ro))
@@ -117,6 +129,18 @@ class SimulatedRobotNode(Node):
             angle_noise_rad=math.radians(float(g('angle_noise_deg').value)),
             seed=None if seed < 0 else seed)
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
+        self._mocap_frame = None   # (frame id, R, t): the base's pose in the mocap frame
+        if g('mocap_frame_id').value:
+            pos_m, quat = list(g('mocap_position_m').value), list(g('mocap_quaternion_xyzw').value)
+            if len(pos_m) != 3 or not all(map(math.isfinite, pos_m)):
+                raise StartupParameterError('mocap_position_m', pos_m, '3 finite numbers [m]',
+                                            'not 3 finite numbers')
+            try:
+                R = geometry.quaternion_to_rotation(quat)
+            except ValueError as exc:
+                raise StartupParameterError('mocap_quaternion_xyzw', quat,
+                                            'a non-zero quaternion (x, y, z, w)', str(exc))
+            self._mocap_frame = (g('mocap_frame_id').value, R, np.asarray(pos_m, dtype=float))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0}
         self.last_refusal_reason = ''
@@ -194,7 +218,11 @@ class SimulatedRobotNode(Node):
 
     def _mocap(self) -> None:
         pos, R = self.robot.measure()   # reads the newest complete state (no lock needed)
-        self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), self._frame,
+        frame = self._frame
+        if self._mocap_frame is not None:   # as a motion capture in its own frame sees it
+            frame, R_b, t_b = self._mocap_frame
+            pos, R = R_b @ pos + t_b, R_b @ R
+        self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), frame,
                                             self.get_clock().now().to_msg()))
         self.stats['published_poses'] += 1
 

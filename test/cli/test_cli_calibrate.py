@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import calibration_data as cd
 from bellow_ancf_ros import cli
@@ -61,6 +62,15 @@ def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
     assert cfg.segments[0].pitch_radius * 1e3 == pytest.approx(
         d['parameters']['segments[0].pitch_radius_mm']['value'], rel=1e-12)
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # the fitted transform is machine-readable: mocap_frame, and it undoes the offset
+    mf = cfg.mocap_frame
+    assert mf is not None and mf.frame_id == 'world'   # a CSV names no frame: the default
+    np.testing.assert_allclose(mf.position, d['frame']['translation_m'], atol=1e-9)
+    R = Rotation.from_rotvec(np.radians(cd.FRAME_ROTVEC_DEG)).as_matrix()
+    p_base = np.array([0.01, -0.02, 0.1])
+    p_back, q_back = mf.to_base(R @ p_base + cd.FRAME_T, Rotation.from_matrix(R).as_quat())
+    np.testing.assert_allclose(p_back, p_base, atol=1e-3)   # the fit's own error (noise)
+    assert abs(abs(q_back[3]) - 1.0) < 1e-4
     # the stage-1 coupling of D_eff and the stiffness scale is named on stderr
     assert 'warning: actuator.d_eff_mm and stiffness_scale cannot be separated' in err
 
@@ -75,6 +85,12 @@ def test_bag_storages(tmp_path, capsys, recorded, storage, unit):
     assert d['samples'] == len(recorded)
     assert d['rmse_after_mm'] < d['rmse_before_mm']
     np.testing.assert_allclose(d['frame']['translation_m'], cd.FRAME_T, atol=1e-3)
+    # a bag names its frame: it is the robot file's mocap frame
+    out = tmp_path / 'cal.yaml'
+    code, _, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag', str(bag),
+                        '--fit', 'actuator.d_a_mm', '--out', str(out))
+    assert code == 0, err
+    assert load_robot(out).mocap_frame.frame_id == 'mocap'   # write_bag's frame_id
 
 
 def test_table_output(tmp_path, capsys, recorded):

@@ -281,3 +281,94 @@ def test_payload_beyond_buckling_names_the_cause_sends_nothing_and_does_not_wind
     ok, reason = inv_set(node, 1.0)       # beyond buckling at the current target: refused
     assert not ok and 'payload_kg 1' in reason and 'buckle' in reason, reason
     assert node.get_parameter('payload_kg').value == pytest.approx(0.7)
+
+
+# ------------------------------------------------------------------ mocap in its own frame
+MOCAP_T = [0.042, -0.027, 0.061]                     # base origin in the mocap frame [m]
+MOCAP_ROTVEC = np.radians([4.0, -3.0, 6.0])          # base orientation in the mocap frame
+
+
+def _mocap_quaternion():
+    from scipy.spatial.transform import Rotation
+    return Rotation.from_rotvec(MOCAP_ROTVEC).as_quat()
+
+
+def _robot_file_with_mocap_frame(tmp_path, name='one_segment'):
+    """The default robot file plus the mocap_frame entry ``bellow-ancf calibrate`` writes."""
+    import yaml
+    d = load_robot(name).to_dict()
+    d['mocap_frame'] = {'frame_id': 'world', 'position_m': MOCAP_T,
+                        'quaternion_xyzw': [float(v) for v in _mocap_quaternion()]}
+    path = tmp_path / f'{name}_mocap.yaml'
+    path.write_text(yaml.safe_dump(d))
+    return str(path)
+
+
+def test_closed_loop_with_measured_poses_in_the_mocap_frame(h, one, tmp_path):
+    """The simulated robot seen by a mocap in 'world'; the robot file knows the transform.
+
+    The loop converges as the base-frame loop does (held target within 0.3 mm,
+    judged on the robot's true pose in the base frame); a pose in a frame the
+    node does not know is refused, naming the frames it accepts.
+    """
+    from scipy.spatial.transform import Rotation
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(PoseStamped, 'measured_pose')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    sim = h.add(SimulatedRobotNode, seed=9, mocap_frame_id='world', mocap_position_m=MOCAP_T,
+                mocap_quaternion_xyzw=[float(v) for v in _mocap_quaternion()])
+    node = h.add(InverseKinetostaticNode, feedback='integral',
+                 robot_config=_robot_file_with_mocap_frame(tmp_path))
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    wait_for(lambda: h.count('measured_pose') > 5, what='mocap poses')
+    assert h.last('measured_pose').header.frame_id == 'world'
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    pub.publish(target_msg(target))
+    R = Rotation.from_rotvec(MOCAP_ROTVEC).as_matrix()
+
+    def converged():
+        if h.count('measured_pose') < 60:
+            return False
+        world = positions(h, 'measured_pose', 50)
+        base = (world - MOCAP_T) @ R          # R^T (p - t), row-wise
+        return np.linalg.norm(base.mean(axis=0) - target) < 0.3e-3
+
+    wait_for(converged, timeout=30.0, what='true pose within 0.3 mm of the target')
+    assert node._feedback.refused == 0
+    st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
+    assert kv(st)['feedback_state'] == 'integrating'
+    # a pose in a frame the node cannot transform: refused with the accepted frames
+    meas = h.publisher(PoseStamped, 'measured_pose', expect_subscribers=1)
+    meas.publish(target_msg(target, frame='elsewhere'))
+    wait_for(lambda: node._feedback.refused >= 1, what='refused pose in an unknown frame')
+    wait_for(lambda: any('elsewhere' in s.message and 'world' in s.message
+                         for s in diag_statuses(h, 'inverse')), what='refusal naming the frames')
+    cfg = load_robot('one_segment')
+    with h.lock:
+        for _, m in h.msgs['pressure_command']:
+            assert_safe(m.data, cfg)
+
+
+def test_mocap_relay_republishes_in_the_base_frame(h, tmp_path):
+    from bellow_ancf_ros.nodes.mocap_relay import MocapRelay
+    from scipy.spatial.transform import Rotation
+    h.record(PoseStamped, 'measured_pose')
+    relay = h.add(MocapRelay, robot_config=_robot_file_with_mocap_frame(tmp_path))
+    pub = h.publisher(PoseStamped, 'mocap_pose')
+    R = Rotation.from_rotvec(MOCAP_ROTVEC).as_matrix()
+    p_base = np.array([0.005, -0.01, 0.1])
+    R_ee = Rotation.from_rotvec([0.1, 0.2, 0.0]).as_matrix()     # end-effector in base
+    msg = target_msg(R @ p_base + MOCAP_T, Rotation.from_matrix(R @ R_ee).as_quat(),
+                     frame='world')
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345
+    pub.publish(msg)
+    wait_for(lambda: h.count('measured_pose') >= 1, what='relayed pose')
+    out = h.last('measured_pose')
+    assert out.header.frame_id == 'base'
+    assert (out.header.stamp.sec, out.header.stamp.nanosec) == (12, 345)
+    pos, quat = pose_of(out)
+    np.testing.assert_allclose(pos, p_base, atol=1e-12)
+    np.testing.assert_allclose(Rotation.from_quat(quat).as_matrix(), R_ee, atol=1e-12)
+    pub.publish(target_msg(p_base, frame='elsewhere'))
+    wait_for(lambda: relay.stats['refused'] >= 1, what='refused unknown frame')

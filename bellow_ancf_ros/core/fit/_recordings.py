@@ -64,7 +64,9 @@ class Recording:
 
     ``quaternions_xyzw`` are unit quaternions; ``times_s`` the time of each
     sample (CSV: the file's ``t_s``; bag: the start of the averaged window).
-    ``notes`` say what a reader dropped.
+    ``notes`` say what a reader dropped.  ``frame_id``: the mocap frame's
+    name where the recording says it (a bag's pose ``header.frame_id``; '' for
+    a CSV file).
     """
 
     pressures_pa: np.ndarray
@@ -73,6 +75,7 @@ class Recording:
     times_s: np.ndarray
     source: str = ''
     notes: list = field(default_factory=list)
+    frame_id: str = ''
 
     def __post_init__(self) -> None:
         self.pressures_pa = np.atleast_2d(np.asarray(self.pressures_pa, dtype=float))
@@ -95,7 +98,7 @@ class Recording:
         """The samples ``index`` (array of indices or a boolean mask)."""
         return Recording(self.pressures_pa[index], self.positions_m[index],
                          self.quaternions_xyzw[index], self.times_s[index], self.source,
-                         list(self.notes))
+                         list(self.notes), self.frame_id)
 
 
 # ------------------------------------------------------------------- CSV
@@ -310,6 +313,7 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
                     raise RecordingError(f'{label}: topic {topic} has type {topics[topic]}, '
                                          f'expected {want}')
             cmd_t, cmd_p, pose_t, pose_x, pose_q = [], [], [], [], []
+            frames = {}   # pose frame_id -> count
             conns = [c for c in reader.connections if c.topic in (p_topic, x_topic)]
             for conn, stamp, raw in reader.messages(connections=conns):
                 msg = store.deserialize_cdr(raw, conn.msgtype)
@@ -326,6 +330,7 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
                     cmd_p.append(values * pressure_unit(msg, where))
                 else:
                     p, o = msg.pose.position, msg.pose.orientation
+                    frames[msg.header.frame_id] = frames.get(msg.header.frame_id, 0) + 1
                     pose_t.append(stamp * 1e-9)
                     pose_x.append((p.x, p.y, p.z))
                     pose_q.append((o.x, o.y, o.z, o.w))
@@ -338,7 +343,12 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
         raise RecordingError(f'{label}: topic {p_topic} holds no messages')
     if not pose_t:
         raise RecordingError(f'{label}: topic {x_topic} holds no messages')
-    return settled_samples(cmd_t, cmd_p, pose_t, pose_x, pose_q, settle_s, drift_tol_m, label)
+    rec = settled_samples(cmd_t, cmd_p, pose_t, pose_x, pose_q, settle_s, drift_tol_m, label)
+    rec.frame_id = max(frames, key=frames.get)   # the poses' frame (the most frequent)
+    if len(frames) > 1:
+        rec.notes.append(f'poses in several frames {sorted(frames)}; taken as '
+                         f'{rec.frame_id!r}')
+    return rec
 
 
 def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3',

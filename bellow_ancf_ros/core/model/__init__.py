@@ -18,7 +18,8 @@ from . import parameter_keys
 from ._ancf import (GAUSS_W, GAUSS_XI, element_energy, element_forces, gravity_weights, hermite,
                     shape_weights)
 from ._assembly import Evaluation, RobotModel
-from ._config import (ConfigError, RobotConfig, SegmentConfig, check_element_count, config_dirs,
+from ._config import (ConfigError, MocapFrame, RobotConfig, SegmentConfig, check_element_count,
+                      config_dirs,
                       find_shipped, load_robot, plate_support_problem, robot_from_dict,
                       shipped_robot_names, smallest_element_count)
 from ._kernels import element_parameters, evaluate_kernel, horner
@@ -26,9 +27,9 @@ from ._pcc import PccModel, PccPose, arc_parameters, arc_state, arc_transform
 from ._stage1 import Stage1
 
 __all__ = [
-    "ConfigError", "Evaluation", "GAUSS_W", "GAUSS_XI", "PccModel", "PccPose", "RobotConfig",
-    "RobotModel", "SegmentConfig", "Stage1", "arc_parameters", "arc_state", "arc_transform",
-    "check_element_count", "config_dirs", "element_energy", "element_forces",
+    "ConfigError", "Evaluation", "MocapFrame", "GAUSS_W", "GAUSS_XI", "PccModel", "PccPose",
+    "RobotConfig", "RobotModel", "SegmentConfig", "Stage1", "arc_parameters", "arc_state",
+    "arc_transform", "check_element_count", "config_dirs", "element_energy", "element_forces",
     "element_parameters", "evaluate_kernel", "find_shipped", "gravity_weights", "hermite",
     "horner", "load_robot", "parameter_keys", "plate_support_problem", "robot_from_dict",
     "shape_weights", "shipped_robot_names", "smallest_element_count",

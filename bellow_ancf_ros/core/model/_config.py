@@ -36,10 +36,13 @@ from typing import Any, Iterable
 import numpy as np
 import yaml
 
+from ..geometry import (QUATERNION_MIN_NORM, quaternion_from_rotation, quaternion_to_rotation,
+                        unit_quaternion)
 from ._stage1 import Stage1
 
 __all__ = [
     'ConfigError',
+    'MocapFrame',
     'SegmentConfig',
     'RobotConfig',
     'load_robot',
@@ -122,6 +125,55 @@ class SegmentConfig:
 
 
 @dataclass(frozen=True)
+class MocapFrame:
+    """Where the motion capture sees the robot: the pose of the base frame in the mocap frame.
+
+    Attributes
+    ----------
+    frame_id: the mocap frame's name (``header.frame_id`` of its poses).
+    position: the base frame's origin in the mocap frame [m].
+    quaternion_xyzw: the base frame's orientation in the mocap frame (unit,
+        ROS order x, y, z, w): its rotation's columns are the base axes in
+        mocap coordinates.
+
+    ``bellow-ancf calibrate`` fits it and writes it to the calibrated robot
+    file (key ``mocap_frame``); nodes that take measured poses use it to
+    express mocap poses in the base frame (:meth:`to_base`).
+    """
+
+    frame_id: str
+    position: tuple[float, float, float]
+    quaternion_xyzw: tuple[float, float, float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'position', tuple(float(v) for v in self.position))
+        q = unit_quaternion(self.quaternion_xyzw)
+        object.__setattr__(self, 'quaternion_xyzw', tuple(float(v) for v in q))
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """Base axes in mocap coordinates (columns)."""
+        return quaternion_to_rotation(self.quaternion_xyzw)
+
+    def to_base(self, position, quaternion_xyzw=None):
+        """A pose in the mocap frame expressed in the base frame: ``(position, quaternion)``.
+
+        ``p_base = R^T (p_mocap - t)``, ``R_base = R^T R_mocap`` (quaternion
+        None: only the position).  Raises ValueError for a bad quaternion.
+        """
+        R = self.rotation
+        p = R.T @ (np.asarray(position, dtype=float).reshape(3) - np.asarray(self.position))
+        if quaternion_xyzw is None:
+            return p, None
+        return p, quaternion_from_rotation(R.T @ quaternion_to_rotation(quaternion_xyzw))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``mocap_frame`` entry of a robot file."""
+        return {'frame_id': self.frame_id, 'position_m': list(self.position),
+                'quaternion_xyzw': list(self.quaternion_xyzw)}
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     """Complete robot description (SI units).
 
@@ -139,6 +191,8 @@ class RobotConfig:
     gravity: gravity vector in the base frame [m/s^2].
     tool_length: end-effector offset along the last top-plate normal [m].
     payload: point mass at the end effector [kg].
+    mocap_frame: where the motion capture sees the robot (:class:`MocapFrame`),
+        or None (measured poses come in the base frame).
     source: where the description came from (not compared by ``==``).
     """
 
@@ -155,6 +209,7 @@ class RobotConfig:
     gravity: tuple[float, float, float]
     tool_length: float
     payload: float
+    mocap_frame: MocapFrame | None = None
     source: str = field(default='<dict>', compare=False)
 
     def __post_init__(self) -> None:
@@ -202,7 +257,7 @@ class RobotConfig:
                 d['connector_height_mm'] = seg.connector_height * 1e3
                 d['connector_mass_kg'] = seg.connector_mass
             segments.append(d)
-        return {
+        d = {
             'name': self.name,
             'actuator': {
                 'l0_m': self.l0,
@@ -220,10 +275,15 @@ class RobotConfig:
             },
             'payload_kg': self.payload,
         }
+        if self.mocap_frame is not None:
+            d['mocap_frame'] = self.mocap_frame.to_dict()
+        return d
 
 
 # --------------------------------------------------------------------- schema
 _TOP_KEYS = ('name', 'actuator', 'segments', 'pressure_limits', 'model', 'payload_kg')
+_OPTIONAL_TOP_KEYS = ('mocap_frame',)
+_MOCAP_KEYS = ('frame_id', 'position_m', 'quaternion_xyzw')
 _ACTUATOR_KEYS = ('l0_m', 'stiffness_coeffs_n_per_m', 'd_eff_mm', 'd_a_mm',
                   'linear_density_kg_per_m')
 _SEGMENT_KEYS = ('n_actuators', 'pitch_radius_mm', 'theta0_deg', 'constraint_plate_fractions',
@@ -261,22 +321,27 @@ class _Checker:
         return f'{path}.{key}' if path else key
 
     def mapping(self, value: Any, path: str, allowed: Sequence[str],
-                forbidden: Mapping[str, str] | None = None) -> Mapping | None:
-        """Check that ``value`` is a mapping without unknown keys; report missing ones."""
+                forbidden: Mapping[str, str] | None = None,
+                optional: Sequence[str] = ()) -> Mapping | None:
+        """Check that ``value`` is a mapping without unknown keys; report missing ones.
+
+        ``optional`` keys may be there or not.
+        """
         if not isinstance(value, Mapping):
             self.err(path or '<top level>', f'expected a mapping, got {_type_name(value)}')
             return None
         forbidden = forbidden or {}
         for key in value:
-            if key in allowed:
+            if key in allowed or key in optional:
                 continue
             full = self.join(path, str(key))
             if key in forbidden:
                 self.err(full, forbidden[key])
                 continue
-            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
+            known = tuple(allowed) + tuple(optional)
+            close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
             hint = f"did you mean '{close[0]}'?" if close else \
-                'allowed keys: ' + ', '.join(allowed)
+                'allowed keys: ' + ', '.join(known)
             self.err(full, f'unknown key; {hint}')
         for key in allowed:
             if key not in value:
@@ -486,7 +551,7 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
     Raises :class:`ConfigError` listing every problem found.
     """
     chk = _Checker()
-    top = chk.mapping(d, '', _TOP_KEYS)
+    top = chk.mapping(d, '', _TOP_KEYS, optional=_OPTIONAL_TOP_KEYS)
     if top is None:
         raise ConfigError(chk.issues, source)
 
@@ -533,6 +598,7 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
             tool = chk.number(mod, 'model', 'tool_length_mm', nonneg=True)
 
     payload = chk.number(top, '', 'payload_kg', nonneg=True)
+    mocap = _mocap_frame(chk, top['mocap_frame']) if 'mocap_frame' in top else None
 
     # Stage 1 must map [p_min, p_max] monotonically (docs/model.md section 2).
     if None not in (coeffs, l0, d_eff, p_min, p_max):
@@ -563,8 +629,25 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
         gravity=gravity,
         tool_length=tool * 1e-3,
         payload=payload,
+        mocap_frame=mocap,
         source=source,
     )
+
+
+def _mocap_frame(chk: _Checker, raw: Any) -> MocapFrame | None:
+    """The optional ``mocap_frame`` entry (frame name, position [m], unit quaternion)."""
+    m = chk.mapping(raw, 'mocap_frame', _MOCAP_KEYS)
+    if m is None:
+        return None
+    frame = chk.string(m, 'mocap_frame', 'frame_id')
+    pos = chk.numbers(m, 'mocap_frame', 'position_m', length=3)
+    quat = chk.numbers(m, 'mocap_frame', 'quaternion_xyzw', length=4)
+    if quat is not None and not np.linalg.norm(quat) > QUATERNION_MIN_NORM:
+        chk.err('mocap_frame.quaternion_xyzw', f'must be a non-zero quaternion, got {list(quat)}')
+        quat = None
+    if None in (frame, pos, quat):
+        return None
+    return MocapFrame(frame, pos, quat)
 
 
 # ---------------------------------------------------------------- file access
