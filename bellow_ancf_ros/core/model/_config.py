@@ -147,7 +147,9 @@ class MocapFrame:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'position', tuple(float(v) for v in self.position))
-        q = unit_quaternion(self.quaternion_xyzw)
+        q = np.asarray(self.quaternion_xyzw, dtype=float)
+        if not abs(np.linalg.norm(q) - 1.0) <= 1e-14:   # (a unit one stays bit for bit)
+            q = unit_quaternion(q)
         object.__setattr__(self, 'quaternion_xyzw', tuple(float(v) for v in q))
 
     @property

@@ -133,11 +133,35 @@ def test_to_dict_round_trip():
         again = robot_from_dict(cfg.to_dict())
         assert again.source == '<dict>' and again.name == cfg.name
         for f in dataclasses.fields(RobotConfig):
-            if f.name not in ('source', 'segments', 'name'):
+            if f.name not in ('source', 'segments', 'name', 'mocap_frame'):
                 assert getattr(again, f.name) == pytest.approx(getattr(cfg, f.name), rel=1e-15)
+        assert again.mocap_frame is None and cfg.mocap_frame is None
         for s_a, s_b in zip(again.segments, cfg.segments):
             for f in dataclasses.fields(SegmentConfig):
                 assert getattr(s_a, f.name) == pytest.approx(getattr(s_b, f.name), rel=1e-15)
+
+
+def test_mocap_frame_entry_validated_and_round_tripped(one):
+    """Optional ``mocap_frame``: the base's pose in the mocap frame; its quaternion normalised."""
+    one['mocap_frame'] = {'frame_id': 'world', 'position_m': [0.1, -0.2, 0.3],
+                          'quaternion_xyzw': [0.0, 0.0, 2.0, 2.0]}
+    cfg = robot_from_dict(one)
+    mf = cfg.mocap_frame
+    assert mf.frame_id == 'world' and mf.position == (0.1, -0.2, 0.3)
+    np.testing.assert_allclose(mf.quaternion_xyzw, [0, 0, np.sqrt(0.5), np.sqrt(0.5)])
+    assert robot_from_dict(cfg.to_dict()) == cfg
+    # a point 0.1 m above the base origin, seen in the mocap frame, back in the base frame
+    p, q = mf.to_base(np.array([0.1, -0.2, 0.4]), mf.quaternion_xyzw)
+    np.testing.assert_allclose(p, [0, 0, 0.1], atol=1e-15)
+    np.testing.assert_allclose(np.abs(q), [0, 0, 0, 1], atol=1e-12)
+    one['mocap_frame'] = {'frame_id': '', 'position_m': [0, 0],
+                          'quaternion_xyzw': [0, 0, 0, 0], 'frame': 'x'}
+    with pytest.raises(ConfigError) as e:
+        robot_from_dict(one)
+    text = str(e.value)
+    for key in ('mocap_frame.frame_id', 'mocap_frame.position_m',
+                'mocap_frame.quaternion_xyzw', "mocap_frame.frame: unknown key; did you mean"):
+        assert key in text, text
 
 
 def test_ints_are_accepted_for_floats(one):
