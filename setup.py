@@ -62,6 +62,7 @@ setup(
             'excitation_publisher = bellow_ancf_ros.nodes.excitation_publisher:main',
             'simulated_robot_node = bellow_ancf_ros.nodes.simulated_robot_node:main',
             'mocap_relay = bellow_ancf_ros.nodes.mocap_relay:main',
+            'regulator_driver = bellow_ancf_ros.nodes.regulator_driver:main',
         ],
     },
 )

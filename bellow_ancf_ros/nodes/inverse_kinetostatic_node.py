@@ -182,6 +182,10 @@ class InverseKinetostaticNode(LifecycleNode):
         declare(self, 'max_rate_hz', 100.0, descriptor(
             'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
             lo=0.1, hi=1000.0))
+        declare(self, 'command_rate_hz', 20.0, descriptor(
+            'Rate at which the current command is republished while active and no new one went '
+            'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
+            'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True))
         declare(self, 'autostart', True, descriptor(
             'Configure and activate at start-up (so that a plain ros2 run works).', B,
             read_only=True))
@@ -208,7 +212,9 @@ class InverseKinetostaticNode(LifecycleNode):
         self.last_vent_acked: bool | None = None
         self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
                       'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0,
-                      'over_budget': 0}
+                      'over_budget': 0, 'republished': 0}
+        self._last_publish_t = -float('inf')
+        self._republish_timer = None
         self.solve_stats = worker.SolveStats()
         self._last_item, self._continuations = None, 0   # budget slices of one target
         self._resume = None   # (item, unusable budget-limited answer): its next slice goes on
@@ -311,6 +317,9 @@ class InverseKinetostaticNode(LifecycleNode):
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='inverse-solver')
+        rate = float(self.get_parameter('command_rate_hz').value)
+        self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
+                                 if rate > 0 else None)
         self._feedback.configure(cfg, self._worker.submit)
         self._configured = True
         self.get_logger().info(
@@ -377,6 +386,9 @@ class InverseKinetostaticNode(LifecycleNode):
             self._active = False
             self._configured = False
         self._feedback.release()
+        if getattr(self, '_republish_timer', None) is not None:
+            self.destroy_timer(self._republish_timer)
+            self._republish_timer = None
         if self._worker is not None:
             self._worker.stop()
             self._worker = None
@@ -480,6 +492,24 @@ class InverseKinetostaticNode(LifecycleNode):
         # work before its next wait (about 0.5 ms of latency, measured by bench/ros_latency.py)
         time.sleep(0)
 
+    def _republish(self) -> None:
+        """The current command again (``command_rate_hz``), unless a new one just went out.
+
+        Only while active, and only a command that passed the safety gate
+        (the last solve's, or the vent): a driver's watchdog sees a live
+        controller even while the target is held.
+        """
+        with self._lock:
+            p = self.last_command_pa
+            if not self._active or p is None or self._pub_cmd is None:
+                return
+            period = 1.0 / float(self.get_parameter('command_rate_hz').value)
+            if time.monotonic() - self._last_publish_t < 0.5 * period:
+                return
+            self._pub_cmd.publish(pressure_message(p, self._unit()))
+            self._last_publish_t = time.monotonic()
+            self.stats['republished'] += 1
+
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
         self.last_refusal_reason = reason
@@ -539,6 +569,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 if stamp.sec == 0 and stamp.nanosec == 0:
                     stamp = self.get_clock().now().to_msg()
                 self._pub_cmd.publish(pressure_message(p, unit))
+                self._last_publish_t = time.monotonic()
                 self._pub_pose.publish(pose_message(
                     fw.position, geometry.quaternion_from_rotation(fw.rotation),
                     self.get_parameter('base_frame').value, stamp))

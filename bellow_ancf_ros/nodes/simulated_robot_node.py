@@ -111,6 +111,10 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('angle_noise_deg', 0.1, descriptor(
             'Motion-capture orientation noise, standard deviation per axis [deg].', D,
             lo=0.0, hi=45.0, **ro))
+        self.declare_parameter('command_timeout_s', 0.0, descriptor(
+            'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
+            'as a regulator driver does (the inverse node republishes at command_rate_hz); '
+            '0 = off (a bench fed single commands).', D, lo=0.0, hi=60.0, **ro))
         d = descriptor('Seed of the noise generator; -1 = random.', INT, **ro)
         d.integer_range = [IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]
         self.declare_parameter('seed', -1, d)
@@ -142,7 +146,10 @@ class SimulatedRobotNode(Node):
                                             'a non-zero quaternion (x, y, z, w)', str(exc))
             self._mocap_frame = (g('mocap_frame_id').value, R, np.asarray(pos_m, dtype=float))
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0}
+        self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
+                      'timeouts': 0}
+        self._timeout_s = float(g('command_timeout_s').value)
+        self._last_cmd_t: float | None = None
         self.last_refusal_reason = ''
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'measured_pose', qos)
@@ -188,6 +195,7 @@ class SimulatedRobotNode(Node):
             self._refusals.report(str(exc), self.stats['refused'])
             return
         self.robot.command(p)   # one array assignment: the physics thread reads it whole
+        self._last_cmd_t = time.monotonic()
 
     # ------------------------------------------------------------ physics
     def _physics_loop(self) -> None:
@@ -201,6 +209,14 @@ class SimulatedRobotNode(Node):
             else:
                 next_t = time.monotonic()   # running late: no catch-up burst
             now = time.monotonic()
+            t_cmd = self._last_cmd_t
+            if self._timeout_s > 0 and t_cmd is not None and now - t_cmd > self._timeout_s:
+                self._last_cmd_t = None   # vent once, as a driver does
+                self.robot.command(contract.vent_pressures(self.robot.model.A, self.cfg.p_min,
+                                                           self.cfg.p_max))
+                self.stats['timeouts'] += 1
+                self.get_logger().warning(f'vented: no pressure_command for '
+                                          f'{self._timeout_s:g} s (controller dead or stopped)')
             failures = self.robot.failures
             self.robot.step(now - last)   # only this thread steps the robot
             failed = self.robot.failures > failures
