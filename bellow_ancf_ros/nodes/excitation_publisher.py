@@ -8,8 +8,10 @@ workspace schemes (section VI.B) at ``points_per_scheme`` points each, then
 ``dwell_s`` seconds and republished at ``rate_hz`` (a repeated command is not a
 new step for ``bellow-ancf calibrate``).  After the last step, and on shutdown
 (Ctrl-C/SIGTERM), it publishes the vent command (0 Pa gauge on every actuator)
-once and stops.  With ``wait_for_subscribers`` it starts only once that many
-subscribers listen on ``pressure_command``.  Record meanwhile, e.g.
+once and stops; the process then ends (``exit_when_done``).  While another
+node publishes ``pressure_command`` it publishes nothing but the vent
+(``bellow_ancf_ros.nodes.ownership``).  With ``wait_for_subscribers`` it
+starts only once that many subscribers listen on ``pressure_command``.  Record meanwhile, e.g.
 ``ros2 bag record /pressure_command /measured_pose``; choose ``dwell_s`` well above
 calibrate's ``--settle-s``.
 
@@ -35,13 +37,16 @@ from ..core.fit import excitation_sequence
 from . import contract
 from .diagnostics import publish_diagnostic
 from .ros_util import (
+    StartupParameterError,
     command_qos,
     descriptor,
     diagnostics_qos,
     guard_parameters,
     main_for,
     pressure_message,
+    request_stop,
 )
+from .ownership import TopicOwner
 
 __all__ = ['ExcitationPublisher', 'main']
 
@@ -78,20 +83,34 @@ class ExcitationPublisher(Node):
         self.declare_parameter('wait_for_subscribers', 0, descriptor(
             'Start (then wait start_delay_s) only once pressure_command has this many '
             'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True))
+        B = ParameterType.PARAMETER_BOOL
+        self.declare_parameter('allow_other_publishers', False, descriptor(
+            'Publish pressure_command even while another node publishes it (default false: '
+            'refuse, ERROR diagnostics, until this node is the only publisher).', B))
+        self.declare_parameter('exit_when_done', True, descriptor(
+            'End the process once the sequence and the vent are done (the vent acknowledged, '
+            'at most 1 s).', B, read_only=True))
         guard_parameters(self, ('pressure_unit', 'robot_config'))
 
         self.cfg = load_robot(self.get_parameter('robot_config').value)
-        self.sequence = excitation_sequence(
-            self.cfg, int(self.get_parameter('points_per_scheme').value),
-            int(self.get_parameter('n_random').value), int(self.get_parameter('seed').value))
+        pps = int(self.get_parameter('points_per_scheme').value)
+        try:
+            self.sequence = excitation_sequence(
+                self.cfg, pps, int(self.get_parameter('n_random').value),
+                int(self.get_parameter('seed').value))
+        except ValueError as exc:   # e.g. points_per_scheme < 2: one line, exit status 2
+            raise StartupParameterError('points_per_scheme', pps, 'an integer >= 2',
+                                        str(exc)) from None
         for p in self.sequence:       # refuse at start-up rather than mid-run
             contract.safe_pressures(p, self.cfg.p_min, self.cfg.p_max, self.cfg.n_actuators_total)
         self.dwell = float(self.get_parameter('dwell_s').value)
         self.step = -1
         self.published = 0
+        self.refused = 0
         self.finished = False
         self.vented = False
         self._pub = self.create_publisher(Float64MultiArray, 'pressure_command', command_qos())
+        self._owner = TopicOwner(self, 'pressure_command')
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._t0 = None
         rate = float(self.get_parameter('rate_hz').value)
@@ -100,9 +119,15 @@ class ExcitationPublisher(Node):
             f'excitation of robot {self.cfg.name!r}: {len(self.sequence)} steps of '
             f'{self.dwell:g} s ({len(self.sequence) * self.dwell:.0f} s), then vent')
 
-    def _publish(self, pressures_pa) -> None:
+    def _publish(self, pressures_pa, vent: bool = False) -> None:
         p = contract.safe_pressures(pressures_pa, self.cfg.p_min, self.cfg.p_max,
                                     self.cfg.n_actuators_total)
+        if not vent and not self._owner.may_publish():   # the vent always goes out
+            self.refused += 1
+            reason = self._owner.refusal()
+            self.get_logger().error(reason, throttle_duration_sec=2.0)
+            self._diag(DiagnosticStatus.ERROR, reason)
+            return
         self._pub.publish(pressure_message(p, self.get_parameter('pressure_unit').value))
         self.published += 1
 
@@ -122,6 +147,10 @@ class ExcitationPublisher(Node):
             self.vent('excitation finished')
             self.finished = True
             self._timer.cancel()
+            if self.get_parameter('exit_when_done').value:
+                self._wait_acked()
+                self.get_logger().info('sequence and vent done: exiting')
+                request_stop()
             return
         if step != self.step:
             self.step = step
@@ -133,7 +162,7 @@ class ExcitationPublisher(Node):
         if self.vented:
             return
         self._publish(contract.vent_pressures(self.cfg.n_actuators_total, self.cfg.p_min,
-                                              self.cfg.p_max))
+                                              self.cfg.p_max), vent=True)
         self.vented = True
         self._diag(DiagnosticStatus.OK, f'{why}: vented')
         self.get_logger().info(f'{why}: vent command (0 Pa gauge) published')
@@ -141,6 +170,10 @@ class ExcitationPublisher(Node):
     def vent_and_wait(self) -> None:
         """Vent on shutdown and wait (bounded) until subscribers have it."""
         self.vent('shutdown')
+        self._wait_acked()
+
+    def _wait_acked(self) -> None:
+        """Wait (at most ``VENT_ACK_TIMEOUT_S``) until the subscribers have the last command."""
         try:
             if self._pub.get_subscription_count() > 0:
                 self._pub.wait_for_all_acked(Duration(seconds=VENT_ACK_TIMEOUT_S))
@@ -151,7 +184,7 @@ class ExcitationPublisher(Node):
         publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: excitation',
                            self.cfg.name, level, message,
                            {'step': self.step + 1, 'steps': len(self.sequence),
-                            'published': self.published})
+                            'published': self.published, 'refused': self.refused})
 
 
 main = main_for(ExcitationPublisher, before_destroy=lambda n: n.vent_and_wait())

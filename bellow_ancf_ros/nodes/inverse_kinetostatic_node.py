@@ -128,6 +128,7 @@ from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_
 from ..core import geometry
 from . import contract, worker
 from .measured_feedback import FeedbackLink
+from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
@@ -186,6 +187,9 @@ class InverseKinetostaticNode(LifecycleNode):
             'Rate at which the current command is republished while active and no new one went '
             'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
             'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True))
+        declare(self, 'allow_other_publishers', False, descriptor(
+            'Publish pressure_command even while another node publishes it (default false: '
+            'refuse, ERROR diagnostics, until this node is the only publisher).', B))
         declare(self, 'autostart', True, descriptor(
             'Configure and activate at start-up (so that a plain ros2 run works).', B,
             read_only=True))
@@ -313,6 +317,7 @@ class InverseKinetostaticNode(LifecycleNode):
             self._warm = fw0 if fw0.success else None
         qos = command_qos()
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
+        self._owner = TopicOwner(self, 'pressure_command')
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
@@ -432,7 +437,11 @@ class InverseKinetostaticNode(LifecycleNode):
         values.update({f'targets_{k}': v for k, v in self.stats.items()})
         if self.last_vent_acked is not None:
             values['last_vent_acked'] = str(self.last_vent_acked).lower()
-        if state == 'active':
+        owner = getattr(self, '_owner', None)
+        if state == 'active' and owner is not None and not owner.may_publish():
+            level, message = DiagnosticStatus.ERROR, f'active, but {owner.refusal()}'
+            self.get_logger().error(owner.refusal(), throttle_duration_sec=WARN_THROTTLE_S)
+        elif state == 'active':
             level, message = DiagnosticStatus.OK, 'active: pressure commands enabled'
             last_ok = self.solve_stats.summary()['last_ok']
             if last_ok is False:
@@ -503,12 +512,21 @@ class InverseKinetostaticNode(LifecycleNode):
             p = self.last_command_pa
             if not self._active or p is None or self._pub_cmd is None:
                 return
+            if not self._owner.may_publish():
+                self._report_other_publishers()
+                return
             period = 1.0 / float(self.get_parameter('command_rate_hz').value)
             if time.monotonic() - self._last_publish_t < 0.5 * period:
                 return
             self._pub_cmd.publish(pressure_message(p, self._unit()))
             self._last_publish_t = time.monotonic()
             self.stats['republished'] += 1
+
+    def _report_other_publishers(self) -> None:
+        """Log (throttled) and report why no command goes out while another node publishes."""
+        reason = self._owner.refusal()
+        self.get_logger().error(reason, throttle_duration_sec=WARN_THROTTLE_S)
+        self._publish_diag(DiagnosticStatus.ERROR, reason, {})
 
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
@@ -560,6 +578,8 @@ class InverseKinetostaticNode(LifecycleNode):
                 p = contract.safe_pressures(inv.pressures_pa, cfg.p_min, cfg.p_max, model.A)
             except contract.UnsafePressureError as exc:
                 unsafe = exc
+        if p is not None and not self._owner.may_publish():
+            p, unsafe = None, contract.UnsafePressureError(self._owner.refusal())
         unit = self._unit()
         if p is not None:   # the command first, the diagnostics after it
             with self._lock:
@@ -614,7 +634,9 @@ class InverseKinetostaticNode(LifecycleNode):
         if unsafe is not None:
             self._feedback.no_command()
             self.stats['failed'] += 1
-            msg = f'solver output refused by the safety gate ({unsafe}); last command kept'
+            msg = (f'not published ({unsafe}); last command kept' if self._owner.others
+                   else f'solver output refused by the safety gate ({unsafe}); '
+                        'last command kept')
             self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
             self._publish_diag(DiagnosticStatus.ERROR, msg, values)
             return

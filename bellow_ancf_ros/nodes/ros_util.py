@@ -45,7 +45,7 @@ __all__ = [
     'WARN_THROTTLE_S', 'StartupEnvironmentError', 'StartupParameterError', 'allowed_values',
     'command_qos', 'declare', 'descriptor', 'diagnostics_qos', 'executor_choice',
     'guard_parameters', 'init_rclpy', 'main_for', 'make_executor', 'pose_message',
-    'pressure_message', 'publish_and_wait_acked', 'run_node',
+    'pressure_message', 'publish_and_wait_acked', 'request_stop', 'run_node',
 ]
 
 QOS_DEPTH = 5
@@ -347,6 +347,11 @@ def make_executor():
         else:
             return EventsExecutor()
     return SingleThreadedExecutor()
+
+
+def request_stop() -> None:
+    """End :func:`run_node`'s spin loop as a first SIGINT would (a node that is done)."""
+    _STOP.set()
 
 
 def run_node(node, before_destroy=None) -> None:

@@ -124,3 +124,60 @@ def test_sigkilled_controller_driver_and_simulated_robot_vent_within_the_timeout
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(10)
+
+
+# ------------------------------------------------------------------ one owner of the topic
+def test_two_publishers_on_pressure_command_never_alternate(h, one):
+    """The controller holds a target; an excitation publisher is started by mistake.
+
+    Once they have discovered each other neither publishes anything but a
+    vent: the commands never flip between the two; both say why, naming
+    the other node.  With the other gone, the controller commands again.
+    """
+    from diagnostic_msgs.msg import DiagnosticArray
+    from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher
+    from bellow_ancf_ros.nodes.ros_util import command_qos
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    inv = h.add(InverseKinetostaticNode, command_rate_hz=20.0)
+    pub = h.publisher(PoseStamped, 'target_pose')
+    pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
+    wait_for(lambda: inv.stats['published'] >= 1, what='the controller commands')
+    held = inv.last_command_pa.copy()
+    n0 = h.count('pressure_command')
+    exc = h.add(ExcitationPublisher, dwell_s=0.5, rate_hz=20.0, exit_when_done=False)
+    wait_for(lambda: exc.refused >= 3 and inv._owner.others, what='both see each other')
+    time.sleep(1.0)
+    with h.lock:
+        seq = [np.array(m.data) for _, m in h.msgs['pressure_command'][n0:]]
+    kinds = ['vent' if not np.any(c) else 'controller' if np.allclose(c, held) else 'other'
+             for c in seq]
+    flips = sum(1 for a, b in zip(kinds, kinds[1:]) if {a, b} == {'controller', 'other'})
+    assert flips <= 1, kinds          # at most the one switch before discovery, never back
+    n1 = h.count('pressure_command')
+    time.sleep(0.5)
+    with h.lock:
+        late = [np.array(m.data) for _, m in h.msgs['pressure_command'][n1:]]
+    assert all(not np.any(c) for c in late), late     # silence (or a vent) while two
+    assert any(exc.get_fully_qualified_name() in s.message
+               for s in _rn.diag_statuses(h, 'inverse'))
+    assert any(inv.get_fully_qualified_name() in s.message
+               for s in _rn.diag_statuses(h, 'excitation'))
+    # the intruder goes: the controller is the only publisher again and commands
+    h.executor.remove_node(exc)
+    h.nodes.remove(exc)
+    exc.destroy_node()
+    n2 = h.count('pressure_command')
+    wait_for(lambda: h.count('pressure_command') > n2 + 3, what='commands again')
+    np.testing.assert_allclose(h.last('pressure_command').data, held)
+
+
+def test_excitation_publisher_process_exits_when_its_sequence_and_the_vent_are_done():
+    cmd = [sys.executable, '-m', 'bellow_ancf_ros.nodes.excitation_publisher', '--ros-args',
+           '-p', 'dwell_s:=0.05', '-p', 'points_per_scheme:=2', '-p', 'n_random:=1']
+    t0 = time.monotonic()
+    proc = subprocess.run(cmd, env=dict(os.environ), capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert 'excitation finished: vent command' in proc.stderr
+    assert 'sequence and vent done: exiting' in proc.stderr
+    assert time.monotonic() - t0 < 60
