@@ -46,12 +46,15 @@ from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticN
 from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
+from bellow_ancf_ros.nodes.mocap_relay import MocapRelay  # noqa: E402
+from bellow_ancf_ros.nodes.regulator_driver import RegulatorDriver  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / 'README.md'
 #: the documents whose code blocks hold commands: the README, then every page of docs/
 DOCUMENTS = [README, *sorted((REPO / 'docs').glob('*.md'))]
-NODES = {'inverse_kinetostatic_node': InverseKinetostaticNode,
+NODES = {'mocap_relay': MocapRelay, 'regulator_driver': RegulatorDriver,
+         'inverse_kinetostatic_node': InverseKinetostaticNode,
          'forward_kinetostatic_node': ForwardKinetostaticNode,
          'trajectory_publisher': TrajectoryPublisher,
          'excitation_publisher': ExcitationPublisher,
