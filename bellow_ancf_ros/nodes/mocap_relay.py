@@ -10,8 +10,8 @@ node accepts the mocap frame itself; this relay serves everything else (a
 recorder, rviz, a lab's own tools).  Poses it cannot transform, or with
 NaN/inf, are refused (throttled warning, diagnostics WARN).
 
-    ros2 run bellow_ancf_ros mocap_relay --ros-args -p robot_config:=robot_calibrated.yaml \\
-        -r mocap_pose:=/rigid_bodies/robot/pose
+    ros2 run bellow_ancf_ros mocap_relay --ros-args -p robot_config:=my_robot.yaml
+        -r mocap_pose:=/rigid_bodies/robot/pose   (one line)
 """
 
 from __future__ import annotations

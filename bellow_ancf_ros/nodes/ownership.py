@@ -22,7 +22,7 @@ __all__ = ['TopicOwner']
 
 
 class TopicOwner:
-    """Is ``node`` the only publisher of ``topic``?  (See the module docstring.)"""
+    """Whether ``node`` is the only publisher of ``topic`` (see the module docstring)."""
 
     def __init__(self, node, topic: str, allow_param: str = 'allow_other_publishers') -> None:
         """``allow_param``: the node's boolean parameter that lifts the rule."""

@@ -12,6 +12,7 @@ pytest.importorskip('rclpy')
 REPO = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_main_demo_short_run_one_segment(tmp_path):
     plot = tmp_path / 'demo.png'
     env = dict(os.environ)

@@ -369,6 +369,7 @@ def test_targets_to_pressures_to_predictions_and_latency(stack):
     assert np.median(lat) < 250.0
 
 
+@pytest.mark.slow
 def test_kill_and_restart_one_node_at_a_time(stack):
     client, cfg, procs = stack['client'], stack['cfg'], stack['procs']
     targets = reachable_targets(3, seed=2)
@@ -440,6 +441,7 @@ def test_flood_answers_last_target_with_bounded_memory(stack):
     assert inverse.running
 
 
+@pytest.mark.slow
 def test_ros_wiring_check_short_run_two_segments(tmp_path):
     """The wiring check (three processes, the model against itself), shortened to seconds."""
     plot = tmp_path / 'tracking.png'

@@ -332,6 +332,7 @@ print('RETURNED', flush=True)
 """
 
 
+@pytest.mark.slow
 def test_a_hanging_shutdown_still_ends_the_process_by_the_deadline(env, tmp_path):
     """Whatever hangs after Ctrl-C, the process exits STOP_DEADLINE_S later, and says so."""
     procs = {}
@@ -383,6 +384,7 @@ def test_double_sigint_still_vents(env, tmp_path, client, executor):
         node.kill()
 
 
+@pytest.mark.slow
 def test_vent_not_acknowledged_by_a_stopped_subscriber_is_logged(env, tmp_path, client):
     node = _active_inverse(env, tmp_path / 'inverse.log', client)
     # a second subscriber of pressure_command (the forward node), then frozen (SIGSTOP)
