@@ -127,7 +127,7 @@ from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_
                     precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
 from . import contract, worker
-from .measured_feedback import FeedbackLink
+from .measured_feedback import FEEDBACK_PARAMETERS, FeedbackLink
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
@@ -146,8 +146,9 @@ from .ros_util import (
 
 __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_S', 'main']
 
-#: Parameters read on configure (a change needs cleanup + configure).
-CONFIGURE_PARAMETERS = ('robot_config',)
+#: Parameters read on configure, or that change what a command means: a change needs
+#: cleanup + configure (refused while configured, with the way out)
+CONFIGURE_PARAMETERS = ('robot_config', 'pressure_unit', 'base_frame') + FEEDBACK_PARAMETERS
 BUDGET_PERIODS = 5.0   # wall-clock budget of one solve, in periods of max_rate_hz
 PAYLOAD_CHECK_BUDGET_S = 1.0  # wall-clock budget of the buckling check of a new payload_kg
 BUDGET_STATUSES = (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET)
@@ -196,10 +197,12 @@ class InverseKinetostaticNode(LifecycleNode):
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
                          extra_check=self._configure_time_check)
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
+        self.add_post_set_parameters_callback(self._after_set)
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
         self._solve_lock = threading.Lock()   # one solve of the model at a time (worker, checks)
         self._last_target = None   # newest accepted target (position, z-axis), uncorrected
+        self._held_item = None     # its worker item (re-solved when the payload changes)
         self._active = False
         self._configured = False
         self._configure_error = ''
@@ -263,13 +266,28 @@ class InverseKinetostaticNode(LifecycleNode):
         the current target (or the current command), where the model can
         tell (core :func:`~bellow_ancf_ros.core.payload_problem`).
         """
+        if not getattr(self, '_configured', False):   # (declaring parameters in __init__)
+            return ''
         if param.name == 'payload_kg':
             return self._payload_check(float(param.value))
-        if param.name not in CONFIGURE_PARAMETERS or not self._configured:
+        if param.name not in CONFIGURE_PARAMETERS:
             return ''
         state = 'active' if self._active else 'inactive'
         return contract.configure_time_refusal(param.name, self._node_path(), state,
                                                self.get_parameter(param.name).value)
+
+    def _after_set(self, params) -> None:
+        """Run-time changes in effect: say so; a new payload re-solves the held target."""
+        for p in params:
+            if p.name == 'max_rate_hz':
+                self.get_logger().info(
+                    f'max_rate_hz {p.value:g}: at most {p.value:g} solves/s, solve budget '
+                    f'{self._time_budget() * 1e3:g} ms, from the next solve')
+            elif p.name == 'payload_kg':
+                self.get_logger().info(f'payload_kg {p.value:g}: the held target is re-solved')
+                item = self._held_item
+                if item is not None and self._worker is not None and self.is_active:
+                    self._worker.submit(item)
 
     def _payload_check(self, payload: float) -> str:
         """Why the configured robot cannot carry ``payload`` where it is, or ''."""
@@ -406,7 +424,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 setattr(self, attr, None)
         with self._lock:
             self._model = self._cfg = self._warm = None
-            self._last_target = None
+            self._last_target = self._held_item = None
 
     def vent_and_shutdown(self) -> None:
         """Shutdown transition from any primary state (vents if configured)."""
@@ -495,6 +513,7 @@ class InverseKinetostaticNode(LifecycleNode):
         item = (pos, z, msg.header.stamp, time.monotonic())
         with self._lock:
             self._last_target = (pos, z)
+            self._held_item = item
         self._feedback.remember(item)
         self._worker.submit(item)
         # hand the GIL to the solver thread now: else it waits for the executor's own Python

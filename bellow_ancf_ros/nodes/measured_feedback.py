@@ -37,7 +37,12 @@ from .diagnostics import Refusals
 from .frames import PoseFrames
 from .ros_util import QOS_DEPTH, descriptor
 
-__all__ = ['FeedbackLink', 'measured_pose_qos']
+__all__ = ['FEEDBACK_PARAMETERS', 'FeedbackLink', 'measured_pose_qos']
+
+#: The parameters FeedbackLink declares; all are read on configure.
+FEEDBACK_PARAMETERS = ('feedback', 'feedback_gain_per_s', 'feedback_max_correction_mm',
+                       'feedback_max_correction_deg', 'measured_pose_timeout_s',
+                       'measured_pose_max_jump_mm', 'feedback_reset_jump_mm', 'feedback_rate_hz')
 
 
 def measured_pose_qos() -> QoSProfile:

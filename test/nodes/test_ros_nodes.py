@@ -418,14 +418,23 @@ def test_pressure_unit_kpa_label_and_values(h, one):
     msg = send_and_wait_command(h, pub, target_msg(target))
     assert msg.layout.dim[0].label == 'actuator_pressure_gauge_kpa'
     np.testing.assert_allclose(msg.data, [100.0, -50.0, 20.0], atol=1e-3)
-    # switch back to Pa at run time through the parameter service
+    # the unit changes what a command means: refused while configured, with the way out
     setp = h.service(SetParameters, f'{h.ns}/inverse_kinetostatic_node/set_parameters')
     res = h.call(setp, SetParameters.Request(parameters=[
         Parameter('pressure_unit', value='Pa').to_parameter_msg()]))
-    assert res.results[0].successful
+    reason = res.results[0].reason
+    assert not res.results[0].successful and 'cleanup' in reason and 'configure' in reason
     res = h.call(setp, SetParameters.Request(parameters=[
         Parameter('pressure_unit', value='bar').to_parameter_msg()]))
     assert not res.results[0].successful and 'bar' in res.results[0].reason
+    node.trigger_deactivate()
+    node.trigger_cleanup()
+    res = h.call(setp, SetParameters.Request(parameters=[
+        Parameter('pressure_unit', value='Pa').to_parameter_msg()]))
+    assert res.results[0].successful
+    node.trigger_configure()
+    node.trigger_activate()
+    wait_for(lambda: node._pub_cmd.get_subscription_count() >= 1, what='pressure_command again')
     msg = send_and_wait_command(h, pub, target_msg(target + [0.0, 0.0, 1e-4]))
     assert msg.layout.dim[0].label == 'actuator_pressure_gauge_pa'
     assert np.all(np.abs(msg.data) > 1e3)
@@ -797,3 +806,23 @@ def test_trajectory_publisher_one_segment_rejects_bending(h, one):
     assert not res[0].successful
     with pytest.raises(ValueError):
         h.add(TrajectoryPublisher, name='tp_bad', trajectory='no_such_curve')
+
+
+def test_live_parameters_refused_or_applied_at_once(h, one):
+    """Parameters read on configure are refused while configured; payload and rate apply now."""
+    from rclpy.parameter import Parameter as P
+    node, pub, _ = setup_inverse(h, feedback='integral')
+    msg = send_and_wait_command(h, pub, target_msg(solve_forward(one, [70e3, 0.0, 0.0]).position))
+    before = np.array(msg.data)
+    for name, value in (('feedback', 'none'), ('feedback_gain_per_s', 1.0),
+                        ('base_frame', 'world')):
+        res = node.set_parameters([P(name, value=value)])[0]
+        assert not res.successful and 'cleanup' in res.reason, (name, res.reason)
+    assert node.get_parameter('feedback').value == 'integral'
+    assert node.set_parameters([P('max_rate_hz', value=50.0)])[0].successful
+    assert node._time_budget() == pytest.approx(0.1)          # applied from the next solve
+    n = h.count('pressure_command')
+    assert node.set_parameters([P('payload_kg', value=0.05)])[0].successful
+    # the held target is re-solved with the payload: a new command, no new target
+    wait_for(lambda: h.count('pressure_command') > n and not np.allclose(
+        h.last('pressure_command').data, before), what='the held target re-solved')
