@@ -98,8 +98,13 @@ def is_concrete(args):
     return not any(re.fullmatch(r'[A-Z][A-Z0-9]*', a) or a == '...' for a in args)
 
 
+#: the command line as a ROS user runs it after installation: the same command
+ROS2_RUN_CLI = 'ros2 run bellow_ancf_ros bellow-ancf '
+
+
 def cli_lines():
-    return [line for _, line in code_lines() if line.startswith('bellow-ancf ')]
+    return [line.replace(ROS2_RUN_CLI, 'bellow-ancf ', 1) for _, line in code_lines()
+            if line.startswith(('bellow-ancf ', ROS2_RUN_CLI))]
 
 
 def test_readme_has_the_examples_this_file_checks():
@@ -218,7 +223,7 @@ def _ros2_run_lines():
     """(block, executable, ros-args) of every ``ros2 run bellow_ancf_ros`` line."""
     out = []
     for block, line in code_lines():
-        if line.startswith('ros2 run bellow_ancf_ros '):
+        if line.startswith('ros2 run bellow_ancf_ros ') and not line.startswith(ROS2_RUN_CLI):
             args = shlex.split(line)
             out.append((block, args[3], args[4:]))
     return out

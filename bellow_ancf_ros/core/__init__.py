@@ -43,7 +43,7 @@ __all__ = [
     "PccModel", "PressureRegulators", "Recording", "RecordingError", "RobotConfig", "RobotModel",
     "SegmentConfig", "SimulatedRobot", "Stage1", "calibrate", "calibration", "control",
     "experiments", "fit", "geometry", "identification", "limit_blas_threads", "linalg",
-    "load_robot", "model", "parameter_keys", "payload_problem", "precompute_corners",
-    "read_recording", "robot_from_dict", "solve", "solve_forward", "solve_inverse", "status",
-    "studies", "trajectories", "warm_up",
+    "load_robot", "model", "numba_cache", "parameter_keys", "payload_problem",
+    "precompute_corners", "read_recording", "robot_from_dict", "solve", "solve_forward",
+    "solve_inverse", "status", "studies", "trajectories", "warm_up",
 ]

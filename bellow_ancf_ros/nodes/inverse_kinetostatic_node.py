@@ -237,6 +237,11 @@ class InverseKinetostaticNode(LifecycleNode):
         if self.get_parameter('autostart').value:
             if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
                 self.trigger_activate()
+        else:
+            path = self._node_path()
+            self.get_logger().info(
+                f'autostart false: waiting unconfigured (no pressure commands); to start: '
+                f'ros2 lifecycle set {path} configure, then ros2 lifecycle set {path} activate')
 
     # ---------------------------------------------------------- parameters
     def _min_period(self) -> float:

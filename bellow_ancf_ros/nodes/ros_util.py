@@ -37,7 +37,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ..core import ConfigError, limit_blas_threads
+from ..core import ConfigError, limit_blas_threads, numba_cache
 from . import contract
 
 __all__ = [
@@ -412,6 +412,10 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None):
         init_rclpy(args)
         try:
             executor_choice()
+            if not numba_cache.is_compiled():   # say at once what the blank terminal is
+                print(f'[{name}] compiling the numerical kernels once after installation '
+                      '(about 20 s; `ros2 run bellow_ancf_ros bellow-ancf warm-up` does it '
+                      'ahead of time)', file=sys.stderr, flush=True)
             node = node_class()
             _SPINNING.set()  # from here a signal stops the node cleanly (run_node)
         except (StartupParameterError, ConfigError) as exc:

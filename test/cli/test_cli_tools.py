@@ -252,3 +252,13 @@ def test_track_unreachable_exits_1(capsys):
                        '--points', '2', '--json', '--quiet')
     assert code == 1
     assert one_json(out)['reachable_fraction'] == 0.0
+
+
+def test_warm_up_compiles_or_loads_and_names_the_cache(capsys):
+    from bellow_ancf_ros import cli
+    assert cli.main(['warm-up', '--config', 'one_segment']) == 0
+    out = capsys.readouterr().out
+    assert 'numerical kernels' in out and 'cache:' in out
+    assert cli.main(['warm-up', '--config', 'no_such_robot']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith('bellow-ancf: error: --config: no_such_robot')

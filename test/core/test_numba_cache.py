@@ -1,5 +1,6 @@
 """core.numba_cache: one cache directory per version of the compiled sources."""
 
+import re
 import shutil
 
 import numba
@@ -24,9 +25,13 @@ def test_every_module_with_compiled_functions_is_hashed(tmp_path):
     """Subpackages included: editing any module with @njit anywhere under core/ changes the tag."""
     core = tmp_path / "core"
     shutil.copytree(numba_cache._CORE, core, ignore=shutil.ignore_patterns("__pycache__"))
-    compiled = [p for p in sorted(core.rglob("*.py")) if b"@njit" in p.read_bytes()]
+    compiled = [p for p in sorted(core.rglob("*.py"))
+                if re.search(rb"^[ \t]*@njit", p.read_bytes(), re.M)]
     names = {p.relative_to(core).as_posix() for p in compiled}
-    assert {"model/_kernels.py", "linalg/_ldlt.py", "solve/_chord.py"} <= names
+    assert names == {"model/_kernels.py", "linalg/_ldlt.py", "solve/_chord.py",
+                     "solve/_inverse_warm.py"}
+    assert {p.relative_to(numba_cache._CORE).as_posix()
+            for p in numba_cache.compiled_modules()} == names
     for path in compiled:
         tag = numba_cache.source_tag(core)
         path.write_text(path.read_text() + "\n# edited\n")
@@ -38,3 +43,10 @@ def test_numba_caches_in_the_tagged_directory(tmp_path):
     assert numba_cache.CACHE_DIR.name == numba_cache.source_tag()
     env = {"NUMBA_CACHE_DIR": str(tmp_path)}
     assert numba_cache.cache_dir(env) == tmp_path / "bellow_ancf_ros" / numba_cache.source_tag()
+
+
+def test_is_compiled_after_a_warm_up():
+    from bellow_ancf_ros.core import RobotModel, load_robot, warm_up
+    for name in ("one_segment", "two_segment"):   # (the pseudo-inverse: redundant robots)
+        warm_up(RobotModel(load_robot(name)))
+    assert numba_cache.is_compiled()

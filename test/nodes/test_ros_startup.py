@@ -414,3 +414,19 @@ def test_vent_not_acknowledged_by_a_stopped_subscriber_is_logged(env, tmp_path, 
     finally:
         listener.kill()
         node.kill()
+
+
+def test_a_first_start_says_at_once_that_it_compiles(tmp_path):
+    """An empty kernel cache (as after installation): the first line says what the wait is."""
+    import signal as _signal
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONUNBUFFERED='1')
+    proc = subprocess.Popen([sys.executable, '-m',
+                             'bellow_ancf_ros.nodes.inverse_kinetostatic_node'],
+                            env=env, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        first = proc.stderr.readline()
+        assert 'compiling the numerical kernels once after installation' in first, first
+        assert 'bellow-ancf warm-up' in first
+    finally:
+        os.killpg(proc.pid, _signal.SIGKILL)
+        proc.wait(10)
