@@ -6,12 +6,23 @@
     ros2 launch bellow_ancf_ros bellow_ancf.launch.py with_trajectory:=false \
         pressure_topic:=measured_pressure
     ros2 launch bellow_ancf_ros bellow_ancf.launch.py rviz:=true
+    ros2 launch bellow_ancf_ros bellow_ancf.launch.py sim:=true feedback:=integral payload_kg:=0.02
 
 Starts ``inverse_kinetostatic_node`` (managed node, autostarted),
 ``forward_kinetostatic_node`` (its input remapped to ``pressure_topic``),
 unless ``with_trajectory:=false`` ``trajectory_publisher``, and with
 ``rviz:=true`` rviz2 with the installed ``rviz/bellow_ancf.rviz`` (where
-rviz2 is installed; otherwise a log line says it is not).
+rviz2 is installed; otherwise a log line says it is not), and with
+``sim:=true`` ``simulated_robot_node`` (``sim_robot_config``, default the
+mismatched one-segment robot; it vents after ``command_timeout_s`` 0.5 s
+without a command, as a regulator driver does).  ``feedback`` and
+``payload_kg`` go to the controller (and the payload to the forward node).
+
+One outcome: a node that ends (a robot file that does not load ends the
+forward node and the trajectory publisher at start-up) ends the whole
+launch, so no half of the pipeline keeps running.  The controller gets
+``sigterm_timeout`` 10 s: its vent and the wait for the acknowledgement
+(at most 4 s) are not cut short by SIGKILL.
 
 Node parameters come from ``params_file`` (default: the installed
 ``config/nodes.yaml``); the launch arguments below override it.  launch_ros
@@ -29,7 +40,7 @@ instead (see the README).
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument, LogInfo
+from launch.actions import DeclareLaunchArgument, LogInfo, Shutdown
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
@@ -84,6 +95,16 @@ def generate_launch_description():
                               description='bending angle of bending_circle [deg]'),
         DeclareLaunchArgument('period_s', default_value='0.0',
                               description='trajectory period [s]; 0 = default'),
+        DeclareLaunchArgument('feedback', default_value='none',
+                              description="controller: 'none' (feedforward) or 'integral' "
+                                          '(closed loop on measured_pose)'),
+        DeclareLaunchArgument('payload_kg', default_value='0.0',
+                              description='payload at the end effector [kg], known to the model'),
+        DeclareLaunchArgument('sim', default_value='false',
+                              description='start simulated_robot_node in place of the robot'),
+        DeclareLaunchArgument('sim_robot_config', default_value='one_segment_mismatched',
+                              description="the simulated robot's own file (two segments: "
+                                          'two_segment_mismatched)'),
         DeclareLaunchArgument('rviz', default_value='false',
                               description='start rviz2 with the package RViz config'),
         DeclareLaunchArgument('rviz_config', default_value=default_rviz,
@@ -97,16 +118,29 @@ def generate_launch_description():
     }
     unit = {'pressure_unit': _typed('pressure_unit', str)}
 
+    payload = {'payload_kg': _typed('payload_kg', float)}
+    ends_all = Shutdown(reason='a node of the pipeline ended')
+
     inverse = Node(
         package=PACKAGE, executable='inverse_kinetostatic_node',
         name='inverse_kinetostatic_node', output='screen',
-        parameters=[params_file, robot, unit],
+        parameters=[params_file, robot, unit, payload, {'feedback': _typed('feedback', str)}],
+        sigterm_timeout='10', on_exit=ends_all,
     )
     forward = Node(
         package=PACKAGE, executable='forward_kinetostatic_node',
         name='forward_kinetostatic_node', output='screen',
-        parameters=[params_file, robot, unit],
+        parameters=[params_file, robot, unit, payload],
         remappings=[('pressure_command', LaunchConfiguration('pressure_topic'))],
+        on_exit=ends_all,
+    )
+    sim = Node(
+        package=PACKAGE, executable='simulated_robot_node', name='simulated_robot_node',
+        output='screen',
+        parameters=[params_file, {'robot_config': _typed('sim_robot_config', str),
+                                  'base_frame': _typed('base_frame', str),
+                                  'command_timeout_s': 0.5}, unit],
+        condition=IfCondition(LaunchConfiguration('sim')), on_exit=ends_all,
     )
     trajectory = Node(
         package=PACKAGE, executable='trajectory_publisher', name='trajectory_publisher',
@@ -130,4 +164,4 @@ def generate_launch_description():
                 'starting without RViz',
             condition=IfCondition(LaunchConfiguration('rviz')),
         )
-    return LaunchDescription(args + [inverse, forward, trajectory, rviz])
+    return LaunchDescription(args + [inverse, forward, sim, trajectory, rviz])

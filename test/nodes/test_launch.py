@@ -35,6 +35,7 @@ from rclpy.context import Context  # noqa: E402
 
 from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
+from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
@@ -43,7 +44,9 @@ NODE_CLASSES = {
     'inverse_kinetostatic_node': InverseKinetostaticNode,
     'forward_kinetostatic_node': ForwardKinetostaticNode,
     'trajectory_publisher': TrajectoryPublisher,
+    'simulated_robot_node': SimulatedRobotNode,
 }
+DEFAULT_NODES = {'inverse_kinetostatic_node', 'forward_kinetostatic_node', 'trajectory_publisher'}
 ISSUE_EXAMPLE = ('robot_config:=two_segment trajectory:=bending_circle bending_angle_deg:=10.0 '
                  'period_s:=20.0 pressure_unit:=kPa')
 
@@ -88,10 +91,18 @@ class _Action:
 
 class Node(_Action):
     def __init__(self, *, package, executable, name=None, parameters=(), remappings=(),
-                 arguments=(), output=None, condition=None):
+                 arguments=(), output=None, condition=None, on_exit=None, sigterm_timeout=None):
         super().__init__(condition)
         self.package, self.executable, self.name = package, executable, name
         self.parameters, self.remappings, self.arguments = list(parameters), remappings, arguments
+        self.on_exit, self.sigterm_timeout = on_exit, sigterm_timeout
+
+
+class Shutdown:
+    """launch.actions.Shutdown: ends the launch (as a node's ``on_exit``)."""
+
+    def __init__(self, *, reason=''):
+        self.reason = reason
 
 
 class LogInfo(_Action):
@@ -152,6 +163,7 @@ def load_launch_file(installed=('bellow_ancf_ros',)):
     stubs['launch'].LaunchDescription = LaunchDescription
     stubs['launch.actions'].DeclareLaunchArgument = DeclareLaunchArgument
     stubs['launch.actions'].LogInfo = LogInfo
+    stubs['launch.actions'].Shutdown = Shutdown
     stubs['launch.conditions'].IfCondition = IfCondition
     stubs['launch.substitutions'].LaunchConfiguration = LaunchConfiguration
     stubs['launch_ros.actions'].Node = Node
@@ -270,15 +282,17 @@ def run_launch(domain, tmp_path, cli_args):
 # ------------------------------------------------------------------ tests
 def test_issue_example_launch_arguments_win_over_the_params_file(domain_id, tmp_path):
     results = run_launch(domain_id, tmp_path, ISSUE_EXAMPLE)
-    assert set(results) == set(NODE_CLASSES)
+    assert set(results) == DEFAULT_NODES
     for exe, (expected, got) in results.items():
         assert got == expected, exe
     assert results['trajectory_publisher'][1] == {
         'robot_config': 'two_segment', 'base_frame': 'base', 'trajectory': 'bending_circle',
         'bending_angle_deg': 10.0, 'period_s': 20.0}
     for exe in ('inverse_kinetostatic_node', 'forward_kinetostatic_node'):
-        assert results[exe][1] == {'robot_config': 'two_segment', 'base_frame': 'base',
-                                   'pressure_unit': 'kPa'}
+        got = dict(results[exe][1])
+        assert got.pop('payload_kg') == 0.0 and got.pop('feedback', 'none') == 'none'
+        assert got == {'robot_config': 'two_segment', 'base_frame': 'base',
+                       'pressure_unit': 'kPa'}
 
 
 def test_defaults_are_the_declared_defaults(domain_id, tmp_path):
@@ -378,3 +392,26 @@ def test_rviz_config_shows_the_topics_in_the_base_frame():
         if 'Topic' in d:
             assert d['Topic']['Reliability Policy'] == 'Reliable'   # the nodes publish reliable
             assert d['Enabled'] is True
+
+
+def test_sim_feedback_and_payload_arguments(domain_id, tmp_path):
+    """sim:=true feedback:=integral payload_kg:=0.02: a simulated robot that vents on its own."""
+    results = run_launch(domain_id, tmp_path, 'sim:=true feedback:=integral payload_kg:=0.02')
+    assert set(results) == DEFAULT_NODES | {'simulated_robot_node'}
+    for exe, (expected, got) in results.items():
+        assert got == expected, exe
+    assert results['inverse_kinetostatic_node'][1]['feedback'] == 'integral'
+    assert results['inverse_kinetostatic_node'][1]['payload_kg'] == 0.02
+    assert results['forward_kinetostatic_node'][1]['payload_kg'] == 0.02
+    sim = results['simulated_robot_node'][1]
+    assert sim['robot_config'] == 'one_segment_mismatched' and sim['command_timeout_s'] == 0.5
+
+
+def test_one_outcome_and_time_to_vent():
+    """A node that ends ends the launch; the controller's SIGTERM wait covers its vent wait."""
+    from bellow_ancf_ros.nodes.ros_util import VENT_ACK_TIMEOUT_S
+    nodes = {e.executable: e for e in load_launch_file().entities
+             if isinstance(e, Node) and e.package == 'bellow_ancf_ros'}
+    for exe in ('inverse_kinetostatic_node', 'forward_kinetostatic_node', 'simulated_robot_node'):
+        assert isinstance(nodes[exe].on_exit, Shutdown), exe
+    assert float(nodes['inverse_kinetostatic_node'].sigterm_timeout) > VENT_ACK_TIMEOUT_S
