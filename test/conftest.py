@@ -22,10 +22,11 @@ ROS_MODULES = ('test_launch.py', 'test_readme_examples.py')
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark ROS tests ``ros`` (``test_ros_*.py`` and :data:`ROS_MODULES`): ``-m "not ros"``."""
+    """Mark ROS tests ``ros``: ``test_ros_*.py``, :data:`ROS_MODULES`, users of ``ros_context``."""
     for item in items:
         name = item.path.name
-        if name.startswith('test_ros_') or name in ROS_MODULES:
+        if (name.startswith('test_ros_') or name in ROS_MODULES
+                or 'ros_context' in getattr(item, 'fixturenames', ())):
             item.add_marker(pytest.mark.ros)
 
 

@@ -31,7 +31,8 @@ This interface is a contract other programs script against:
   :mod:`.solve` (``forward``, ``inverse``), :mod:`.identify` (``identify
   stiffness|deff|da``), :mod:`.studies` (``convergence``, ``workspace``,
   ``compare-pcc``), :mod:`.track` (``track``), :mod:`.calibrate`
-  (``calibrate``), :mod:`.warmup` (``warm-up``); shared helpers in
+  (``calibrate``), :mod:`.record` (``record``), :mod:`.warmup` (``warm-up``);
+  shared helpers in
   :mod:`.common`, :mod:`.output` and
   :mod:`.batch`.  Every subcommand's parser sets ``func``
   (``set_defaults(func=...)``), a callable taking the parsed arguments and
@@ -53,7 +54,7 @@ from .common import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, PROG, Parser, SolverError
 __all__ = ['main', 'build_parser', 'UsageError', 'json_safe']
 
 #: Modules of this package that add subcommands, in the order of ``--help``.
-COMMAND_FAMILIES = ('solve', 'identify', 'studies', 'track', 'calibrate', 'warmup')
+COMMAND_FAMILIES = ('solve', 'identify', 'studies', 'track', 'calibrate', 'record', 'warmup')
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -466,7 +466,7 @@ def test_help_lists_every_family_in_order(capsys):
     code, out, _ = run(capsys, '--help')
     assert code == 0
     commands = ['forward', 'inverse', 'identify', 'convergence', 'workspace', 'compare-pcc',
-                'track', 'calibrate']
+                'track', 'calibrate', 'record', 'warm-up']
     listed = [m.group(1) for m in re.finditer(r'^    (\S+)', out, re.MULTILINE)]
     assert listed == commands
 

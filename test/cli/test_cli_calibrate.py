@@ -144,3 +144,55 @@ def test_bag_without_the_topics(tmp_path, capsys):
     code, _, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag',
                         str(tmp_path / 'other'))
     assert code == 2 and "no topic 'pressure_command'" in err and '/chatter' in err
+
+
+def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
+    """``bellow-ancf record`` (no rosbag2): commands and poses in, a bag calibrate reads out."""
+    import os
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    rclpy = pytest.importorskip('rclpy')
+    from geometry_msgs.msg import PoseStamped
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    from bellow_ancf_ros.core.fit import read_bag
+
+    node = rclpy.create_node('record_source', context=ros_context)
+    pub_p = node.create_publisher(Float64MultiArray, 'pressure_command', 10)
+    pub_x = node.create_publisher(PoseStamped, 'measured_pose', 10)
+    stop = threading.Event()
+
+    def publish():
+        k = 0
+        while not stop.is_set():
+            m = Float64MultiArray(data=[10e3 * (k // 20), 0.0, 0.0])
+            m.layout.dim = [MultiArrayDimension(label='actuator_pressure_gauge_pa', size=3,
+                                                stride=3)]
+            pub_p.publish(m)
+            x = PoseStamped()
+            x.header.frame_id = 'world'
+            x.header.stamp = node.get_clock().now().to_msg()
+            x.pose.position.z = 0.1 + 1e-3 * (k // 20)
+            x.pose.orientation.w = 1.0
+            pub_x.publish(x)
+            k += 1
+            time.sleep(0.05)
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    bag = tmp_path / 'bag'
+    try:
+        res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.cli', 'record', '--out',
+                              str(bag), '--duration', '4', '--storage', 'mcap'],
+                             env=dict(os.environ), capture_output=True, text=True, timeout=60)
+    finally:
+        stop.set()
+        thread.join(5)
+        node.destroy_node()
+    assert res.returncode == 0, res.stderr
+    assert 'recorded: /pressure_command' in res.stdout
+    rec = read_bag(bag, settle_s=0.2, n_actuators=3)
+    assert len(rec) >= 2 and rec.frame_id == 'world'
+    assert set(np.round(rec.pressures_pa[:, 0] / 10e3)) <= set(range(10))

@@ -13,14 +13,15 @@
 from . import calibration, identification
 from ._cantilever import Cantilever, CantileverResult
 from ._excitation import excitation_sequence, random_pressures, simulate_recording
-from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_TOPIC, PRESSURE_TOPIC, Recording,
+from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_TOPIC, PRESSURE_TOPIC, BagWriter,
+                          Recording,
                           RecordingError, csv_header, pressure_unit, read_bag, read_csv,
                           read_recording, settled_samples, write_bag, write_csv)
 from ._sensitivities import RecordingModel
 from .calibration import CalibrationError, CalibrationResult, calibrate
 
 __all__ = [
-    "CalibrationError", "CalibrationResult", "Cantilever", "CantileverResult",
+    "BagWriter", "CalibrationError", "CalibrationResult", "Cantilever", "CantileverResult",
     "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_TOPIC", "PRESSURE_TOPIC", "Recording",
     "RecordingError", "RecordingModel", "calibrate", "calibration", "csv_header",
     "excitation_sequence", "identification", "pressure_unit", "random_pressures", "read_bag",

@@ -42,7 +42,7 @@ from ..geometry import quaternion_mean
 __all__ = [
     'RecordingError', 'Recording', 'csv_header', 'read_csv', 'write_csv', 'settled_samples',
     'read_bag', 'write_bag', 'read_recording', 'PRESSURE_TOPIC', 'POSE_TOPIC',
-    'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit',
+    'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit', 'BagWriter',
 ]
 
 PRESSURE_TOPIC = 'pressure_command'
@@ -398,6 +398,49 @@ def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3
                         orientation=T['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2],
                                                                       w=q[3])))
                 writer.write(c_pose, ns, store.serialize_cdr(msg, POSE_STAMPED))
+
+
+class BagWriter:
+    """A rosbag2 directory written without ROS (``rosbags``): topics and serialized messages.
+
+    ``topic(name, msgtype)`` adds a topic of a ROS 2 Jazzy message type
+    (``'geometry_msgs/msg/PoseStamped'``); ``write(name, t_ns, cdr)`` appends
+    a message already serialized (CDR, as rclpy delivers it with ``raw=True``).
+    Use as a context manager; ``storage``: ``'sqlite3'`` or ``'mcap'``.
+    """
+
+    def __init__(self, path, storage: str = 'sqlite3') -> None:
+        """Open ``path`` (must not exist) for writing."""
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        plugins = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
+        if storage not in plugins:
+            raise ValueError(f'storage must be one of {sorted(plugins)}, got {storage!r}')
+        self._store = _typestore()
+        self._writer = Writer(path, version=9, storage_plugin=plugins[storage])
+        self._connections = {}
+        self.counts = {}
+
+    def __enter__(self) -> 'BagWriter':
+        self._writer.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._writer.close()
+
+    def topic(self, name: str, msgtype: str) -> None:
+        """Add topic ``name`` of ``msgtype``; an unknown type raises ValueError naming it."""
+        if msgtype not in self._store.types:
+            raise ValueError(f'{name}: message type {msgtype!r} is not a ROS 2 Jazzy type '
+                             'rosbags knows')
+        self._connections[name] = self._writer.add_connection(name, msgtype,
+                                                              typestore=self._store)
+        self.counts[name] = 0
+
+    def write(self, name: str, t_ns: int, cdr: bytes) -> None:
+        """Append one serialized message of topic ``name`` at time ``t_ns`` [ns]."""
+        self._writer.write(self._connections[name], int(t_ns), bytes(cdr))
+        self.counts[name] += 1
 
 
 def read_recording(csv_path=None, bag_path=None, n_actuators: int | None = None,
