@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .pipeline import NodeProcess, SpunNode, child_env, record_qos, wait_until
+from .pipeline import NodeProcess, SpunNode, child_env, record_qos, tidy, wait_until
 
 #: pose of the base frame in the demo's motion-capture frame (unknown to the calibration)
 MOCAP_T = np.array([0.042, -0.027, 0.061])
@@ -244,9 +244,12 @@ def main(argv=None) -> int:
         print('feedforward tracking RMSE of the simulated robot: '
               f'{before * 1e3:.3f} mm (nominal file) '
               f'-> {after * 1e3:.3f} mm (calibrated file); plots {res_png}, {track_png}')
-        return 0 if after < before else 1
+        passed = after < before
+        tidy(logs, passed)
+        return 0 if passed else 1
     except _DemoFailed as exc:
         print(f'calibration demo failed: {exc}')
+        tidy(logs, False)
         return 1
     finally:
         for p in reversed(procs):

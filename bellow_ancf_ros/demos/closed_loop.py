@@ -53,7 +53,7 @@ import numpy as np
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import NodeProcess, Recorder, child_env, wait_until
+from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until
 
 RMSE_RATIO_GOAL = 0.25
 STEADY_GOALS = {1: (0.3, None), 2: (0.5, 0.5)}   # segments -> (mm, deg)
@@ -394,7 +394,7 @@ def main(argv=None) -> int:
     log_dir = Path(tempfile.mkdtemp(prefix='bellow_ancf_ros_demo_'))
     domains = random.sample(range(102), 2 * len(CASES))
     print('bellow_ancf_ros main job: the default model controls a simulated robot that is not '
-          f'the model (config/*_mismatched.yaml); node logs in {log_dir}')
+          f'the model (config/*_mismatched.yaml); node logs in {log_dir} (kept if it fails)')
     t_all = time.monotonic()
     results, ok = {}, True
     cases = [c for c in CASES if c.robot in args.cases.split(',')]
@@ -451,6 +451,7 @@ def main(argv=None) -> int:
     plot(results, cases, path)
     print(f'  plot written to {path}; total {time.monotonic() - t_all:.0f} s')
     print('PASS' if passed else 'FAIL')
+    tidy(log_dir, passed)
     return 0 if passed else 1
 
 

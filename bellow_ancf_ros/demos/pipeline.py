@@ -18,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'wait_until']
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'tidy', 'wait_until']
 
 
 class NodeProcess:
@@ -184,3 +184,12 @@ def wait_until(pred, timeout: float) -> bool:
             return True
         time.sleep(0.01)
     return False
+
+
+def tidy(log_dir: Path, passed: bool) -> None:
+    """Remove a job's temporary log folder when it passed; keep it (and say where) when not."""
+    import shutil
+    if passed:
+        shutil.rmtree(log_dir, ignore_errors=True)
+    else:
+        print(f'  node logs kept in {log_dir}')

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.geometry import angle_between
-from .pipeline import NodeProcess, Recorder, child_env, wait_until
+from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until
 
 ROBOT = 'two_segment'
 TOPICS = ('target_pose', 'pressure_command', 'commanded_pose', 'predicted_pose', '/diagnostics')
@@ -305,6 +305,7 @@ def main(argv=None) -> int:
     print('PASS' if passed else f'FAIL (need >= {min_pairs} paired samples, errors below '
                                 f'{args.max_position_error:g} m / {args.max_angle_error:g} rad, '
                                 'no ERROR, safe pressures)')
+    tidy(log_dir, passed)
     return 0 if passed else 1
 
 

@@ -97,6 +97,7 @@ class FeedbackLink:
         self._frame = ''
         self._use_orientation = False
         self._last_item = None
+        self._was_fallback = True   # the loop starts waiting for measured poses
         self.refused = 0
         self.received = 0
 
@@ -197,11 +198,25 @@ class FeedbackLink:
         return now - age if age >= 0.0 else now
 
     def correct(self, position: np.ndarray, z_axis: np.ndarray | None):
-        """The target to hand to the inverse (unchanged when feedback is off)."""
+        """The target to hand to the inverse (unchanged when feedback is off).
+
+        A change between closed loop and the fallback to feedforward (stale
+        or implausible measurements) is logged, not only reported on
+        ``/diagnostics``.
+        """
         with self._lock:
             if self._law is None:
                 return position, z_axis
-            return self._law.corrected_target(time.monotonic(), position, z_axis)
+            out = self._law.corrected_target(time.monotonic(), position, z_axis)
+            fallback, state = self._law.fallback, self._law.state
+        if fallback != self._was_fallback:
+            self._was_fallback = fallback
+            log = self.node.get_logger()
+            if fallback:
+                log.warning(f'feedback: {state}; pure feedforward, integrator frozen')
+            else:
+                log.info(f'feedback: measured poses back, closed loop again ({state})')
+        return out
 
     def after_solve(self, inv) -> None:
         """Anti-windup input: the inverse's outcome for the corrected target."""
@@ -228,5 +243,8 @@ class FeedbackLink:
         with self._lock:
             if self._law is None:
                 return {'feedback': 'none'}
-            return dict(self._law.status(time.monotonic()), feedback='integral',
-                        refused_measured_poses=self.refused)
+            values = self._law.status(time.monotonic())
+            # one count of the measured poses that did not reach the integrator: bad input
+            # (frame, NaN, quaternion) and implausible jumps; the latter also on their own
+            return dict(values, feedback='integral', measured_poses_refused=(
+                self.refused + values['measured_poses_implausible']))

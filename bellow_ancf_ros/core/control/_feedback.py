@@ -308,6 +308,6 @@ class IntegralFeedback:
             'feedback_correction_mm': f'{np.linalg.norm(self.correction_m) * 1e3:.3f}',
             'feedback_correction_deg': f'{math.degrees(np.linalg.norm(self.correction_rad)):.3f}',
             'measured_pose_age_s': 'none' if age is None else f'{age:.3f}',
-            'measured_pose_rejected': self.rejected,
+            'measured_poses_implausible': self.rejected,
             'feedback_resets': self.resets,
         }
