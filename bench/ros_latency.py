@@ -123,14 +123,21 @@ def main(n_targets=150, robot="one_segment", quiet=False, pythonpath=None):
             print(f"   ({len(lat)} of {n_targets} targets answered; at this client's callback: "
                   f"median {out['callback_median_s'] * 1e3:.2f} ms)")
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-        try:
-            os.killpg(node_proc.pid, signal.SIGINT)
-            node_proc.wait(timeout=10)
-        except (ProcessLookupError, subprocess.TimeoutExpired):
-            os.killpg(node_proc.pid, signal.SIGKILL)
+        close(node, node_proc)
     return out
+
+
+def close(node, proc):
+    """Destroy the client ``node``, shut rclpy down, stop the node process (SIGINT, SIGKILL)."""
+    import rclpy
+
+    node.destroy_node()
+    rclpy.try_shutdown()
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=10)
+    except (ProcessLookupError, subprocess.TimeoutExpired):
+        os.killpg(proc.pid, signal.SIGKILL)
 
 
 if __name__ == "__main__":

@@ -22,12 +22,13 @@ from __future__ import annotations
 import argparse
 import os
 import random
-import signal
 import subprocess
 import sys
 import time
 
 import numpy as np
+
+from ros_latency import close   # same folder
 
 
 def _start_node(robot, rate_hz):
@@ -137,13 +138,7 @@ def main(robot="one_segment", seconds=20.0, rate_hz=100.0, quiet=False):
                   f"one target at a time: median {single_med * 1e3:.2f} ms; "
                   f"ratio {out['ratio']:.2f} (target <= 1.5)")
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-        try:
-            os.killpg(proc.pid, signal.SIGINT)
-            proc.wait(timeout=10)
-        except (ProcessLookupError, subprocess.TimeoutExpired):
-            os.killpg(proc.pid, signal.SIGKILL)
+        close(node, proc)
     return out
 
 
