@@ -372,3 +372,43 @@ def test_mocap_relay_republishes_in_the_base_frame(h, tmp_path):
     np.testing.assert_allclose(Rotation.from_quat(quat).as_matrix(), R_ee, atol=1e-12)
     pub.publish(target_msg(p_base, frame='elsewhere'))
     wait_for(lambda: relay.stats['refused'] >= 1, what='refused unknown frame')
+
+
+def test_closed_loop_through_the_mocap_frame_bellow_ancf_calibrate_wrote(h, one, tmp_path):
+    """Record (simulated, in world), bellow-ancf calibrate, then close the loop with its file.
+
+    The calibrated file's ``mocap_frame`` is the only thing that tells the
+    controller where the mocap sees the robot: held target within 0.3 mm.
+    """
+    from scipy.spatial.transform import Rotation
+    from bellow_ancf_ros import cli
+    from bellow_ancf_ros.core.fit import excitation_sequence, simulate_recording, write_csv
+    plant = load_robot('one_segment_mismatched')
+    rec, _, _ = simulate_recording(plant, excitation_sequence(one.cfg, 2, 6, seed=3), MOCAP_T,
+                                   MOCAP_ROTVEC, 0.15e-3, np.radians(0.1), seed=4)
+    csv_path, robot_file = tmp_path / 'rec.csv', tmp_path / 'calibrated.yaml'
+    write_csv(csv_path, rec)
+    assert cli.main(['calibrate', '--config', 'one_segment', '--csv', str(csv_path), '--out',
+                     str(robot_file), '--json']) == 0
+    mf = load_robot(str(robot_file)).mocap_frame
+    assert mf.frame_id == 'world'
+    np.testing.assert_allclose(mf.position, MOCAP_T, atol=1e-3)
+
+    h.record(PoseStamped, 'measured_pose')
+    sim = h.add(SimulatedRobotNode, seed=9, mocap_frame_id='world', mocap_position_m=MOCAP_T,
+                mocap_quaternion_xyzw=[float(v) for v in _mocap_quaternion()])
+    node = h.add(InverseKinetostaticNode, feedback='integral', robot_config=str(robot_file))
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    pub.publish(target_msg(target))
+    R = Rotation.from_rotvec(MOCAP_ROTVEC).as_matrix()
+
+    def converged():
+        if h.count('measured_pose') < 60:
+            return False
+        base = (positions(h, 'measured_pose', 50) - MOCAP_T) @ R   # the truth, in base
+        return np.linalg.norm(base.mean(axis=0) - target) < 0.3e-3
+
+    wait_for(converged, timeout=30.0, what='true pose within 0.3 mm of the target')
+    assert node._feedback.refused == 0
