@@ -221,6 +221,7 @@ class InverseKinetostaticNode(LifecycleNode):
                       'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0,
                       'over_budget': 0, 'republished': 0}
         self._last_publish_t = -float('inf')
+        self._last_pose = None   # the commanded_pose of the current command
         self._republish_timer = None
         self.solve_stats = worker.SolveStats()
         self._last_item, self._continuations = None, 0   # budget slices of one target
@@ -398,6 +399,7 @@ class InverseKinetostaticNode(LifecycleNode):
             vent = contract.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
             msg = pressure_message(vent, self._unit())
             self.last_command_pa = vent
+            self._last_pose = None   # (the vented robot's pose is not a solve's)
             self.stats['vents'] += 1
             # under the lock: no solve result can be published after the vent
             what = f'{why}: vent command (0 Pa gauge)'
@@ -428,7 +430,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 destroy(ent)
                 setattr(self, attr, None)
         with self._lock:
-            self._model = self._cfg = self._warm = None
+            self._model = self._cfg = self._warm = self._last_pose = None
             self._last_target = self._held_item = None
 
     def vent_and_shutdown(self) -> None:
@@ -543,6 +545,8 @@ class InverseKinetostaticNode(LifecycleNode):
             if time.monotonic() - self._last_publish_t < 0.5 * period:
                 return
             self._pub_cmd.publish(pressure_message(p, self._unit()))
+            if self._last_pose is not None:   # the model's pose for it (stamp: its target's)
+                self._pub_pose.publish(self._last_pose)
             self._last_publish_t = time.monotonic()
             self.stats['republished'] += 1
 
@@ -614,9 +618,10 @@ class InverseKinetostaticNode(LifecycleNode):
                     stamp = self.get_clock().now().to_msg()
                 self._pub_cmd.publish(pressure_message(p, unit))
                 self._last_publish_t = time.monotonic()
-                self._pub_pose.publish(pose_message(
+                self._last_pose = pose_message(
                     fw.position, geometry.quaternion_from_rotation(fw.rotation),
-                    self.get_parameter('base_frame').value, stamp))
+                    self.get_parameter('base_frame').value, stamp)
+                self._pub_pose.publish(self._last_pose)
                 self.last_command_pa = p
                 self.stats['published'] += 1
         self._report(item, inv, dt, payload, unit, p, unsafe, usable)

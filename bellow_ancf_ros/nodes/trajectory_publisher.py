@@ -14,7 +14,10 @@ Parameters (all with descriptors): ``trajectory``, ``rate_hz``, ``period_s``
 ``height_m`` (0 = default), ``robot_config``, ``base_frame``,
 ``bending_angle_deg``, ``loop`` (repeat, default true; otherwise stop after
 one period), ``start_delay_s`` (time to wait before the first target, e.g. for
-the controller to come up).  Trajectory parameters may be changed at run
+the controller to come up), ``ramp_in_s`` (default 2 s: when the controller
+holds a pose off the path, its ``commanded_pose``, the targets lead in from
+there onto the path's start with minimum-jerk timing, instead of a jump;
+the path's clock starts after it).  Trajectory parameters may be changed at run
 time; an invalid combination is refused with the reason and the old one stays.
 A bad start-up value ends the process with one line naming the parameter, the
 value and what is allowed (exit status 2).  ``/diagnostics`` carries a 1 Hz
@@ -33,7 +36,7 @@ from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
 
 from ..core import ConfigError, load_robot
-from ..core.experiments import TRAJECTORY_NAMES, trajectory, trajectory_parameters
+from ..core.experiments import TRAJECTORY_NAMES, lead_in, trajectory, trajectory_parameters
 from ..core import geometry
 from .diagnostics import Heartbeat
 from .ros_util import (
@@ -86,6 +89,10 @@ class TrajectoryPublisher(Node):
             'Repeat the trajectory; false: stop publishing after one period.', B))
         declare(self, 'start_delay_s', 0.0, descriptor(
             'Wait this long after start-up before publishing [s].', D, lo=0.0, hi=3600.0))
+        declare(self, 'ramp_in_s', 2.0, descriptor(
+            'Lead the target from the commanded pose the controller holds (commanded_pose) '
+            'onto the path over this long [s], instead of a jump; 0 = off.', D, lo=0.0,
+            hi=60.0, read_only=True))
 
         robot = self.get_parameter('robot_config').value
         try:
@@ -107,6 +114,11 @@ class TrajectoryPublisher(Node):
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self.cfg.name)
         self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
+        self._held = None      # the newest commanded_pose: (position, z-axis, arrival time)
+        self._ramp = None      # (start position, start z-axis, duration), False: none
+        self._waited = 0.0     # time spent waiting for a commanded_pose before the path
+        self._sub = self.create_subscription(PoseStamped, 'commanded_pose', self._on_commanded,
+                                             command_qos())
         self.published = 0
         self.finished = False
         rate = float(self.get_parameter('rate_hz').value)
@@ -180,10 +192,61 @@ class TrajectoryPublisher(Node):
     def _period(self) -> float:
         return float(self._effective()['period'])
 
+    def _on_commanded(self, msg: PoseStamped) -> None:
+        p, o = msg.pose.position, msg.pose.orientation
+        try:
+            z = geometry.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
+        except ValueError:
+            return
+        self._held = (np.array([p.x, p.y, p.z]), z, time.monotonic())
+
+    def _ramp_in(self, t: float):
+        """Decide once, at the first target: lead in from the held pose (if fresh and off).
+
+        None: undecided yet (no ``commanded_pose`` seen; wait up to 0.5 s for one, which a
+        live controller republishes at its ``command_rate_hz``).
+        """
+        duration = float(self.get_parameter('ramp_in_s').value)
+        held = self._held
+        start, z_start = self.pose_at(0.0)
+        if duration <= 0:
+            return False
+        if held is None or time.monotonic() - held[2] > 2.0:
+            if t < 0.5:
+                return None
+            self.get_logger().info('no commanded_pose of a controller seen: the path starts '
+                                   'without a lead-in')
+            return False
+        if np.linalg.norm(held[0] - start) < 0.5e-3:
+            return False
+        self.get_logger().info(
+            f'leading in from the held pose over {duration:g} s '
+            f'({np.linalg.norm(held[0] - start) * 1e3:.1f} mm to the path)')
+        return (held[0], held[1], duration)
+
     def _tick(self) -> None:
         t = time.monotonic() - self._t0
         if t < 0 or self.finished:
             return
+        if self._ramp is None:
+            decision = self._ramp_in(t)
+            if decision is None:
+                return
+            self._ramp, self._waited = decision, t   # the lead-in (or the path) starts now
+        t -= self._waited
+        if self._ramp:
+            p0, z0, duration = self._ramp
+            if t < duration:
+                end, q_end = self.pose_at(0.0)
+                multi = self.cfg.n_segments >= 2
+                pos, z = lead_in(p0, z0 if multi else None, end,
+                                 geometry.z_axis_from_quaternion(q_end) if multi else None,
+                                 t / duration)
+                q = geometry.quaternion_from_z_axis(z) if multi else np.array([0, 0, 0, 1.0])
+                self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
+                                               self.get_clock().now().to_msg()))
+                return
+            t -= duration
         if not self.get_parameter('loop').value and t > self._period():
             self.finished = True
             self.get_logger().info('trajectory finished (loop is false)')

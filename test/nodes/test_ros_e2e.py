@@ -300,7 +300,7 @@ def test_trajectory_publisher_drives_pipeline(stack):
     client, cfg = stack['client'], stack['cfg']
     traj = NodeProcess('trajectory_publisher', stack['env'], stack['logs'],
                        {'robot_config': 'one_segment', 'trajectory': 'planar_circle',
-                        'rate_hz': 10.0, 'period_s': 6.0}).start()
+                        'rate_hz': 10.0, 'period_s': 6.0, 'ramp_in_s': 0.0}).start()
     try:
         # our own target publisher is one; wait until we also see the trajectory publisher's
         wait_for(lambda: client.subs['target_pose'].get_publisher_count() >= 2, STARTUP_TIMEOUT,

@@ -826,3 +826,23 @@ def test_live_parameters_refused_or_applied_at_once(h, one):
     # the held target is re-solved with the payload: a new command, no new target
     wait_for(lambda: h.count('pressure_command') > n and not np.allclose(
         h.last('pressure_command').data, before), what='the held target re-solved')
+
+
+def test_trajectory_publisher_leads_in_from_the_held_pose(h, one):
+    """The controller holds a pose 13 mm off the path: the targets lead in, no jump."""
+    h.record(PoseStamped, 'target_pose')
+    node, pub, _ = setup_inverse(h, command_rate_hz=20.0)       # republishes commanded_pose
+    held = solve_forward(one, [0.0, 0.0, 0.0]).position       # the vented, straight robot
+    send_and_wait_command(h, pub, target_msg(held))
+    n0 = h.count('target_pose')
+    tp = h.add(TrajectoryPublisher, rate_hz=50.0, ramp_in_s=1.0)
+    start = tp.pose_at(0.0)[0]
+    assert np.linalg.norm(start - held) > 5e-3
+    wait_for(lambda: h.count('target_pose') > n0 + 80, what='80 targets')
+    with h.lock:
+        pos = np.array([pose_of(m)[0] for _, m in h.msgs['target_pose'][n0 + 1:]])
+    assert np.linalg.norm(pos[0] - held) < 0.5e-3                  # from where it was
+    steps = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    assert steps.max() < 1.5e-3, steps.max()                       # 50 Hz, no 13 mm jump
+    k = int(np.argmin(np.linalg.norm(pos - start, axis=1)))
+    assert np.linalg.norm(pos[k] - start) < 0.5e-3                 # then onto the path

@@ -61,9 +61,11 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry import rotation_between, rotation_from_vector
 from ..model import RobotConfig, Stage1, load_robot
 
 __all__ = [
+    'lead_in',
     'MULTI_SEGMENT_TRAJECTORIES',
     'ONE_SEGMENT_TRAJECTORIES',
     'PAPER_BENDING_ANGLES_DEG',
@@ -303,3 +305,22 @@ def trajectory(name: str, t: Any, config: Any = 'one_segment', **params: Any):
         np.full_like(phi, math.cos(beta)),
     ])
     return pos, z_axes
+
+
+def lead_in(start_position, start_z, end_position, end_z, fraction):
+    """A pose on the way from where the robot is to where a trajectory starts.
+
+    Minimum-jerk timing ``s = 10 f^3 - 15 f^4 + 6 f^5`` of ``fraction`` ``f``
+    in [0, 1] (zero velocity and acceleration at both ends), a straight line
+    for the position, and for the z-axis (None: one segment) a rotation
+    about ``start_z x end_z`` by ``s`` times their angle.  Returns
+    ``(position (3,), z_axis (3,) or None)``.
+    """
+    f = min(max(float(fraction), 0.0), 1.0)
+    s = f ** 3 * (10.0 - 15.0 * f + 6.0 * f * f)
+    p0, p1 = np.asarray(start_position, dtype=float), np.asarray(end_position, dtype=float)
+    pos = p0 + s * (p1 - p0)
+    if start_z is None or end_z is None:
+        return pos, None
+    z0 = np.asarray(start_z, dtype=float) / np.linalg.norm(start_z)
+    return pos, rotation_from_vector(s * rotation_between(z0, end_z)) @ z0

@@ -234,3 +234,23 @@ def test_trajectory_parameters_are_the_ones_used(two):
     np.testing.assert_allclose(pos[0], pos[1], atol=1e-15)
     with pytest.raises(ValueError, match='unknown trajectory parameter'):
         trajectory_parameters('planar_circle', cfg, radios=1.0)
+
+
+def test_lead_in_goes_from_the_held_pose_to_the_path_smoothly():
+    from bellow_ancf_ros.core.experiments import lead_in
+    from bellow_ancf_ros.core.geometry import angle_between
+    p0, p1 = np.array([0.0, 0.0, 0.1]), np.array([0.013, 0.0, 0.098])
+    z0, z1 = np.array([0.0, 0.0, 1.0]), np.array([np.sin(0.2), 0.0, np.cos(0.2)])
+    f = np.linspace(0.0, 1.0, 201)
+    poses = [lead_in(p0, z0, p1, z1, v) for v in f]
+    pos = np.array([p for p, _ in poses])
+    np.testing.assert_allclose(pos[0], p0, atol=1e-15)
+    np.testing.assert_allclose(pos[-1], p1, atol=1e-15)
+    np.testing.assert_allclose(poses[-1][1], z1, atol=1e-12)
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    assert np.all(np.diff(np.linalg.norm(pos - p0, axis=1)) >= -1e-15)   # monotone
+    assert step[0] < 0.01 * step.max() and step[-1] < 0.01 * step.max()  # rests at both ends
+    assert step.max() <= 1.9 * np.linalg.norm(p1 - p0) / 200             # min-jerk peak 1.875
+    ang = [angle_between(z, z1) for _, z in poses]
+    assert np.all(np.diff(ang) <= 1e-12)
+    assert lead_in(p0, None, p1, None, 0.5)[1] is None
