@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import datetime
 import math
+from pathlib import Path
+import re
 
 import numpy as np
 import yaml
@@ -34,13 +36,84 @@ __all__ = ['register', 'robot_yaml_text', 'plot_residuals']
 
 
 # ------------------------------------------------------------ output
+def _flow(value) -> str:
+    """``value`` as YAML flow text (a scalar, or ``[a, b]``)."""
+    return yaml.safe_dump([value], default_flow_style=True, width=10**6).strip()[1:-1]
+
+
+def _values_in_place(original: str, d: dict) -> str | None:
+    """``original``'s text (its comments, order, layout) with the values of ``d`` put in.
+
+    Handles the robot-file schema: top-level keys, one level of nested
+    mappings, and the ``segments`` list of mappings; values are scalars or
+    flow lists, comments after them.  Keys of ``d`` the text lacks are
+    appended.  None when the result would not read back as ``d`` (the
+    caller then writes a plain dump).
+    """
+    out, section, seg = [], None, -1
+    seen = set()
+    lines = original.splitlines()
+    while lines and (not lines[0].strip() or lines[0].lstrip().startswith('#')):
+        lines.pop(0)   # the nominal file's own header: the provenance lines replace it
+    for line in lines:
+        body = line.lstrip()
+        indent = len(line) - len(body)
+        m = re.match(r'(- )?([A-Za-z_]\w*):(\s*)([^#]*?)(\s*)(#.*)?$', body)
+        if not body or body.startswith('#') or m is None:
+            out.append(line)
+            continue
+        item, key, gap, value, pad, comment = m.groups()
+        if indent == 0:
+            section, path = key, (key,)
+        elif item:
+            seg += 1
+            path = (section, seg, key)
+        elif section == 'segments':
+            path = (section, seg, key)
+        else:
+            path = (section, key)
+        target = d
+        try:
+            for k in path:
+                target = target[k]
+        except (KeyError, IndexError, TypeError):
+            out.append(line)
+            continue
+        seen.add(path[0])
+        if isinstance(target, dict) or not value:
+            out.append(line)
+            continue
+        try:
+            same = yaml.safe_load(value) == target
+        except yaml.YAMLError:
+            return None
+        new = value if same else _flow(target)
+        head = line[:indent] + (item or '') + key + ':' + (gap or ' ')
+        text = head + new
+        if comment:
+            width = len(head) + len(value) + len(pad or '')
+            text += ' ' * max(1, width - len(text)) + comment
+        out.append(text)
+    extra = {k: v for k, v in d.items() if k not in seen}
+    text = '\n'.join(out) + '\n'
+    if extra:
+        text += yaml.safe_dump(extra, sort_keys=False, default_flow_style=None)
+    try:
+        same = yaml.safe_load(text) == yaml.safe_load(yaml.safe_dump(d))
+    except yaml.YAMLError:
+        return None
+    return text if same else None
+
+
 def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source: str,
-                    mocap_frame_id: str = 'world') -> str:
+                    mocap_frame_id: str = 'world', original: str | None = None) -> str:
     """A complete robot file of the calibrated robot, provenance in comments.
 
     The fitted pose of the base in the mocap frame is its ``mocap_frame``
     entry (``frame_id``, ``position_m``, ``quaternion_xyzw``), which the
-    nodes use to take measured poses in that frame.
+    nodes use to take measured poses in that frame.  With the nominal file's
+    text (``original``), its comments (units, sources) and layout are kept
+    and the fitted values put in their places.
     """
     d = result.config.to_dict()
     d['name'] = f'{d["name"]}_calibrated'
@@ -66,7 +139,9 @@ def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source:
                  f'quaternion_xyzw {np.round(q, 6).tolist()}')
     for w in result.warnings:
         lines.append(f'# Warning: {w}')
-    text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+    text = None if original is None else _values_in_place(original, d)
+    if text is None:
+        text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
     return '\n'.join(lines) + '\n' + text
 
 
@@ -125,6 +200,14 @@ def _table(result: CalibrationResult) -> list[str]:
     return lines
 
 
+def _text_of(source) -> str | None:
+    """The nominal robot file's text (None when it did not come from a file)."""
+    try:
+        return Path(str(source)).read_text(encoding='utf-8')
+    except OSError:
+        return None
+
+
 # ----------------------------------------------------------- command
 def _cmd_calibrate(args) -> int:
     limit_blas_threads()
@@ -159,7 +242,8 @@ def _cmd_calibrate(args) -> int:
         try:
             with open(args.out, 'w', encoding='utf-8') as fh:
                 fh.write(robot_yaml_text(result, source, str(cfg.source),
-                                         args.mocap_frame_id or rec.frame_id or 'world'))
+                                         args.mocap_frame_id or rec.frame_id or 'world',
+                                         _text_of(cfg.source)))
         except OSError as exc:
             raise UsageError(f'--out {args.out}: cannot write file: '
                              f'{exc.strerror or exc}') from None

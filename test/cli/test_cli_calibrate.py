@@ -62,6 +62,11 @@ def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
     assert cfg.segments[0].pitch_radius * 1e3 == pytest.approx(
         d['parameters']['segments[0].pitch_radius_mm']['value'], rel=1e-12)
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # the nominal file's unit comments stay, beside the fitted values
+    assert '# cross-sectional diameter for bending [mm] (paper V.C)' in text
+    d_a_line = next(line for line in text.splitlines() if line.strip().startswith('d_a_mm:'))
+    assert float(d_a_line.split(':')[1].split('#')[0]) == pytest.approx(
+        d['parameters']['actuator.d_a_mm']['value'], rel=1e-12)
     # the fitted transform is machine-readable: mocap_frame, and it undoes the offset
     mf = cfg.mocap_frame
     assert mf is not None and mf.frame_id == 'world'   # a CSV names no frame: the default
@@ -196,3 +201,28 @@ def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
     rec = read_bag(bag, settle_s=0.2, n_actuators=3)
     assert len(rec) >= 2 and rec.frame_id == 'world'
     assert set(np.round(rec.pressures_pa[:, 0] / 10e3)) <= set(range(10))
+
+
+def test_values_in_place_keeps_layout_and_reads_back(one_cfg):
+    """The calibrated file: the nominal text, its comments, the new values; else a plain dump."""
+    import yaml
+
+    from bellow_ancf_ros.cli.calibrate import _values_in_place
+
+    for name in ('one_segment', 'two_segment'):
+        cfg = load_robot(name)
+        original = open(cfg.source).read()
+        d = cfg.to_dict()
+        d['name'] = f'{name}_calibrated'
+        d['actuator']['stiffness_coeffs_n_per_m'] = [30.1, 580.5]
+        d['segments'][-1]['top_plate_mass_kg'] = 0.0123
+        d['mocap_frame'] = {'frame_id': 'world', 'position_m': [0.1, 0.2, 0.3],
+                            'quaternion_xyzw': [0.0, 0.0, 0.0, 1.0]}
+        text = _values_in_place(original, d)
+        assert yaml.safe_load(text) == yaml.safe_load(yaml.safe_dump(d))
+        assert load_robot(name).to_dict()['payload_kg'] == yaml.safe_load(text)['payload_kg']
+        kept = [c for c in original.splitlines() if '# ' in c and ':' in c.split('#')[0]]
+        for line in kept:   # every inline comment of the original is still there
+            assert line.split('#', 1)[1] in text
+    # a text it cannot follow: None (the caller dumps)
+    assert _values_in_place('name: [unexpected\n', d) is None
