@@ -181,3 +181,27 @@ def test_excitation_publisher_process_exits_when_its_sequence_and_the_vent_are_d
     assert 'excitation finished: vent command' in proc.stderr
     assert 'sequence and vent done: exiting' in proc.stderr
     assert time.monotonic() - t0 < 60
+
+
+def test_driver_process_vents_on_ctrl_c(h):
+    """The template as a process (as a launch file starts it): Ctrl-C -> it writes the vent."""
+    cmd = [sys.executable, '-m', 'bellow_ancf_ros.nodes.regulator_driver', '--ros-args',
+           '-r', f'__ns:={h.ns}', '-p', 'command_timeout_s:=30.0']
+    proc = subprocess.Popen(cmd, env=dict(os.environ), start_new_session=True, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        pub = h.client.create_publisher(Float64MultiArray, 'pressure_command',
+                                        _rn.command_qos())
+        wait_for(lambda: pub.get_subscription_count() >= 1, timeout=60.0, what='the driver')
+        pub.publish(pressure_msg([70e3, 10e3, -30e3]))
+        time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(10)
+    assert proc.returncode == 0, out[-2000:]
+    assert 'regulators <- 70.00 10.00 -30.00 kPa gauge' in out
+    assert 'regulators <- 0.00 0.00 0.00 kPa gauge' in out and 'vented: driver shutdown' in out
