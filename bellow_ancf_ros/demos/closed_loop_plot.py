@@ -40,22 +40,22 @@ def figure(results: dict, cases):
     from matplotlib.ticker import ScalarFormatter
 
     fig = plt.figure(figsize=(13, 11))
-    gs = fig.add_gridspec(3, len(cases), height_ratios=[2.2, 1, 1], hspace=0.35, wspace=0.25)
+    gs = fig.add_gridspec(3, len(cases), height_ratios=[2.2, 1, 1], hspace=0.45, wspace=0.25)
     colours = {'none': 'tab:orange', 'integral': 'tab:green'}
     for col, case in enumerate(cases):
         res = results.get(case.robot, {})
         ax = fig.add_subplot(gs[0, col], projection='3d')
         ref = res.get('none') or res.get('integral')
-        if ref and 'target' in ref:
-            tp = ref['target'] * 1e3
-            ax.plot(tp[:, 0], tp[:, 1], tp[:, 2], '-', lw=2.5, color='tab:blue', alpha=0.5,
-                    label='target')
         for mode in MODES:
             r = res.get(mode)
             if r and 'measured' in r:
                 mp = r['measured'] * 1e3   # the evaluated period only: no lead-in, no return
                 ax.plot(mp[:, 0], mp[:, 1], mp[:, 2], '-', lw=0.8, color=colours[mode],
                         label=f'measured, {MODE_NAMES[mode]}')
+        if ref and 'target' in ref:   # drawn last, dashed: visible over the closed loop
+            tp = ref['target'] * 1e3
+            ax.plot(tp[:, 0], tp[:, 1], tp[:, 2], '--', lw=1.4, color='k', label='target',
+                    zorder=10)
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             fmt = ScalarFormatter(useOffset=False)   # no offset label to collide with ticks
             fmt.set_scientific(False)
@@ -69,7 +69,8 @@ def figure(results: dict, cases):
         ax.set_ylabel('y [mm]')
         ax.set_zlabel('z [mm]', labelpad=12)
         ax.set_title(case.label, fontsize=10)
-        ax.legend(loc='upper left', fontsize=8)
+        ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.04), ncol=3, fontsize=8,
+                  frameon=False)   # below the axes, not over the paths
         for row, (key, unit, scale) in enumerate((('pos_err', 'position error [mm]', 1e3),
                                                   ('ang_err', 'angle error [deg]', 180 / math.pi)),
                                                  start=1):
@@ -88,7 +89,8 @@ def figure(results: dict, cases):
             a.set_xlabel('time in the evaluated period [s]')
             a.grid(True, alpha=0.3)
             a.set_ylim(bottom=0.0)
-            a.legend(fontsize=8, loc='upper right')
+            a.legend(fontsize=8, loc='lower center', bbox_to_anchor=(0.5, 1.0), ncol=2,
+                     frameon=False)   # above the plot, not over the data
     fig.suptitle('bellow_ancf_ros: mismatched simulated robot, measured pose vs target '
                  f'({PAPER})', fontsize=10)
     return fig

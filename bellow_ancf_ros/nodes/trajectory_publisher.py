@@ -14,11 +14,13 @@ Parameters (all with descriptors): ``trajectory``, ``rate_hz``, ``period_s``
 ``height_m`` (0 = default), ``robot_config``, ``base_frame``,
 ``bending_angle_deg``, ``loop`` (repeat, default true; otherwise stop after
 one period), ``start_delay_s`` (time to wait before the first target, e.g. for
-the controller to come up), ``ramp_in_s`` (default 2 s: when the controller
-holds a pose off the path, its ``commanded_pose``, the targets lead in from
-there onto the path's start with minimum-jerk timing, instead of a jump;
-the path's clock starts after it).  Trajectory parameters may be changed at run
-time; an invalid combination is refused with the reason and the old one stays.
+the controller to come up), ``ramp_in_s`` (default 2 s: when the robot is
+off the path's start, the targets lead in from where it is, onto the path
+with minimum-jerk timing, instead of a jump; the path's clock starts after
+it).  Where it is: the target another node holds it at (``target_pose``),
+else its ``measured_pose``, else the controller's ``commanded_pose``.
+Trajectory parameters may be changed at run time; an invalid combination is
+refused with the reason and the old one stays.
 A bad start-up value ends the process with one line naming the parameter, the
 value and what is allowed (exit status 2).  ``/diagnostics`` carries a 1 Hz
 heartbeat ``'<node>: status'`` (trajectory, targets published, finished).
@@ -26,6 +28,7 @@ heartbeat ``'<node>: status'`` (trajectory, targets published, finished).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -39,6 +42,7 @@ from ..core import ConfigError, load_robot
 from ..core.experiments import TRAJECTORY_NAMES, lead_in, trajectory, trajectory_parameters
 from ..core import geometry
 from .diagnostics import Heartbeat
+from .measured_feedback import measured_pose_qos
 from .ros_util import (
     StartupParameterError,
     command_qos,
@@ -114,11 +118,16 @@ class TrajectoryPublisher(Node):
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self.cfg.name)
         self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
-        self._held = None      # the newest commanded_pose: (position, z-axis, arrival time)
+        # where the robot is, newest of each source: (position, z-axis, arrival time)
+        self._seen = {'target_pose': None, 'measured_pose': None, 'commanded_pose': None}
         self._ramp = None      # (start position, start z-axis, duration), False: none
-        self._waited = 0.0     # time spent waiting for a commanded_pose before the path
-        self._sub = self.create_subscription(PoseStamped, 'commanded_pose', self._on_commanded,
-                                             command_qos())
+        self._waited = 0.0     # time spent waiting for a pose of the robot before the path
+        self._subs = [self.create_subscription(PoseStamped, topic,
+                                               lambda m, topic=topic: self._on_pose(topic, m),
+                                               qos)
+                      for topic, qos in (('target_pose', command_qos()),
+                                         ('measured_pose', measured_pose_qos()),
+                                         ('commanded_pose', command_qos()))]
         self.published = 0
         self.finished = False
         rate = float(self.get_parameter('rate_hz').value)
@@ -192,30 +201,49 @@ class TrajectoryPublisher(Node):
     def _period(self) -> float:
         return float(self._effective()['period'])
 
-    def _on_commanded(self, msg: PoseStamped) -> None:
+    def _on_pose(self, topic: str, msg: PoseStamped) -> None:
+        if self._ramp is not None or msg.header.frame_id != self.get_parameter('base_frame').value:
+            return   # decided already (target_pose: then also our own), or another frame
         p, o = msg.pose.position, msg.pose.orientation
         try:
             z = geometry.z_axis_from_quaternion((o.x, o.y, o.z, o.w))
         except ValueError:
             return
-        self._held = (np.array([p.x, p.y, p.z]), z, time.monotonic())
+        pos = np.array([p.x, p.y, p.z])
+        if np.all(np.isfinite(pos)):
+            self._seen[topic] = (pos, z, time.monotonic())
+
+    def _held_pose(self):
+        """Where the robot is: the target another node holds it at, else measured, else commanded.
+
+        The held target first (the controller, closed loop or not, keeps the
+        robot there); the measured pose (fresh) when no target was sent; the
+        controller's commanded pose (fresh) last.  None: nothing known.
+        """
+        now = time.monotonic()
+        for topic, max_age in (('target_pose', math.inf), ('measured_pose', 1.0),
+                               ('commanded_pose', 2.0)):
+            seen = self._seen[topic]
+            if seen is not None and now - seen[2] <= max_age:
+                return seen
+        return None
 
     def _ramp_in(self, t: float):
         """Decide once, at the first target: lead in from the held pose (if fresh and off).
 
-        None: undecided yet (no ``commanded_pose`` seen; wait up to 0.5 s for one, which a
-        live controller republishes at its ``command_rate_hz``).
+        None: undecided yet (no pose seen; wait up to 0.5 s for one: a live controller
+        republishes its ``commanded_pose`` at its ``command_rate_hz``).
         """
         duration = float(self.get_parameter('ramp_in_s').value)
-        held = self._held
+        held = self._held_pose()
         start, z_start = self.pose_at(0.0)
         if duration <= 0:
             return False
-        if held is None or time.monotonic() - held[2] > 2.0:
+        if held is None:
             if t < 0.5:
                 return None
-            self.get_logger().info('no commanded_pose of a controller seen: the path starts '
-                                   'without a lead-in')
+            self.get_logger().info('no pose of the robot seen (target_pose, measured_pose, '
+                                   'commanded_pose): the path starts without a lead-in')
             return False
         if np.linalg.norm(held[0] - start) < 0.5e-3:
             return False

@@ -846,3 +846,22 @@ def test_trajectory_publisher_leads_in_from_the_held_pose(h, one):
     assert steps.max() < 1.5e-3, steps.max()                       # 50 Hz, no 13 mm jump
     k = int(np.argmin(np.linalg.norm(pos - start, axis=1)))
     assert np.linalg.norm(pos[k] - start) < 0.5e-3                 # then onto the path
+
+
+def test_lead_in_starts_from_the_held_target_not_the_corrected_command(h, one):
+    """Closed loop: the commanded pose carries the correction; the held target is where it is."""
+    h.record(PoseStamped, 'target_pose')
+    tp = h.add(TrajectoryPublisher, rate_hz=50.0, ramp_in_s=1.0, start_delay_s=0.5)
+    pub = h.publisher(PoseStamped, 'target_pose', expect_subscribers=1)
+    held = solve_forward(one, [0.0, 0.0, 0.0]).position
+    start = tp.pose_at(0.0)[0]
+    pub.publish(target_msg(held))                               # another node holds the robot
+    h.client.create_publisher(PoseStamped, 'commanded_pose', command_qos()).publish(
+        target_msg(held + [0.004, 0.0, 0.0]))                   # a corrected command beside it
+    n0 = h.count('target_pose')
+    wait_for(lambda: h.count('target_pose') > n0 + 40, what='40 targets')
+    with h.lock:
+        pos = np.array([pose_of(m)[0] for _, m in h.msgs['target_pose'][n0 + 1:]])
+    first = pos[np.argmin(np.linalg.norm(pos - held, axis=1))]
+    assert np.linalg.norm(first - held) < 0.5e-3                 # from the held target
+    assert np.linalg.norm(pos[0] - held) < 1e-3 and np.linalg.norm(start - held) > 5e-3
