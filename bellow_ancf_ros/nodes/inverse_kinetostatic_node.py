@@ -694,8 +694,11 @@ class InverseKinetostaticNode(LifecycleNode):
         """Queue the next budget slice of ``item`` (at most ``MAX_CONTINUATIONS``); queued."""
         self._continuations = self._continuations + 1 if item is self._last_item else 1
         self._last_item = item
-        return (self._continuations < MAX_CONTINUATIONS and self._worker is not None
-                and self._worker.resubmit(item))
+        with self._lock:   # deactivated meanwhile: no slice (the vent stands; an old target
+            if not self._active:   # must not be solved after a later activate)
+                return False
+            return (self._continuations < MAX_CONTINUATIONS and self._worker is not None
+                    and self._worker.resubmit(item))
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
         cfg = self._cfg

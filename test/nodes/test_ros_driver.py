@@ -194,8 +194,9 @@ def test_driver_process_vents_on_ctrl_c(h):
         pub = h.client.create_publisher(Float64MultiArray, 'pressure_command',
                                         _rn.command_qos())
         wait_for(lambda: pub.get_subscription_count() >= 1, timeout=60.0, what='the driver')
-        pub.publish(pressure_msg([70e3, 10e3, -30e3]))
-        time.sleep(0.5)
+        for _ in range(10):   # a controller republishes; one message may precede matching
+            pub.publish(pressure_msg([70e3, 10e3, -30e3]))
+            time.sleep(0.1)
         os.killpg(proc.pid, signal.SIGINT)
         out, _ = proc.communicate(timeout=20)
     finally:
