@@ -107,6 +107,7 @@ class ExcitationPublisher(Node):
         self.step = -1
         self.published = 0
         self.refused = 0
+        self._refusal_diag_t = -float('inf')
         self.finished = False
         self.vented = False
         self._pub = self.create_publisher(Float64MultiArray, 'pressure_command', command_qos())
@@ -126,7 +127,10 @@ class ExcitationPublisher(Node):
             self.refused += 1
             reason = self._owner.refusal()
             self.get_logger().error(reason, throttle_duration_sec=2.0)
-            self._diag(DiagnosticStatus.ERROR, reason)
+            now = time.monotonic()
+            if now - self._refusal_diag_t >= 1.0:   # at most 1 Hz on /diagnostics
+                self._refusal_diag_t = now
+                self._diag(DiagnosticStatus.ERROR, reason)
             return
         self._pub.publish(pressure_message(p, self.get_parameter('pressure_unit').value))
         self.published += 1
