@@ -37,7 +37,6 @@ import threading
 import time
 from typing import Any
 
-import numpy as np
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
@@ -47,6 +46,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ..core import load_robot
 from ..core.control import SimulatedRobot
+from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
@@ -133,18 +133,17 @@ class SimulatedRobotNode(Node):
             angle_noise_rad=math.radians(float(g('angle_noise_deg').value)),
             seed=None if seed < 0 else seed)
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
-        self._mocap_frame = None   # (frame id, R, t): the base's pose in the mocap frame
+        self._mocap_frame = None   # MocapFrame: the base's pose in the mocap frame
         if g('mocap_frame_id').value:
             pos_m, quat = list(g('mocap_position_m').value), list(g('mocap_quaternion_xyzw').value)
             if len(pos_m) != 3 or not all(map(math.isfinite, pos_m)):
                 raise StartupParameterError('mocap_position_m', pos_m, '3 finite numbers [m]',
                                             'not 3 finite numbers')
             try:
-                R = geometry.quaternion_to_rotation(quat)
+                self._mocap_frame = MocapFrame(g('mocap_frame_id').value, pos_m, quat)
             except ValueError as exc:
                 raise StartupParameterError('mocap_quaternion_xyzw', quat,
                                             'a non-zero quaternion (x, y, z, w)', str(exc))
-            self._mocap_frame = (g('mocap_frame_id').value, R, np.asarray(pos_m, dtype=float))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
                       'timeouts': 0}
@@ -236,8 +235,8 @@ class SimulatedRobotNode(Node):
         pos, R = self.robot.measure()   # reads the newest complete state (no lock needed)
         frame = self._frame
         if self._mocap_frame is not None:   # as a motion capture in its own frame sees it
-            frame, R_b, t_b = self._mocap_frame
-            pos, R = R_b @ pos + t_b, R_b @ R
+            frame = self._mocap_frame.frame_id
+            pos, R = self._mocap_frame.from_base(pos, R)
         self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), frame,
                                             self.get_clock().now().to_msg()))
         self.stats['published_poses'] += 1

@@ -304,21 +304,18 @@ def _robot_file_with_mocap_frame(tmp_path, name='one_segment'):
     return str(path)
 
 
-def test_closed_loop_with_measured_poses_in_the_mocap_frame(h, one, tmp_path):
-    """The simulated robot seen by a mocap in 'world'; the robot file knows the transform.
+def _held_target_through_the_mocap_frame(h, one, robot_file):
+    """The simulated robot seen by a mocap in 'world', the controller on ``robot_file``.
 
-    The loop converges as the base-frame loop does (held target within 0.3 mm,
-    judged on the robot's true pose in the base frame); a pose in a frame the
-    node does not know is refused, naming the frames it accepts.
+    Holds a target and waits until the robot's true pose (the mocap poses
+    taken back to the base frame with the known transform) is within 0.3 mm
+    of it; returns ``(inverse node, target)``.
     """
     from scipy.spatial.transform import Rotation
-    h.record(Float64MultiArray, 'pressure_command')
     h.record(PoseStamped, 'measured_pose')
-    h.record(DiagnosticArray, '/diagnostics', command_qos())
     sim = h.add(SimulatedRobotNode, seed=9, mocap_frame_id='world', mocap_position_m=MOCAP_T,
                 mocap_quaternion_xyzw=[float(v) for v in _mocap_quaternion()])
-    node = h.add(InverseKinetostaticNode, feedback='integral',
-                 robot_config=_robot_file_with_mocap_frame(tmp_path))
+    node = h.add(InverseKinetostaticNode, feedback='integral', robot_config=robot_file)
     pub = h.publisher(PoseStamped, 'target_pose')
     wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
     wait_for(lambda: h.count('measured_pose') > 5, what='mocap poses')
@@ -330,12 +327,25 @@ def test_closed_loop_with_measured_poses_in_the_mocap_frame(h, one, tmp_path):
     def converged():
         if h.count('measured_pose') < 60:
             return False
-        world = positions(h, 'measured_pose', 50)
-        base = (world - MOCAP_T) @ R          # R^T (p - t), row-wise
+        base = (positions(h, 'measured_pose', 50) - MOCAP_T) @ R   # R^T (p - t), row-wise
         return np.linalg.norm(base.mean(axis=0) - target) < 0.3e-3
 
     wait_for(converged, timeout=30.0, what='true pose within 0.3 mm of the target')
     assert node._feedback.refused == 0
+    return node, target
+
+
+def test_closed_loop_with_measured_poses_in_the_mocap_frame(h, one, tmp_path):
+    """The simulated robot seen by a mocap in 'world'; the robot file knows the transform.
+
+    The loop converges as the base-frame loop does (held target within 0.3 mm,
+    judged on the robot's true pose in the base frame); a pose in a frame the
+    node does not know is refused, naming the frames it accepts.
+    """
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node, target = _held_target_through_the_mocap_frame(
+        h, one, _robot_file_with_mocap_frame(tmp_path))
     st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
     assert kv(st)['feedback_state'] == 'integrating'
     # a pose in a frame the node cannot transform: refused with the accepted frames
@@ -380,7 +390,6 @@ def test_closed_loop_through_the_mocap_frame_bellow_ancf_calibrate_wrote(h, one,
     The calibrated file's ``mocap_frame`` is the only thing that tells the
     controller where the mocap sees the robot: held target within 0.3 mm.
     """
-    from scipy.spatial.transform import Rotation
     from bellow_ancf_ros import cli
     from bellow_ancf_ros.core.fit import excitation_sequence, simulate_recording, write_csv
     plant = load_robot('one_segment_mismatched')
@@ -394,21 +403,4 @@ def test_closed_loop_through_the_mocap_frame_bellow_ancf_calibrate_wrote(h, one,
     assert mf.frame_id == 'world'
     np.testing.assert_allclose(mf.position, MOCAP_T, atol=1e-3)
 
-    h.record(PoseStamped, 'measured_pose')
-    sim = h.add(SimulatedRobotNode, seed=9, mocap_frame_id='world', mocap_position_m=MOCAP_T,
-                mocap_quaternion_xyzw=[float(v) for v in _mocap_quaternion()])
-    node = h.add(InverseKinetostaticNode, feedback='integral', robot_config=str(robot_file))
-    pub = h.publisher(PoseStamped, 'target_pose')
-    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
-    target = solve_forward(one, [70e3, 10e3, -30e3]).position
-    pub.publish(target_msg(target))
-    R = Rotation.from_rotvec(MOCAP_ROTVEC).as_matrix()
-
-    def converged():
-        if h.count('measured_pose') < 60:
-            return False
-        base = (positions(h, 'measured_pose', 50) - MOCAP_T) @ R   # the truth, in base
-        return np.linalg.norm(base.mean(axis=0) - target) < 0.3e-3
-
-    wait_for(converged, timeout=30.0, what='true pose within 0.3 mm of the target')
-    assert node._feedback.refused == 0
+    _held_target_through_the_mocap_frame(h, one, str(robot_file))

@@ -169,6 +169,15 @@ class MocapFrame:
             return p, None
         return p, quaternion_from_rotation(R.T @ quaternion_to_rotation(quaternion_xyzw))
 
+    def from_base(self, position, rotation):
+        """A pose in the base frame as the mocap sees it: ``(R p + t, R R_pose)``.
+
+        The inverse of :meth:`to_base`; ``rotation`` is a rotation matrix.
+        """
+        R = self.rotation
+        return (R @ np.asarray(position, dtype=float).reshape(3) + np.asarray(self.position),
+                R @ np.asarray(rotation, dtype=float))
+
     def to_dict(self) -> dict[str, Any]:
         """The ``mocap_frame`` entry of a robot file."""
         return {'frame_id': self.frame_id, 'position_m': list(self.position),

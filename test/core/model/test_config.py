@@ -10,6 +10,7 @@ from numpy.polynomial import Polynomial
 import pytest
 import yaml
 
+from bellow_ancf_ros.core import geometry
 from bellow_ancf_ros.core.model import _config as config_mod
 from bellow_ancf_ros.core.model import (ConfigError, RobotConfig, SegmentConfig, config_dirs,
                                         find_shipped, load_robot, robot_from_dict,
@@ -154,6 +155,12 @@ def test_mocap_frame_entry_validated_and_round_tripped(one):
     p, q = mf.to_base(np.array([0.1, -0.2, 0.4]), mf.quaternion_xyzw)
     np.testing.assert_allclose(p, [0, 0, 0.1], atol=1e-15)
     np.testing.assert_allclose(np.abs(q), [0, 0, 0, 1], atol=1e-12)
+    # from_base is its inverse (what a mocap in that frame sees of a base-frame pose)
+    R_pose = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    p_m, R_m = mf.from_base([0.01, 0.02, 0.1], R_pose)
+    p_b, q_b = mf.to_base(p_m, geometry.quaternion_from_rotation(R_m))
+    np.testing.assert_allclose(p_b, [0.01, 0.02, 0.1], atol=1e-15)
+    np.testing.assert_allclose(geometry.quaternion_to_rotation(q_b), R_pose, atol=1e-12)
     one['mocap_frame'] = {'frame_id': '', 'position_m': [0, 0],
                           'quaternion_xyzw': [0, 0, 0, 0], 'frame': 'x'}
     with pytest.raises(ConfigError) as e:
