@@ -202,7 +202,10 @@ def test_venv_node_commands_start_and_stop(tmp_path):
         for module, robot, log, proc in procs:
             while STARTED[module] not in log.read_text():
                 assert proc.poll() is None, log.read_text()
-                assert time.monotonic() < deadline, log.read_text()
+                if time.monotonic() >= deadline:
+                    os.kill(proc.pid, signal.SIGUSR1)  # its stacks into its log (faulthandler)
+                    time.sleep(1.0)
+                    raise AssertionError(log.read_text())
                 time.sleep(0.05)
             assert f"'{robot}'" in log.read_text(), (robot, log.read_text())
     finally:

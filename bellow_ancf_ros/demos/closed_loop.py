@@ -53,7 +53,7 @@ import numpy as np
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until
+from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until, wait_up
 
 RMSE_RATIO_GOAL = 0.25
 STEADY_GOALS = {1: (0.3, None), 2: (0.5, 0.5)}   # segments -> (mm, deg)
@@ -126,11 +126,12 @@ class Run:
     def wait_up(self) -> None:
         """Wait until the robot measures, the forward node predicts, the inverse commands."""
         rec = self.rec
-        if not wait_until(lambda: rec.count('measured_pose') > 0
-                          and rec.count('predicted_pose') > 0
-                          and rec.publishers('pressure_command') >= 1
-                          and all(p.alive() for p in self.procs.values()),
-                          self.args.startup_timeout):
+        if not wait_up(self.procs.values(),
+                       lambda: rec.count('measured_pose') > 0
+                       and rec.count('predicted_pose') > 0
+                       and rec.publishers('pressure_command') >= 1
+                       and all(p.alive() for p in self.procs.values()),
+                       self.args.startup_timeout):
             raise RuntimeError('nodes did not come up')
 
     def start_trajectory(self) -> None:

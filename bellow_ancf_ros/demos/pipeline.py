@@ -18,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'tidy', 'wait_until']
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'tidy', 'wait_until', 'wait_up']
 
 
 class NodeProcess:
@@ -30,14 +30,63 @@ class NodeProcess:
         self.module = module
         self._interrupted = False
         self.log_path = log_dir / f'{tag}{module}.log'
-        cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args']
+        self.cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args']
         for k, v in params.items():
-            cmd += ['-p', f'{k}:={v}']
+            self.cmd += ['-p', f'{k}:={v}']
         for k, v in (remaps or {}).items():
-            cmd += ['-r', f'{k}:={v}']
-        with open(self.log_path, 'w') as log:
-            self.proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL, start_new_session=True)
+            self.cmd += ['-r', f'{k}:={v}']
+        self.env = env
+        self._start('w')
+
+    def _start(self, mode: str) -> None:
+        with open(self.log_path, mode) as log:
+            self.proc = subprocess.Popen(self.cmd, env=self.env, stdout=log,
+                                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                         start_new_session=True)
+        self._interrupted = False
+
+    def silent(self) -> bool:
+        """True while the process runs and has written nothing to its log yet."""
+        try:
+            return self.alive() and self.log_path.stat().st_size == 0
+        except OSError:
+            return False
+
+    def dump_stacks(self, wait_s: float = 1.0) -> str:
+        """Have the process print its threads' Python stacks into its log (SIGUSR1); where.
+
+        The nodes register :mod:`faulthandler` on SIGUSR1, which answers even
+        while the main thread is stuck inside a C call.
+        """
+        if self.alive():
+            try:
+                os.kill(self.proc.pid, signal.SIGUSR1)
+            except ProcessLookupError:
+                pass
+            time.sleep(wait_s)
+        return str(self.log_path)
+
+    def restart_if_silent(self) -> bool:
+        """A process that hung before its first output: stacks to its log, kill, start again.
+
+        Returns True when it restarted it.  Its log keeps the hung run (with
+        its stacks) above the new one.
+        """
+        if not self.silent():
+            return False
+        self.dump_stacks()
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait(5.0)
+        stacks = self.log_path.read_text()
+        print(f'  {self.module} hung before its first output; its stacks:\n{stacks}'
+              f'  {self.module} restarted once')
+        with open(self.log_path, 'a') as log:
+            log.write('--- restarted after a hang at start-up ---\n')
+        self._start('a')
+        return True
 
     def alive(self) -> bool:
         """True while the process runs."""
@@ -59,7 +108,8 @@ class NodeProcess:
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
-                print(f'  {self.module} did not stop on SIGINT within {timeout:g} s: SIGKILL')
+                print(f'  {self.module} did not stop on SIGINT within {timeout:g} s: SIGKILL '
+                      f'(its stacks: {self.dump_stacks()})')
                 try:
                     os.killpg(self.proc.pid, signal.SIGKILL)
                 except ProcessLookupError:
@@ -174,6 +224,22 @@ class Recorder(SpunNode):
         with self.lock:
             for v in self.msgs.values():
                 v.clear()
+
+
+def wait_up(procs, pred, timeout: float) -> bool:
+    """:func:`wait_until` ``pred`` for node processes starting; one restart of a hung one.
+
+    A node that has written nothing when ``timeout`` passes hung at
+    start-up (seen about once in a few hundred starts, before the node's
+    first line, ignoring SIGINT: inside the middleware's participant creation
+    or the loading of the compiled kernels); its stacks go to the output and it is started
+    once more, as ``respawn`` would in a launch file, and waited for again.
+    """
+    if wait_until(pred, timeout):
+        return True
+    if not [p.restart_if_silent() for p in procs].count(True):
+        return False
+    return wait_until(pred, timeout)
 
 
 def wait_until(pred, timeout: float) -> bool:

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.geometry import angle_between
-from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until
+from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until, wait_up
 
 ROBOT = 'two_segment'
 TOPICS = ('target_pose', 'pressure_command', 'commanded_pose', 'predicted_pose', '/diagnostics')
@@ -216,10 +216,10 @@ def main(argv=None) -> int:
         t0 = time.monotonic()
         procs['inverse'] = NodeProcess('inverse_kinetostatic_node', common_params, env, log_dir)
         procs['forward'] = NodeProcess('forward_kinetostatic_node', common_params, env, log_dir)
-        up = wait_until(lambda: (rec.publishers('pressure_command') >= 1
-                                 and rec.publishers('predicted_pose') >= 1
-                                 and all(p.proc.poll() is None for p in procs.values())),
-                        args.startup_timeout)
+        up = wait_up(procs.values(), lambda: (rec.publishers('pressure_command') >= 1
+                                              and rec.publishers('predicted_pose') >= 1
+                                              and all(p.alive() for p in procs.values())),
+                     args.startup_timeout)
         if not up:
             raise RuntimeError('inverse/forward nodes did not come up')
         print(f'  inverse and forward nodes up after {time.monotonic() - t0:.1f} s')

@@ -15,4 +15,19 @@
 
 Every node module has a ``main(args=None)`` and runs with
 ``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``.
+
+``kill -USR1 <pid>`` makes a node process print every thread's Python stack
+on its stderr and go on (:mod:`faulthandler`, registered when this package is
+imported, before rclpy and the kernels load): the way to see where a node
+that does not answer is, even inside a C call that holds it.
 """
+
+import faulthandler as _faulthandler
+import signal as _signal
+import sys as _sys
+
+if hasattr(_signal, 'SIGUSR1') and _sys.__stderr__ is not None:
+    try:
+        _faulthandler.register(_signal.SIGUSR1, file=_sys.__stderr__, all_threads=True)
+    except (AttributeError, OSError, ValueError):  # no usable stderr descriptor
+        pass

@@ -94,6 +94,8 @@ class NodeProcess:
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
+                os.kill(self.proc.pid, signal.SIGUSR1)  # its stacks into its log (faulthandler)
+                time.sleep(1.0)
                 os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait(5.0)
         return self.proc.returncode

@@ -1,0 +1,66 @@
+"""demos.pipeline: node processes that hang at start-up are seen, shown and restarted once."""
+
+import sys
+import time
+
+from bellow_ancf_ros.demos import pipeline
+from bellow_ancf_ros.demos.pipeline import NodeProcess, child_env, wait_up
+
+
+def _hangs(mark):
+    """Import the nodes package (SIGUSR1 dumps stacks), say so in ``mark``, hang silently."""
+    return [sys.executable, '-c', 'import bellow_ancf_ros.nodes, pathlib, threading; '
+            f'pathlib.Path({str(mark)!r}).touch(); threading.Event().wait()']
+
+
+def _process(tmp_path, cmd):
+    p = NodeProcess.__new__(NodeProcess)
+    p.module, p.cmd, p.env = 'hanging_node', cmd, child_env(0)
+    p.log_path = tmp_path / 'hanging_node.log'
+    p._start('w')
+    return p
+
+
+def test_silent_process_shows_its_stacks_and_is_restarted_once(tmp_path, capsys):
+    mark = tmp_path / 'imported'
+    p = _process(tmp_path, _hangs(mark))
+    try:
+        first = p.proc.pid
+        assert pipeline.wait_until(mark.exists, 20.0) and p.silent()
+        assert p.restart_if_silent()
+        assert p.proc.pid != first and p.alive()
+        log = p.log_path.read_text()
+        assert 'most recent call first' in log      # faulthandler's dump of the hung run
+        assert 'restarted after a hang at start-up' in log
+        assert 'hanging_node restarted once' in capsys.readouterr().out
+        # a process that wrote something is not silent: not restarted
+        p.proc.kill()
+        p.proc.wait()
+        p.cmd = [sys.executable, '-c', 'print("up", flush=True); import time; time.sleep(60)']
+        p._start('w')
+        assert pipeline.wait_until(lambda: p.log_path.stat().st_size > 0, 5.0)
+        assert not p.restart_if_silent()
+    finally:
+        p.stop(2.0)
+
+
+def test_wait_up_restarts_a_silent_process_and_waits_again(tmp_path):
+    p = _process(tmp_path, _hangs(tmp_path / 'imported'))
+    try:
+        t0 = time.monotonic()
+        starts = []
+        orig = p._start
+
+        def start_and_count(mode):
+            starts.append(mode)
+            p.cmd = [sys.executable, '-c', 'print("up", flush=True); import time; time.sleep(60)']
+            orig(mode)
+
+        p._start = start_and_count
+        assert wait_up([p], lambda: 'up\n' in p.log_path.read_text(), 3.0)
+        assert starts == ['a'] and time.monotonic() - t0 < 15.0
+        # nothing silent to restart: wait_up gives up after one wait
+        assert not wait_up([p], lambda: False, 0.2)
+        assert starts == ['a']
+    finally:
+        p.stop(2.0)
