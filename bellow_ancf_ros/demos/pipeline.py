@@ -230,10 +230,10 @@ def wait_up(procs, pred, timeout: float) -> bool:
     """:func:`wait_until` ``pred`` for node processes starting; one restart of a hung one.
 
     A node that has written nothing when ``timeout`` passes hung at
-    start-up (seen about once in a few hundred starts, before the node's
-    first line, ignoring SIGINT: inside the middleware's participant creation
-    or the loading of the compiled kernels); its stacks go to the output and it is started
-    once more, as ``respawn`` would in a launch file, and waited for again.
+    start-up (rare: seen in a few test-suite runs, before the node's first
+    line, ignoring SIGINT, so inside a C call; not yet explained); its stacks
+    go to the output and it is started once more, as ``respawn`` would in a
+    launch file, and waited for again.
     """
     if wait_until(pred, timeout):
         return True
