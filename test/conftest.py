@@ -43,6 +43,12 @@ def two():
 
 
 @pytest.fixture(scope="session")
+def three():
+    """The shipped three-segment robot model (config/three_segment.yaml)."""
+    return RobotModel(load_robot("three_segment"))
+
+
+@pytest.fixture(scope="session")
 def one_cfg():
     """The default one-segment robot description."""
     return load_robot("one_segment")

@@ -20,14 +20,15 @@ Statuses are :class:`~bellow_ancf_ros.core.status.ForwardStatus` and
 
 from ._forward import ForwardResult, ResumeState, assess_stability, check_pressures, solve_forward
 from ._inverse import MAX_TARGET_LENGTHS, InverseResult, precompute_corners, solve_inverse
+from ._inverse_limits import MAX_CORNERS
 from ._loads import payload_problem
 from ._newton import NewtonResult, ReducedHessian, continuation, deadline_after, expired, newton
 from ._stability import StabilityCheck
 from ._warmup import warm_up
 
 __all__ = [
-    "ForwardResult", "InverseResult", "MAX_TARGET_LENGTHS", "NewtonResult", "ReducedHessian",
-    "ResumeState", "StabilityCheck", "assess_stability", "check_pressures", "continuation",
-    "deadline_after", "expired", "newton", "payload_problem", "precompute_corners",
+    "ForwardResult", "InverseResult", "MAX_CORNERS", "MAX_TARGET_LENGTHS", "NewtonResult",
+    "ReducedHessian", "ResumeState", "StabilityCheck", "assess_stability", "check_pressures",
+    "continuation", "deadline_after", "expired", "newton", "payload_problem", "precompute_corners",
     "solve_forward", "solve_inverse", "warm_up",
 ]

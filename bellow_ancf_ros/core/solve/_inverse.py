@@ -36,6 +36,18 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
   computed once per model and payload), each polished exactly on the face of
   its active limits; the answer is the best of all of them by ``|O|``, so it
   is never worse than any of those pressures.
+* Three segments and more (more than ``MAX_CORNERS`` corners) get no
+  corner starts: 512 corners for three segments are more forward solves than
+  the whole budget of a solve (400), and the search never got past them
+  (measured: 12 of 16 reachable three-segment targets ended on that budget
+  after 40 to 70 s, 15 to 60 mm away).  The minimum-norm iteration from
+  mid-range often drives stretches to a limit early and stalls; the least
+  squares from mid-range then finds the exact answer, and is stopped for the
+  exact polish as soon as it is close (``polish_below`` of
+  :func:`~bellow_ancf_ros.core.solve._inverse_limits.best_in_limits`: median
+  0.17 s instead of 0.22 s per cold three-segment solve).  The polish
+  applies the same rule (stretches closest to ``lam_ref``), so the answer is
+  the one a warm start finds.
 * Budgets: every stage has an iteration limit, the whole solve a limit on
   forward solves (``max_forward_solves``) and optionally a wall-clock budget
   (``time_budget_s``).  When a budget runs out the best pressures found so
@@ -67,7 +79,13 @@ from ..linalg import one_thread_call
 from ..model import RobotModel
 from ..status import InverseStatus
 from ._forward import ForwardResult, WarmState, assess_stability, solve_forward
-from ._inverse_limits import best_in_limits, corner_solutions, stationary
+from ._inverse_limits import (
+    MAX_CORNERS,
+    POLISH_BELOW,
+    best_in_limits,
+    corner_solutions,
+    stationary,
+)
 from ._inverse_newton import (
     Budget,
     Objective,
@@ -90,6 +108,9 @@ __all__ = [
 MAX_TARGET_LENGTHS = 1e3  # targets farther from the base than this many robot lengths are refused
 _RETRY_BELOW = 1e-4  # |O|^2/2 below which a stalled warm start is retried from the cold start
 _SURELY_OUT = 2.0  # targets this many times the largest reach away skip the exact iterations
+# evaluations of one least-squares run for a robot without corner starts (three segments,
+# 16 targets: a run to convergence took 93 to 210, one stopped for the polish 5 to 60)
+_MANY_NFEV = 150
 # stages a solve that ran out of budget continues in (resume_stage): the exact iteration from
 # the warm start, its retry from the cold start (continued, or not started), the best answer
 _EXACT, _RETRY, _BEST, _RETRY_COLD = 0, 1, 2, 3
@@ -194,11 +215,12 @@ def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None, to
     """Solve the corners of the pressure box and the cold start now (cached); True when done.
 
     The first unreachable target of a payload needs the corners (2**A forward
-    solves: 8 for one segment, 64 for two), a cold or retried solve the
-    canonical cold start (one cold forward solve; ``tol`` as in
-    :func:`solve_inverse`).  A controller with a tight time budget calls this
-    once at start-up for its payload; otherwise the work is spread over its
-    first calls (progress is kept when a budget runs out).
+    solves: 8 for one segment, 64 for two; none beyond ``MAX_CORNERS``, three
+    segments and more), a cold or retried solve the canonical cold start (one
+    cold forward solve; ``tol`` as in :func:`solve_inverse`).  A controller
+    with a tight time budget calls this once at start-up for its payload;
+    otherwise the work is spread over its first calls (progress is kept when
+    a budget runs out).
     """
     budget = Budget(time_budget_s, 2**model.A + 1)
     payload = float(payload_kg)
@@ -441,9 +463,10 @@ def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter, se
     candidates += corner_solutions(model, obj.payload, obj.budget)
     if not candidates:
         return None, None, False, 0
-    # a continued search goes on from its best answer so far only
-    return best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter,
-                          **({} if seeds else {"n_starts": 1}))
+    options = {} if seeds else {"n_starts": 1}  # a continued search: from its best answer only
+    if 2**model.A > MAX_CORNERS:  # no corners: the least squares searches for exact answers too
+        options.update(max_nfev=_MANY_NFEV, polish_below=POLISH_BELOW)
+    return best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, **options)
 
 
 def _result(model, lam, fw, reached, iters, position, z_axis, status=None, note=""):

@@ -5,6 +5,15 @@ reflective) on ``|O|^2`` from a small fixed set of starts: the local answer,
 the warm start, vent and mid-range pressures and the corners of the pressure
 box, whose stable forward solutions are computed once per model and payload
 (:func:`corner_solutions`).  The answer is the best of everything seen.
+
+Robots with more than :data:`MAX_CORNERS` corners (three segments and more:
+``2**9 = 512``) have no corner starts: their forward solves alone would
+exceed the budget of a solve (400).  For them the same least squares is also
+the search for the exact answer that the minimum-norm iteration from
+mid-range missed (a stretch driven to a limit early stays held there and the
+iteration stalls): with ``polish_below`` a run stops as soon as
+``|O|^2/2`` is below ``POLISH_BELOW`` and the iterate is polished exactly,
+which needs a fraction of the evaluations of a run to convergence.
 """
 
 from __future__ import annotations
@@ -18,13 +27,15 @@ from ..status import ForwardStatus
 from ._forward import solve_forward
 from ._inverse_newton import OutOfBudget, cost, iterate
 
-__all__ = ["corner_solutions", "best_in_limits", "stationary"]
+__all__ = ["corner_solutions", "best_in_limits", "stationary", "MAX_CORNERS", "POLISH_BELOW"]
 
 TIME_BUDGET = ForwardStatus.TIME_BUDGET
 _N_STARTS = 2  # least-squares runs for an unreachable target
-_POLISH_BELOW = 1e-8  # |O|^2/2 below which a least-squares answer is polished exactly
+POLISH_BELOW = 1e-8  # |O|^2/2 below which a least-squares answer is polished exactly
 _CORNER_CACHE_PAYLOADS = 4
 _STATIONARY_GTOL = 1e-9  # scaled gradient of a finished least-squares answer (about 1e-3 Pa)
+#: Largest number of corners of the pressure box used as starts (2**A: one and two segments).
+MAX_CORNERS = 64
 
 
 def corner_solutions(model, payload, budget):
@@ -32,7 +43,10 @@ def corner_solutions(model, payload, budget):
 
     Work done before a budget runs out is kept for the next call.  Kept
     with the model (:meth:`RobotModel.cached`), so they go when it goes.
+    None (an empty list) for a robot with more than :data:`MAX_CORNERS` corners.
     """
+    if 2**model.A > MAX_CORNERS:
+        return []
     per_model = model.cached("corner_solutions", lambda m: {})  # payload -> partial or done
     entry = per_model.get(payload)
     if entry is None:
@@ -54,13 +68,20 @@ def corner_solutions(model, payload, budget):
     return entry["items"]
 
 
-def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_starts=_N_STARTS):
+class _NearEnough(Exception):
+    """A least-squares iterate close enough to an exact solution to polish it (``args[0]``)."""
+
+
+def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_starts=_N_STARTS,
+                   max_nfev=50, polish_below=None):
     """Best stretches inside the limits from a fixed set of starts (see the module docstring).
 
     ``candidates`` are converged ``(lam, ForwardResult)`` pairs; the best
     ``n_starts`` distinct ones by ``|O|`` start a bound-constrained least-squares
-    run each, polished on the face of its active limits.  Returns
-    ``(lam, fw, reached, iterations)`` of the best answer seen.
+    run each (at most ``max_nfev`` evaluations), polished on the face of its
+    active limits.  With ``polish_below``, a run stops at the first iterate
+    whose ``|O|^2/2`` is below it and that iterate is polished (inside the
+    limits).  Returns ``(lam, fw, reached, iterations)`` of the best answer seen.
     """
     A = obj.model.A
     eps = 1e-4 if multi else 0.0
@@ -81,6 +102,8 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_st
             raise ForwardFailure()
         if obj.best[2] is fw_v:
             obj.advance(v)  # a new best answer: progress, and the point to continue from
+        if polish_below is not None and cost(Ov) <= polish_below:
+            raise _NearEnough(np.array(v, dtype=float))
         return np.concatenate([Ov, eps * (v - lam_ref)]) if multi else Ov
 
     def jac(v):
@@ -99,20 +122,24 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_st
                 ftol=1e-12,
                 xtol=1e-12,
                 gtol=1e-12,
-                max_nfev=50,
+                max_nfev=max_nfev,
             )
         except ForwardFailure:
             continue
-        iters += int(ls.nfev)
-        lam = ls.x.copy()
-        lam[ls.active_mask < 0] = lo[ls.active_mask < 0]
-        lam[ls.active_mask > 0] = hi[ls.active_mask > 0]
+        except _NearEnough as near:
+            lam = near.args[0]
+            active = np.zeros(A, int)
+        else:
+            iters += int(ls.nfev)
+            lam, active = ls.x.copy(), ls.active_mask
+        lam[active < 0] = lo[active < 0]
+        lam[active > 0] = hi[active > 0]
         _, fw, O, _ = obj.evaluate(lam)
-        if O is None or cost(O) > _POLISH_BELOW:
+        if O is None or cost(O) > POLISH_BELOW:
             continue  # a clear miss: least squares has found the best on its face already
         # nearly exact: polish on the face of the active limits (and release limits by KKT)
         span = hi - lo
-        free = (ls.active_mask == 0) & (lam > lo + 1e-10 * span) & (lam < hi - 1e-10 * span)
+        free = (active == 0) & (lam > lo + 1e-10 * span) & (lam < hi - 1e-10 * span)
         lam, fw, O, _, reached, it2 = iterate(
             obj, lam, free, lo, hi, lam_ref, multi, done, max_iter
         )

@@ -391,9 +391,9 @@ def test_all_problems_reported_together(two):
 # ------------------------------------------------------------------ file level
 def test_unknown_shipped_name():
     with pytest.raises(ConfigError) as info:
-        load_robot('three_segment')
+        load_robot('five_segment')
     message = str(info.value)
-    assert 'three_segment' in message
+    assert 'five_segment' in message
     assert 'one_segment' in message and 'two_segment' in message
 
 
