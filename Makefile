@@ -51,6 +51,7 @@ bench: $(STAMP)
 	fi; rc=$$?; rm -rf $$base; exit $$rc
 	$(VENV)/bin/python bench/fuzz_bench.py
 	$(VENV)/bin/python bench/budget_bench.py
+	$(VENV)/bin/python bench/redundant_bench.py
 	$(VENV)/bin/python bench/stream_latency.py one_segment
 	$(VENV)/bin/python bench/stream_latency.py two_segment
 

@@ -39,8 +39,8 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
 * Three segments and more (more than ``MAX_CORNERS`` corners) get no
   corner starts: 512 corners for three segments are more forward solves than
   the whole budget of a solve (400), and the search never got past them
-  (measured: 12 of 16 reachable three-segment targets ended on that budget
-  after 40 to 70 s, 15 to 60 mm away).  The minimum-norm iteration from
+  (reachable targets ended on that budget tens of seconds later,
+  centimetres away).  The minimum-norm iteration from
   mid-range often drives stretches to a limit early and stalls; the least
   squares from mid-range then finds the exact answer, and is stopped for the
   exact polish as soon as it is close (``polish_below`` of
