@@ -30,6 +30,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
+from bellow_ancf_ros.core.model import shipped_robot_names  # noqa: E402
 from bellow_ancf_ros.nodes import ros_util  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 
@@ -183,7 +184,7 @@ BAD_STARTUP = [
     ('inverse_kinetostatic_node', 'pressure_unit:=bar', 'pressure_unit', "'bar'", "'kPa'"),
     ('inverse_kinetostatic_node', 'payload_kg:=1', 'payload_kg', '1', 'floating-point'),
     ('forward_kinetostatic_node', 'robot_config:=nonexistent', 'robot_config', "'nonexistent'",
-     'shipped robots: one_segment, one_segment_mismatched, two_segment'),
+     'shipped robots: ' + ', '.join(shipped_robot_names())),
     ('forward_kinetostatic_node', 'backbone_points:=1', 'backbone_points', '1', 'from 2 to 200'),
     ('trajectory_publisher', 'trajectory:=figure_eight', 'trajectory', "'figure_eight'",
      'planar_circle'),
