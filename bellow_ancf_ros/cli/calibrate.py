@@ -30,7 +30,8 @@ from ..core import ConfigError, limit_blas_threads, load_robot
 from ..core import parameter_keys as pk
 from ..core.fit import (POSE_TOPIC, PRESSURE_TOPIC, CalibrationError, CalibrationResult,
                         RecordingError, calibrate, read_bag, read_csv)
-from .common import EXIT_OK, SolverError, UsageError, emit_json, nonneg_float, warn
+from .common import (EXIT_OK, SolverError, UsageError, config_help, emit_json, nonneg_float,
+                     warn)
 
 __all__ = ['register', 'robot_yaml_text', 'plot_residuals']
 
@@ -282,7 +283,7 @@ def register(subparsers) -> None:
         epilog='Example: bellow-ancf calibrate --config one_segment --bag rec/ --out robot.yaml '
                '--plot residuals.png')
     p.add_argument('--config', required=True, metavar='CFG',
-                   help='nominal robot: file path or shipped name (one_segment, two_segment)')
+                   help=config_help('nominal robot: file path or shipped name'))
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument('--csv', metavar='FILE', help='CSV file of settled samples')
     src.add_argument('--bag', metavar='DIR', help='rosbag2 directory (sqlite3 or mcap)')

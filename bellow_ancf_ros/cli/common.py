@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from ..core import ConfigError, RobotModel, load_robot
+from ..core.model import shipped_robot_names
 
 PROG = 'bellow-ancf'
 EXIT_OK = 0
@@ -157,11 +158,15 @@ def is_number(text: str) -> bool:
 
 
 # ---------------------------------------------------- common options
+def config_help(what: str = 'robot file path or shipped robot name') -> str:
+    """``--config`` help: ``what`` and the shipped robot names (from the config folders)."""
+    return f"{what} ({', '.join(shipped_robot_names()) or 'none found'})"
+
+
 def add_config(p):
     """Add ``--config`` (robot file path or shipped robot name)."""
     p.add_argument('--config', default='one_segment', metavar='C',
-                   help='robot file path or shipped robot name (one_segment, two_segment); '
-                        'default: %(default)s')
+                   help=config_help() + '; default: %(default)s')
 
 
 def add_out(p, json_help='print one JSON object (SI units) instead of the table'):

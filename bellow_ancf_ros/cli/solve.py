@@ -26,8 +26,9 @@ import numpy as np
 
 from ..core import RobotModel, solve_forward, solve_inverse
 from .batch import CsvRows, require_json, row_numbers, run_batch
-from .common import (EXIT_FAILED, EXIT_OK, UsageError, call_solver, element_count, emit_json,
-                     finite_float, is_number, load_model, payload_mass, print_lines, warn)
+from .common import (EXIT_FAILED, EXIT_OK, UsageError, call_solver, config_help, element_count,
+                     emit_json, finite_float, is_number, load_model, payload_mass, print_lines,
+                     warn)
 
 INVERSE_POSITION_COLUMNS = ('x', 'y', 'z')
 INVERSE_AXIS_COLUMNS = ('zx', 'zy', 'zz')
@@ -245,8 +246,7 @@ def _inverse_batch(args, model: RobotModel) -> int:
 # ------------------------------------------------------------ parser
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument('--config', default='one_segment', metavar='C',
-                   help="robot file path or shipped robot name (one_segment, two_segment); "
-                        "default: %(default)s")
+                   help=config_help() + '; default: %(default)s')
     p.add_argument('--payload-kg', type=payload_mass, default=0.0, metavar='M',
                    help='payload at the end effector [kg]; default: %(default)s')
     p.add_argument('--elements', type=element_count, default=None, metavar='N',

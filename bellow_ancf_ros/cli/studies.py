@@ -219,13 +219,20 @@ def _cmd_compare_pcc(args):
              f'n = {res["n_elements"]}) vs PCC (kinematic: no gravity, no payload)',
              'difference    |p_ANCF - p_PCC| of the end effector; dz = z_ANCF - z_PCC; '
              'angle between the z-axes', '']
-    summary_rows = [[f'{s["payload_kg"]:g}', s['category'], s['points'],
-                     f'{s["rms_m"] * 1e3:.3f}', f'{s["max_m"] * 1e3:.3f}',
-                     f'{s["mean_dz_m"] * 1e3:+.3f}', f'{math.degrees(s["max_angle_rad"]):.2f}']
+
+    def fig(v, fmt, scale=1e3):
+        return '-' if v is None else format(v * scale, fmt)
+
+    summary_rows = [[f'{s["payload_kg"]:g}', s['category'], f'{s["usable"]} of {s["points"]}',
+                     fig(s['rms_m'], '.3f'), fig(s['max_m'], '.3f'), fig(s['mean_dz_m'], '+.3f'),
+                     fig(s['max_angle_rad'], '.2f', math.degrees(1.0))]
                     for s in res['summary']]
-    lines += table(['payload [kg]', 'actuations', 'points', 'RMS [mm]', 'max [mm]',
+    lines += table(['payload [kg]', 'actuations', 'usable points', 'RMS [mm]', 'max [mm]',
                    'mean dz [mm]', 'max angle [deg]'], summary_rows,
                    ['>', '<', '>', '>', '>', '>', '>'])
+    if any(s['usable'] < s['points'] for s in res['summary']):
+        lines.append('not usable    points without a converged, stable equilibrium (the robot '
+                     'buckles there); figures over the usable points only, - when none')
     if args.csv:
         lines.append(f'csv           {args.csv}')
     if args.plot:

@@ -123,7 +123,8 @@ class ForwardKinetostaticNode(Node):
         D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
                      ParameterType.PARAMETER_INTEGER)
         robot = declare(self, 'robot_config', 'one_segment', descriptor(
-            'Robot description: a shipped robot name (one_segment, two_segment; the files in '
+            'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
+            '...: the files in '
             'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read at start-up.', S,
             read_only=True, constraints='a shipped robot name or a robot YAML path'))
         declare(self, 'payload_kg', 0.0, descriptor(

@@ -166,7 +166,8 @@ class InverseKinetostaticNode(LifecycleNode):
         D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
                    ParameterType.PARAMETER_BOOL)
         declare(self, 'robot_config', 'one_segment', descriptor(
-            'Robot description: a shipped robot name (one_segment, two_segment; the files in '
+            'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
+            '...: the files in '
             'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
             'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
             constraints='a shipped robot name or a robot YAML path'))

@@ -246,8 +246,11 @@ def workspace_schemes(cfg: RobotConfig) -> list[Scheme]:
 
     One segment: 18 schemes for three actuators (in general: every actuator
     swept with the others at every min/max combination, then every pair
-    swept with the others at every combination).  Two or more segments: the
-    paper's four schemes with the other actuators at 0 kPa.
+    swept with the others at every combination).  Two segments: the paper's
+    four schemes (actuator 1 of segment 1 with actuators 1; 2; 1 and 2; 2 and
+    3 of segment 2) with the other actuators at 0 kPa.  Three or more: the
+    same four, each pattern of segment 2 repeated in every later segment
+    (so that every segment moves).
     """
     A = cfg.n_actuators_total
     lo, hi = cfg.p_min, cfg.p_max
@@ -263,9 +266,10 @@ def workspace_schemes(cfg: RobotConfig) -> list[Scheme]:
                         f'{_act_label(cfg, i)}={tag[v]}' for i, v in fixed.items())
                     out.append(Scheme(name, swept, fixed))
         return out
-    s1, s2 = cfg.actuator_slices[0], cfg.actuator_slices[1]
-    a, b = s1.start, s2.start
-    groups = [(a, b), (a, b + 1), (a, b, b + 1), (a, b + 1, b + 2)]
+    a = cfg.actuator_slices[0].start
+    later = [sl.start for sl in cfg.actuator_slices[1:]]
+    patterns = [(0,), (1,), (0, 1), (1, 2)]
+    groups = [(a,) + tuple(b + j for b in later for j in pat) for pat in patterns]
     for swept in groups:
         fixed = {i: 0.0 for i in range(A) if i not in swept}
         name = '+'.join(_act_label(cfg, i) for i in swept) + ' swept; others 0 kPa'
@@ -335,8 +339,9 @@ def compare_pcc(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05, 0.1
     ANCF model's gravity off (the PCC model has none).  Returns the rows
     (``payload_kg, category, scheme_name, step, pressures_pa, ancf_m, pcc_m,
     diff_m, angle_rad, converged``) and a summary per payload and category
-    (``points, rms_m, max_m, mean_dz_m`` with ``dz = z_ancf - z_pcc``,
-    ``max_angle_rad`` between the z-axes).
+    (``points``, ``usable``: converged and stable ones, over which ``rms_m,
+    max_m, mean_dz_m`` with ``dz = z_ancf - z_pcc`` and ``max_angle_rad``
+    between the z-axes are taken; None when no point is usable).
     """
     progress = progress or _noop
     cfg_a = cfg if gravity else cfg.replace(gravity=(0.0, 0.0, 0.0))
@@ -364,15 +369,16 @@ def compare_pcc(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05, 0.1
     summary = []
     for m in payloads_kg:
         for cat in ('elongation', 'bending'):
-            sel = [r for r in rows
-                   if r['payload_kg'] == float(m) and r['category'] == cat and r['converged']]
-            if not sel:
-                continue
-            d = np.array([r['diff_m'] for r in sel])
-            summary.append(dict(payload_kg=float(m), category=cat, points=len(sel),
-                                rms_m=float(np.sqrt(np.mean(d ** 2))), max_m=float(np.max(d)),
-                                mean_dz_m=float(np.mean([r['dz_m'] for r in sel])),
-                                max_angle_rad=float(np.max([r['angle_rad'] for r in sel]))))
+            mine = [r for r in rows if r['payload_kg'] == float(m) and r['category'] == cat]
+            sel = [r for r in mine if r['converged']]
+            row = dict(payload_kg=float(m), category=cat, points=len(mine), usable=len(sel),
+                       rms_m=None, max_m=None, mean_dz_m=None, max_angle_rad=None)
+            if sel:  # no usable equilibrium (the robot buckles under the payload): no figures
+                d = np.array([r['diff_m'] for r in sel])
+                row.update(rms_m=float(np.sqrt(np.mean(d ** 2))), max_m=float(np.max(d)),
+                           mean_dz_m=float(np.mean([r['dz_m'] for r in sel])),
+                           max_angle_rad=float(np.max([r['angle_rad'] for r in sel])))
+            summary.append(row)
     return dict(config=cfg.name, gravity=bool(gravity),
                 payloads_kg=[float(m) for m in payloads_kg], n_points=int(n_points),
                 n_elements=model.n, rows=rows, summary=summary)

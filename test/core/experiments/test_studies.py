@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import RobotModel, studies
+from bellow_ancf_ros.core import RobotModel, load_robot, studies
 
 
 def test_nodes_on_plates(one_cfg):
@@ -123,3 +123,26 @@ def test_pcc_feedforward_misses_under_payload(one_cfg):
     st = res.stats()
     assert st['reachable_fraction'] == 1.0  # reachable for the PCC model ...
     assert st['position_rms_m'] > 0.5e-3    # ... but the ANCF model predicts a miss
+
+
+def test_three_segment_schemes_move_every_segment():
+    cfg = load_robot('three_segment')
+    schemes = studies.workspace_schemes(cfg)
+    # the paper's four patterns of segment 2, repeated in segment 3 (0-based 3.. and 6..)
+    assert [s.swept for s in schemes] == [(0, 3, 6), (0, 4, 7), (0, 3, 4, 6, 7),
+                                          (0, 4, 5, 7, 8)]
+    for s in schemes:
+        assert {i // 3 for i in s.swept} == {0, 1, 2}
+        assert set(s.fixed) == set(range(9)) - set(s.swept)
+
+
+def test_compare_pcc_says_when_no_point_is_usable():
+    """Three segments buckle upright under 0.1 kg: the summary says so instead of dropping it."""
+    cfg = load_robot('three_segment')
+    res = studies.compare_pcc(cfg, payloads_kg=(0.0, 0.1), n_points=3,
+                              schemes=studies.workspace_schemes(cfg)[:1])
+    s = {(r['payload_kg'], r['category']): r for r in res['summary']}
+    assert len(s) == 4
+    assert s[(0.0, 'elongation')]['usable'] == s[(0.0, 'elongation')]['points'] == 3
+    heavy = s[(0.1, 'elongation')]
+    assert heavy['points'] == 3 and heavy['usable'] == 0 and heavy['rms_m'] is None
