@@ -498,6 +498,23 @@ def test_bad_targets_refused_one_segment(h, one):
     assert node.stats['refused'] == len(bad_inputs)
 
 
+def test_three_segment_robot_is_controlled(h, three):
+    """The inverse node with the shipped three-segment robot: 9 pressures that reach the pose."""
+    node, pub, _ = setup_inverse(h, robot_config='three_segment')
+    cfg = three.cfg
+    fw = solve_forward(three, [60e3, 0.0, 20e3, 10e3, 40e3, 0.0, 0.0, 30e3, 50e3])
+    msg = send_and_wait_command(h, pub, target_msg(fw.position,
+                                                   geometry.quaternion_from_rotation(fw.rotation)))
+    assert len(msg.data) == 9
+    assert_safe(msg.data, cfg)
+    check = solve_forward(three, np.asarray(msg.data))
+    np.testing.assert_allclose(check.position, fw.position, atol=1e-7)
+    assert geometry.angle_between(check.z_axis, fw.z_axis) < 1e-6
+    # the redundant robot's answer is the core's cold answer (the one rule)
+    np.testing.assert_allclose(msg.data, solve_inverse(three, fw.position, fw.z_axis).pressures_pa,
+                               atol=1.0)
+
+
 def test_bad_orientation_refused_two_segment(h, two):
     node, pub, _ = setup_inverse(h, robot_config='two_segment')
     fw = solve_forward(two, [30e3, 20e3, 10e3, 40e3, 0.0, 5e3])
