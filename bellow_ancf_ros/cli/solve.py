@@ -3,13 +3,13 @@
 ::
 
     bellow-ancf forward [--config C] --pressures-kpa P1 P2 ... [--payload-kg M]
-                        [--elements N] [--json]
+                        [--tip-force-n FX FY FZ] [--elements N] [--json]
     bellow-ancf forward [--config C] --pressures-csv FILE [--payload-kg M]
-                        [--elements N] --json
+                        [--tip-force-n FX FY FZ] [--elements N] --json
     bellow-ancf inverse [--config C] --position X Y Z [--z-axis ZX ZY ZZ]
-                        [--payload-kg M] [--elements N] [--json]
+                        [--payload-kg M] [--tip-force-n FX FY FZ] [--elements N] [--json]
     bellow-ancf inverse [--config C] --targets-csv FILE [--payload-kg M]
-                        [--elements N] --json
+                        [--tip-force-n FX FY FZ] [--elements N] --json
 
 A readable summary, or with ``--json`` the keys of ``ForwardResult.to_dict()``
 / ``InverseResult.to_dict()`` (SI units); the CSV batch modes are in
@@ -81,6 +81,8 @@ def _forward_summary(model: RobotModel, d: dict, seconds: float) -> list[str]:
     lines = [
         _robot_line(model),
         'payload        ' + ('n/a' if d.get('payload_kg') is None else f"{d['payload_kg']:g} kg"),
+        'tip force      ' + ('none' if not any(d.get('tip_force_n') or ())
+                             else f"{_vec(d['tip_force_n'], '{:g}')}  N (x y z, base frame)"),
         f"pressures      {_vec(np.asarray(d['pressures_pa']) / 1e3)}  kPa",
         f"stretch        {_vec(d['stretch'], '{:9.5f}')}",
         f"tip position   {_vec(None if pos is None else np.asarray(pos) * 1e3)}  mm (x y z)",
@@ -127,7 +129,8 @@ def _cmd_forward(args) -> int:
         return _forward_batch(args, model)
     pressures = _check_pressures_kpa(model, args.pressures_kpa)
     start = time.perf_counter()
-    fw = call_solver(solve_forward, model, pressures, payload_kg=args.payload_kg)
+    fw = call_solver(solve_forward, model, pressures, payload_kg=args.payload_kg,
+                     tip_force_n=args.tip_force_n)
     seconds = time.perf_counter() - start
     d = fw.to_dict()
     if args.json:
@@ -154,7 +157,7 @@ def _forward_batch(args, model: RobotModel) -> int:
 
     def solve_row(pressures, previous):
         return call_solver(solve_forward, model, pressures, payload_kg=args.payload_kg,
-                           warm_start=previous)
+                           warm_start=previous, tip_force_n=args.tip_force_n)
 
     return run_batch(rows, parse_row, solve_row, lambda fw: fw.to_dict())
 
@@ -179,7 +182,7 @@ def _cmd_inverse(args) -> int:
         warn('--z-axis is ignored for a one-segment robot (its tip has 3 DOF: position only)')
     start = time.perf_counter()
     inv = call_solver(solve_inverse, model, args.position, z_axis=z_axis,
-                      payload_kg=args.payload_kg)
+                      payload_kg=args.payload_kg, tip_force_n=args.tip_force_n)
     seconds = time.perf_counter() - start
     d = _inverse_dict(inv)
     if args.json:
@@ -192,6 +195,7 @@ def _cmd_inverse(args) -> int:
 def _inverse_dict(inv) -> dict:
     d = inv.to_dict()
     d.setdefault('payload_kg', None)  # absent when the forward solve failed
+    d.setdefault('tip_force_n', None)
     return d
 
 
@@ -238,7 +242,8 @@ def _inverse_batch(args, model: RobotModel) -> int:
     def solve_row(job, previous):
         position, z_axis = job
         return call_solver(solve_inverse, model, position, z_axis=z_axis,
-                           payload_kg=args.payload_kg, warm_start=previous)
+                           payload_kg=args.payload_kg, warm_start=previous,
+                           tip_force_n=args.tip_force_n)
 
     return run_batch(rows, parse_row, solve_row, _inverse_dict)
 
@@ -249,6 +254,10 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help=config_help() + '; default: %(default)s')
     p.add_argument('--payload-kg', type=payload_mass, default=0.0, metavar='M',
                    help='payload at the end effector [kg]; default: %(default)s')
+    p.add_argument('--tip-force-n', type=finite_float, nargs=3, default=None,
+                   metavar=('FX', 'FY', 'FZ'),
+                   help='force at the end effector [N, base frame], a dead load on top of the '
+                        "payload's weight; default: none")
     p.add_argument('--elements', type=element_count, default=None, metavar='N',
                    help="ANCF elements per actuator; default: the robot file's value")
     p.add_argument('--json', action='store_true',

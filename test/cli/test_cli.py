@@ -25,7 +25,8 @@ from bellow_ancf_ros.core import solve_forward
 REPO = Path(__file__).resolve().parents[2]
 
 FORWARD_KEYS = {
-    'position_m', 'rotation', 'z_axis', 'stretch', 'pressures_pa', 'payload_kg', 'converged',
+    'position_m', 'rotation', 'z_axis', 'stretch', 'pressures_pa', 'payload_kg', 'tip_force_n',
+    'converged',
     'stable', 'status', 'message', 'iterations', 'residual_norm',
 }
 INVERSE_KEYS = FORWARD_KEYS | {
@@ -540,3 +541,41 @@ def test_element_count_that_cannot_carry_the_plates_is_refused(capsys):
     code, out, err = run(capsys, 'forward', '--pressures-kpa', '0', '0', '0', '--elements', '3',
                          '--json')
     assert code == 0, err
+
+
+def test_tip_force_in_forward_and_inverse_single_and_batch(capsys, one, tmp_path):
+    """``--tip-force-n``: the core's answers under the force, single solves and CSV batches."""
+    F = [0.05, -0.02, 0.01]
+    code, out, _ = run(capsys, 'forward', '--pressures-kpa', 30, 0, 10, '--tip-force-n', *F,
+                       '--json')
+    d = one_json(out)
+    assert code == 0 and d['tip_force_n'] == F
+    ref = solve_forward(one, [30e3, 0.0, 10e3], tip_force_n=F)
+    assert d['position_m'] == pytest.approx(ref.position.tolist(), abs=1e-12)
+    code, out, _ = run(capsys, 'forward', '--pressures-kpa', 30, 0, 10, '--tip-force-n', *F)
+    assert code == 0 and re.search(r'tip force\s+0\.05 -0\.02 0\.01\s+N', out), out
+    # inverse: the target is reached under the force; the batch gives the same answers
+    code, out, err = run(capsys, 'inverse', '--position', *nums(ref.position), '--tip-force-n',
+                         *F, '--json')
+    d = one_json(out)
+    assert code == 0 and d['success'] and d['tip_force_n'] == F, err
+    assert np.allclose(np.array(d['pressures_pa']), [30e3, 0.0, 10e3], atol=1e-3)
+    csv_path = tmp_path / 'targets.csv'
+    csv_path.write_text('x,y,z\n' + ','.join(nums(ref.position)) + '\n')
+    code, out, _ = run(capsys, 'inverse', '--targets-csv', str(csv_path), '--tip-force-n', *F,
+                       '--json')
+    batch = one_json(out)['pressures_pa']
+    assert code == 0 and batch == pytest.approx(d['pressures_pa'], abs=1e-6)
+    pcsv = tmp_path / 'p.csv'
+    pcsv.write_text('a1,a2,a3\n30,0,10\n')
+    code, out, _ = run(capsys, 'forward', '--pressures-csv', str(pcsv), '--tip-force-n', *F,
+                       '--json')
+    batch = one_json(out)['position_m']
+    assert code == 0 and batch == pytest.approx(ref.position.tolist(), abs=1e-12)
+
+
+@pytest.mark.parametrize('force, says', [(['nan', '0', '0'], 'not a finite number'),
+                                         (['5000', '0', '0'], 'refused as absurd')])
+def test_bad_tip_force_is_one_line_and_exit_2(capsys, force, says):
+    code, out, err = run(capsys, 'forward', '--pressures-kpa', 0, 0, 0, '--tip-force-n', *force)
+    assert code == 2 and says in err and len(err.strip().splitlines()) == 1, err

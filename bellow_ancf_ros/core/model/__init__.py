@@ -11,7 +11,9 @@
 * :class:`RobotModel`: the discretised robot, its residual, Jacobians and
   read-outs, and the one per-model cache (:meth:`RobotModel.cached`);
 * :class:`PccModel`, :func:`arc_state`: the piecewise-constant-curvature
-  reference (cold starts, comparison study).
+  reference (cold starts, comparison study);
+* :class:`TipLoad`, :func:`tip_load`: a payload and a force at the end
+  effector (eq. 14), as the solvers take them.
 """
 
 from . import parameter_keys
@@ -25,9 +27,11 @@ from ._config import (ConfigError, MocapFrame, RobotConfig, SegmentConfig, check
 from ._kernels import element_parameters, evaluate_kernel, horner
 from ._pcc import PccModel, PccPose, arc_parameters, arc_state, arc_transform
 from ._stage1 import Stage1
+from ._tip_load import MAX_TIP_FORCE_N, TipLoad, as_tip_load, tip_load
 
 __all__ = [
-    "ConfigError", "Evaluation", "MocapFrame", "GAUSS_W", "GAUSS_XI", "PccModel", "PccPose",
+    "ConfigError", "Evaluation", "MAX_TIP_FORCE_N", "MocapFrame", "TipLoad", "as_tip_load",
+    "tip_load", "GAUSS_W", "GAUSS_XI", "PccModel", "PccPose",
     "RobotConfig", "RobotModel", "SegmentConfig", "Stage1", "arc_parameters", "arc_state",
     "arc_transform", "check_element_count", "config_dirs", "element_energy", "element_forces",
     "element_parameters", "evaluate_kernel", "find_shipped", "gravity_weights", "hermite",

@@ -48,6 +48,7 @@ from ..linalg import coordinates_envelope, kkt_solver
 from . import _ancf as ancf, _kernels as kernels
 from ._config import RobotConfig, check_element_count
 from ._stage1 import Stage1
+from ._tip_load import as_tip_load
 
 __all__ = ["RobotModel", "Evaluation"]
 
@@ -377,11 +378,29 @@ class RobotModel:
         return par
 
     # ------------------------------------------------------------------ loads
+    def point_forces(self, payload=0.0):
+        """Generalised point forces (eq. 14) at full gravity: plates, connectors, tip load.
+
+        ``payload`` is a mass [kg] or a :class:`~._tip_load.TipLoad` (a mass
+        and a force at the end effector, ``Q = B^T F``, module ``_tip_load``).
+        """
+        load = as_tip_load(payload)
+        Q = self.q_masses
+        if load.payload_kg:
+            Q = Q + load.payload_kg * self.q_payload
+        if load.has_force:
+            Q = Q.copy()
+            F = np.asarray(load.force_n, dtype=float)
+            Q[self.plate_dofs[self.ee_plate, 0:3]] += F
+            Q[self.plate_dofs[self.ee_plate, 9:12]] += self.cfg.tool_length * F
+        return Q
+
     def external_forces(self, lam, load_scale=1.0, payload=0.0):
         """Generalised gravity (eq. 16) and point forces (eq. 14), and their lam-derivative.
 
-        Returns ``(Q, dQ_dlam)`` with ``Q`` of length ``nq`` and ``dQ_dlam``
-        of shape ``(nq, A)``.
+        ``payload``: a mass [kg] or a :class:`~._tip_load.TipLoad`.  Returns
+        ``(Q, dQ_dlam)`` with ``Q`` of length ``nq`` and ``dQ_dlam`` of shape
+        ``(nq, A)``; the tip force is scaled by ``load_scale`` like gravity.
         """
         cfg = self.cfg
         lam = np.asarray(lam, dtype=float)
@@ -398,14 +417,7 @@ class RobotModel:
                + (rho_e * par["dle"][self.elem_act])[:, None] * dw)
         dqg = (dwl[:, :, None] * g[None, None, :]).reshape(self.E, 12)
         np.add.at(dQ, (self.elem_dofs.ravel(), np.repeat(self.elem_act, 12)), dqg.ravel())
-        for u, h, m in self.point_masses:
-            F = m * g
-            Q[self.plate_dofs[u, 0:3]] += F
-            Q[self.plate_dofs[u, 9:12]] += h * F
-        if payload:
-            F = payload * g
-            Q[self.plate_dofs[self.ee_plate, 0:3]] += F
-            Q[self.plate_dofs[self.ee_plate, 9:12]] += cfg.tool_length * F
+        Q += load_scale * self.point_forces(payload)
         return Q, dQ
 
     # ------------------------------------------------------------- evaluation
@@ -434,6 +446,8 @@ class RobotModel:
     def evaluate(self, x, lam, load_scale=1.0, payload=0.0, jacobian=True, lam_derivative=False):
         """Residual of eq. (25) at ``x = [q, alpha]``; Jacobian eq. (27); ``dR/dlam`` (eq. 30).
 
+        ``payload``: a mass [kg] or a :class:`~._tip_load.TipLoad` (:meth:`point_forces`).
+
         Computed by the compiled kernel :func:`core.model._kernels.evaluate_kernel`; the
         Jacobian's values go straight into the fixed CSC pattern.
         """
@@ -442,9 +456,7 @@ class RobotModel:
         lam = np.ascontiguousarray(lam, dtype=float)
         par = self.element_parameters(lam)
         g = self.gravity * load_scale
-        Qpoint = load_scale * self.q_masses
-        if payload:
-            Qpoint = Qpoint + (load_scale * payload) * self.q_payload
+        Qpoint = load_scale * self.point_forces(payload)
         res, data, d = kernels.evaluate_kernel(
             x[:nq], x[nq:], lam, par["le"], par["kt"], par["kb"],
             par["dle"], par["dkt"], par["dkb"],

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from ..linalg import EnvelopeLDL, ldl_solve_vector
-from ..model import element_parameters, evaluate_kernel
+from ..model import as_tip_load, element_parameters, evaluate_kernel
 
 __all__ = ["banded_solve", "chord_steps", "stretch_step", "CONVERGED", "STALLED", "LEFT_BOX",
            "MAX_STEPS", "NONFINITE"]
@@ -184,11 +184,12 @@ def _chord_loop(x, lam, rn_prev, lu, ldl, W, JOinv, proj, use_proj, lam_ref,
     return x, lam, status, n_steps, hist[: n_steps + 1], rn
 
 
-def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_steps,
+def chord_steps(model, load, target, lu, W, step, x, lam, tol, rate, max_steps,
                 rn_prev=np.inf, null_space=True):
     """Chord steps from ``(x, lam)`` with the factorisation ``lu`` and ``W``.
 
-    ``lu``: an ``ldlt.EnvelopeLDL`` or a ``BandedLU``.
+    ``lu``: an ``ldlt.EnvelopeLDL`` or a ``BandedLU``; ``load``: the
+    :class:`~bellow_ancf_ros.core.model.TipLoad`.
 
     ``step`` is the ``inverse_warm._StretchStep`` of ``W`` (``J_O``'s
     inverse, the null-space projector; ``null_space`` False: the
@@ -199,7 +200,7 @@ def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_step
     """
     proj = step.proj if null_space else None
     use_proj = proj is not None
-    static = _static_args(model, float(payload), target)
+    static = _static_args(model, as_tip_load(load), target)
     if isinstance(lu, EnvelopeLDL):
         ldl, lu_args = lu.args(), _NO_LU
     else:
@@ -216,14 +217,14 @@ def chord_steps(model, payload, target, lu, W, step, x, lam, tol, rate, max_step
     return x, lam, int(status), int(steps), [float(h) for h in hist], float(rn)
 
 
-def _static_args(model, payload, target):
-    """The loop's arguments that depend on the model and payload only (kept on the model)."""
-    cache = model.cached("chord_static", lambda m: {})  # payload -> arguments
-    args = cache.get(payload)
+def _static_args(model, load, target):
+    """The loop's arguments that depend on the model and tip load only (kept on the model)."""
+    cache = model.cached("chord_static", lambda m: {})  # tip load -> arguments
+    args = cache.get(load)
     if args is None:
         cfg, st = model.cfg, model.stage1
-        Qpoint = model.q_masses + payload * model.q_payload if payload else model.q_masses
-        args = cache[payload] = (
+        Qpoint = model.point_forces(load)
+        args = cache[load] = (
             target.pd.astype(np.int64), model.residual_scale,
             np.asarray(st.k_coefficients, dtype=float),
             np.asarray(st.dk_coefficients, dtype=float),

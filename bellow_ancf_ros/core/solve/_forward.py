@@ -1,8 +1,8 @@
 """Forward kinetostatic problem (paper section IV.B).
 
-Pressures (gauge, Pa, one per actuator, segment by segment) and payload ->
-stretches by stage 1 (eq. 24) -> equilibrium of eq. (25) by Newton's method
--> end-effector pose, plate poses, backbones, stability.
+Pressures (gauge, Pa, one per actuator, segment by segment), payload and tip
+force -> stretches by stage 1 (eq. 24) -> equilibrium of eq. (25) by Newton's
+method -> end-effector pose, plate poses, backbones, stability.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..linalg import kkt_solver, one_thread_call
-from ..model import RobotModel, arc_state
+from ..model import RobotModel, TipLoad, arc_state, tip_load
 from ..status import ForwardStatus, usable
 from . import _newton as solver
 from ._stability import StabilityCheck
@@ -65,6 +65,8 @@ class ForwardResult:
     iterations: int
     residual_norm: float
     history: list = field(default_factory=list, repr=False)
+    #: force at the end effector [N, base frame] on top of the payload's weight
+    tip_force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
     jacobian: object = field(default=None, repr=False)
     _lu: object = field(default=None, repr=False)
     _reduced_hessian: object = field(default=None, repr=False)
@@ -80,6 +82,11 @@ class ForwardResult:
         None before the stability check.
         """
         return None if self._reduced_hessian is None else self._reduced_hessian.min_eigenvalue
+
+    @property
+    def load(self) -> TipLoad:
+        """The payload and tip force the equilibrium is under."""
+        return TipLoad(float(self.payload_kg), tuple(float(f) for f in self.tip_force_n))
 
     @property
     def lu(self):
@@ -127,6 +134,7 @@ class ForwardResult:
             "stretch": self.stretch.tolist(),
             "pressures_pa": self.pressures_pa.tolist(),
             "payload_kg": float(self.payload_kg),
+            "tip_force_n": [float(f) for f in self.tip_force_n],
             "converged": bool(self.converged),
             "stable": None if self.stable is None else bool(self.stable),
             "status": int(self.status),
@@ -159,28 +167,29 @@ def check_pressures(model: RobotModel, pressures, limit_tol=1e-9):
 class ResumeState:
     """Where a forward solve that ran out of budget stopped, for the next call to go on.
 
-    ``x`` is an exact equilibrium at ``(stretch, load_scale, payload)`` (the
-    last one of its continuation, or its start); ``step`` the continuation
+    ``x`` is an exact equilibrium at ``(stretch, load_scale, load)`` (the
+    last one of its continuation, or its start; ``load`` a
+    :class:`~bellow_ancf_ros.core.model.TipLoad`); ``step`` the continuation
     step to try next from there; ``guess`` the Newton iterate of the step (or
     of the direct attempt, ``step`` 1) that was cut short, valid for the
-    final ``target = (stretch, payload)`` only.
+    final ``target = (stretch, load)`` only.
     """
 
     x: np.ndarray
     stretch: np.ndarray
     load_scale: float
-    payload: float
+    load: TipLoad
     step: float = 1.0
     guess: np.ndarray | None = None
     target: tuple | None = None
 
     def start(self):
-        """The equilibrium as the ``(x, lam, load_scale, payload)`` start of a continuation."""
-        return self.x, self.stretch, self.load_scale, self.payload
+        """The equilibrium as the ``(x, lam, load_scale, load)`` start of a continuation."""
+        return self.x, self.stretch, self.load_scale, self.load
 
 
-def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, deadline=None):
-    """Solve eq. (25) for given stretches from ``warm = (x, lam, scale, payload)``, an equilibrium.
+def _stage2(model, lam, load, warm, tol, max_iter, iteration_budget=None, deadline=None):
+    """Solve eq. (25) for given stretches from ``warm = (x, lam, scale, load)``, an equilibrium.
 
     ``warm`` may also be a :class:`ResumeState`: then the interrupted
     continuation goes on (its direct attempt had failed or was cut short; an
@@ -194,7 +203,7 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
         return lambda x, jacobian=True: model.evaluate(x, lam_t, load_t, pay_t, jacobian=jacobian)
 
     def same_target(rs):
-        return (rs.target is not None and rs.guess is not None and rs.target[1] == payload
+        return (rs.target is not None and rs.guess is not None and rs.target[1] == load
                 and np.array_equal(rs.target[0], lam))
 
     first_max = max_iter if iteration_budget is None else min(max_iter, iteration_budget)
@@ -209,23 +218,23 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
             # cold start: the PCC arcs of the target stretches as the guess, then (if Newton
             # fails from there) continuation from the exactly solved unloaded straight robot
             guess = arc_state(model, lam)
-            start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, 0.0)
+            start = (model.straight_state(np.ones(model.A)), np.ones(model.A), 0.0, TipLoad())
         else:
             guess, start = warm[0], warm
     if direct:
-        res = solver.newton(make(lam, 1.0, payload), guess, scale, tol, first_max,
+        res = solver.newton(make(lam, 1.0, load), guess, scale, tol, first_max,
                             deadline=deadline)
         if res.converged:
             return res, None
         if res.status == ForwardStatus.TIME_BUDGET:
-            return res, ResumeState(*start, 1.0, res.x, (lam, payload))
+            return res, ResumeState(*start, 1.0, res.x, (lam, load))
         first_iters, guess = res.iterations, None
         if isinstance(warm, ResumeState):
             first_step = 0.5  # the full step has failed now
     x0, lam0, s0, m0 = start
 
     def point(t):
-        return lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0 + t * (payload - m0)
+        return lam0 + t * (lam - lam0), s0 + t * (1.0 - s0), m0.toward(load, t)
 
     def make_t(t):
         return make(*point(t))
@@ -239,14 +248,14 @@ def _stage2(model, lam, payload, warm, tol, max_iter, iteration_budget=None, dea
         t, x_t, dt, x_cut = res.reached
         lam_t, s_t, m_t = point(t)
         resume = ResumeState(x_t, lam_t, s_t, m_t, min(1.0, dt / (1.0 - t)), x_cut,
-                             (lam, payload))
+                             (lam, load))
     return res, resume
 
 
 @one_thread_call
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
                   check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
-                  iteration_budget=500) -> ForwardResult:
+                  iteration_budget=500, tip_force_n=None) -> ForwardResult:
     """Forward kinetostatic problem.
 
     Parameters
@@ -255,6 +264,11 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     pressures : array_like, Pa (gauge), one per actuator, segment by segment;
         must lie in ``[p_min, p_max]``.
     payload_kg : mass at the end effector.
+    tip_force_n : optional force at the end effector [N, base frame], a dead
+        load on top of the payload's weight (eq. 14 at the end effector);
+        non-finite values and magnitudes above ``MAX_TIP_FORCE_N`` raise
+        ValueError.  A force the robot cannot carry ends in a limit point of
+        the load path or an unstable equilibrium, reported by the status.
     warm_start : ForwardResult, optional
         A previous converged result (e.g. the last sample of a trajectory);
         the solve starts from it and falls back to continuation from it.  A
@@ -278,23 +292,22 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     """
     deadline = solver.deadline_after(time_budget_s)
     p = check_pressures(model, pressures)
-    payload = float(payload_kg)
-    if not np.isfinite(payload) or payload < 0:
-        raise ValueError(f"payload must be a finite non-negative mass in kg, got {payload_kg}")
+    load = tip_load(payload_kg, tip_force_n)
     lam = model.stage1.stretch(p)
     warm = None
     if warm_start is not None and warm_start.converged:
-        warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.payload_kg)
+        warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.load)
     elif warm_start is not None and warm_start.resume_state is not None:
         warm = warm_start.resume_state  # continue a solve that ran out of budget
-    res, resume = _stage2(model, lam, payload, warm, tol, max_iter, int(iteration_budget),
+    res, resume = _stage2(model, lam, load, warm, tol, max_iter, int(iteration_budget),
                           deadline)
     message = res.message
-    if res.status == ForwardStatus.STEP_TOO_SMALL and payload > 0:
-        message += (f"; a limit point of the load path to the payload of {payload:g} kg: "
+    if res.status == ForwardStatus.STEP_TOO_SMALL and (load.payload_kg > 0 or load.has_force):
+        message += (f"; a limit point of the load path to {load.describe()}: "
                     "the robot may buckle under it")
     out = ForwardResult(
-        model=model, pressures_pa=p, stretch=lam, payload_kg=payload, x=res.x,
+        model=model, pressures_pa=p, stretch=lam, payload_kg=load.payload_kg,
+        tip_force_n=np.array(load.force_n), x=res.x,
         converged=res.converged, stable=None, status=res.status,
         message=message, iterations=res.iterations, residual_norm=res.residual_norm,
         history=res.history, jacobian=res.jacobian, resume_state=resume,

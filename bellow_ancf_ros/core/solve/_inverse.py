@@ -33,7 +33,7 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
   ``least_squares``, trust-region reflective) from a small fixed set of
   starts (the local answer, the warm start, vent and mid-range pressures,
   and the best corners of the pressure box, whose forward solutions are
-  computed once per model and payload), each polished exactly on the face of
+  computed once per model and tip load), each polished exactly on the face of
   its active limits; the answer is the best of all of them by ``|O|``, so it
   is never worse than any of those pressures.
 * Three segments and more (more than ``MAX_CORNERS`` corners) get no
@@ -76,7 +76,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..linalg import one_thread_call
-from ..model import RobotModel
+from ..model import RobotModel, tip_load
 from ..status import InverseStatus
 from ._forward import ForwardResult, WarmState, assess_stability, solve_forward
 from ._inverse_limits import (
@@ -211,7 +211,8 @@ def _check_target(model, position, z_axis):
     return position, z_axis / np.linalg.norm(z_axis)
 
 
-def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None, tol=1e-10) -> bool:
+def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None, tol=1e-10,
+                       tip_force_n=None) -> bool:
     """Solve the corners of the pressure box and the cold start now (cached); True when done.
 
     The first unreachable target of a payload needs the corners (2**A forward
@@ -223,14 +224,14 @@ def precompute_corners(model: RobotModel, payload_kg=0.0, time_budget_s=None, to
     a budget runs out).
     """
     budget = Budget(time_budget_s, 2**model.A + 1)
-    payload = float(payload_kg)
+    load = tip_load(payload_kg, tip_force_n)
     st, cfg = model.stage1, model.cfg
     cold = st.stretch(0.5 * (cfg.p_min + cfg.p_max)) if cfg.n_segments > 1 else 1.0
     cold = np.clip(np.full(model.A, float(cold)), st.lam_min, st.lam_max)
     try:
-        corner_solutions(model, payload, budget)
+        corner_solutions(model, load, budget)
         budget.take()
-        fw = cold_solution(model, np.clip(st.pressure(cold), cfg.p_min, cfg.p_max), payload,
+        fw = cold_solution(model, np.clip(st.pressure(cold), cfg.p_min, cfg.p_max), load,
                            tol, budget)
     except OutOfBudget:
         return False
@@ -250,6 +251,7 @@ def solve_inverse(
     tol=1e-10,
     time_budget_s=None,
     max_forward_solves=400,
+    tip_force_n=None,
 ) -> InverseResult:
     """Inverse kinetostatic problem: pressures for a target pose.
 
@@ -259,6 +261,9 @@ def solve_inverse(
         (refused beyond ``MAX_TARGET_LENGTHS`` robot lengths from the base).
     z_axis : (3,) target end-effector z-axis (required for two or more
         segments, ignored for one); any finite non-zero vector.
+    payload_kg, tip_force_n : the payload's mass [kg] and an optional force
+        at the end effector [N, base frame] (dead loads, as in
+        :func:`solve_forward`): the pressures reach the target under them.
     warm_start : InverseResult or ForwardResult, optional
         The previous solution along a trajectory.
     position_tol, angle_tol : a target counts as reached (``reachable``)
@@ -283,9 +288,7 @@ def solve_inverse(
     budget = Budget(time_budget_s, max_forward_solves)
     position, z_axis = _check_target(model, position, z_axis)
     multi = z_axis is not None
-    payload = float(payload_kg)
-    if not np.isfinite(payload) or payload < 0:
-        raise ValueError(f"payload must be a finite non-negative mass in kg, got {payload_kg}")
+    load = tip_load(payload_kg, tip_force_n)
     L = model.length_scale
     ptol = 1e-8 * L if position_tol is None else float(position_tol)
     atol = 1e-8 if angle_tol is None else float(angle_tol)
@@ -302,24 +305,25 @@ def solve_inverse(
         warm_fw = warm_start.forward
         if warm_start.resume is not None:  # continue an interrupted solve
             warm_fw, prev_best = warm_start.resume, warm_start.forward
-            if _same_target(warm_start, position, z_axis, payload):
+            if _same_target(warm_start, position, z_axis, load):
                 stage = warm_start.resume_stage
     if warm_fw is not None and not warm_fw.converged:
         warm_fw, stage = None, _EXACT
-    obj = Objective(model, position, z_axis, payload, None, tol, budget)
+    obj = Objective(model, position, z_axis, load, None, tol, budget)
     budget.grace = warm_fw is not None  # a warm start gets at least one step of progress
     iters = 0
     try:
-        if warm_fw is not None and warm_fw.payload_kg != payload:
+        if warm_fw is not None and warm_fw.load != load:
             prev_best, stage = None, _EXACT
             budget.take()
             warm_fw = solve_forward(
                 model,
                 warm_fw.pressures_pa,
-                payload,
+                load.payload_kg,
                 warm_start=warm_fw,
                 check_stability=False,
                 time_budget_s=budget.remaining_s(),
+                tip_force_n=load.force_n,
             )
             warm_fw = warm_fw if warm_fw.converged else None
         obj.warm = warm_fw
@@ -327,7 +331,7 @@ def solve_inverse(
             obj.offer(warm_fw.stretch, warm_fw)
             if prev_best is not None:
                 obj.seed(warm_fw)  # the resume point comes with its sensitivities
-                if prev_best.converged and prev_best.payload_kg == payload:
+                if prev_best.converged and prev_best.load == load:
                     obj.offer(prev_best.stretch, prev_best)  # never worse than the last slice
                 if warm_start.resume_cut is not None:  # a forward solve it had begun
                     obj.pending[warm_start.resume_cut[0].tobytes()] = warm_start.resume_cut[1]
@@ -336,7 +340,7 @@ def solve_inverse(
         obj.stage = stage
         if warm_fw is not None and stage == _EXACT:
             fw = full_space_newton(
-                model, obj.target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol,
+                model, obj.target, multi, load, warm_fw, lam_ref, lo, hi, done, tol,
                 budget=budget,
             )
         if stage != _EXACT:
@@ -425,7 +429,7 @@ def _continue(obj, prev_best, resume, lo, hi, lam_ref, multi, done, max_iter):
         obj.stage, seeds = _BEST, True
         if O is not None:
             local.append((lam, fw))
-    if prev_best is not None and prev_best.converged and prev_best.payload_kg == obj.payload:
+    if prev_best is not None and prev_best.converged and prev_best.load == obj.load:
         if not seeds and stationary(obj, prev_best.stretch, lo, hi, lam_ref, multi):
             # the search had arrived: its best answer is the answer (a least-squares run
             # from it would only confirm it)
@@ -436,12 +440,12 @@ def _continue(obj, prev_best, resume, lo, hi, lam_ref, multi, done, max_iter):
     return lam, fw, reached, iters + it2
 
 
-def _same_target(prev, position, z_axis, payload):
-    """Whether the InverseResult ``prev`` was for this target and payload."""
+def _same_target(prev, position, z_axis, load):
+    """Whether the InverseResult ``prev`` was for this target and tip load."""
     fw = prev.forward if prev.forward is not None else prev.resume
     same_axis = (z_axis is None) == (prev.target_z_axis is None) and (
         z_axis is None or np.array_equal(z_axis, prev.target_z_axis))
-    return (fw is not None and fw.payload_kg == payload and same_axis
+    return (fw is not None and fw.load == load and same_axis
             and np.array_equal(position, prev.target_position))
 
 
@@ -460,7 +464,7 @@ def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter, se
         _, fw_s, O_s, _ = obj.evaluate(seed)
         if O_s is not None:
             candidates.append((seed, fw_s))
-    candidates += corner_solutions(model, obj.payload, obj.budget)
+    candidates += corner_solutions(model, obj.load, obj.budget)
     if not candidates:
         return None, None, False, 0
     options = {} if seeds else {"n_starts": 1}  # a continued search: from its best answer only
@@ -482,7 +486,7 @@ def _result(model, lam, fw, reached, iters, position, z_axis, status=None, note=
     errors = f"position error {pe * 1e3:.4g} mm" + (
         "" if ae is None else f", angle error {np.degrees(ae):.4g} deg"
     )
-    buckled = f"the robot would buckle under a payload of {fw.payload_kg:g} kg"
+    buckled = f"the robot would buckle under {fw.load.describe()}"
     if status is not None:
         msg = f"{note}; best pressures so far: {errors}"
         if not fw.stable:

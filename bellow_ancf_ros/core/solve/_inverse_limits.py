@@ -3,7 +3,7 @@
 Bound-constrained least squares (scipy ``least_squares``, trust-region
 reflective) on ``|O|^2`` from a small fixed set of starts: the local answer,
 the warm start, vent and mid-range pressures and the corners of the pressure
-box, whose stable forward solutions are computed once per model and payload
+box, whose stable forward solutions are computed once per model and tip load
 (:func:`corner_solutions`).  The answer is the best of everything seen.
 
 Robots with more than :data:`MAX_CORNERS` corners (three segments and more:
@@ -38,8 +38,8 @@ _STATIONARY_GTOL = 1e-9  # scaled gradient of a finished least-squares answer (a
 MAX_CORNERS = 64
 
 
-def corner_solutions(model, payload, budget):
-    """Stable forward solutions at the corners of the pressure box, once per model and payload.
+def corner_solutions(model, load, budget):
+    """Stable forward solutions at the corners of the pressure box, once per model and tip load.
 
     Work done before a budget runs out is kept for the next call.  Kept
     with the model (:meth:`RobotModel.cached`), so they go when it goes.
@@ -47,18 +47,19 @@ def corner_solutions(model, payload, budget):
     """
     if 2**model.A > MAX_CORNERS:
         return []
-    per_model = model.cached("corner_solutions", lambda m: {})  # payload -> partial or done
-    entry = per_model.get(payload)
+    per_model = model.cached("corner_solutions", lambda m: {})  # tip load -> partial or done
+    entry = per_model.get(load)
     if entry is None:
         while len(per_model) >= _CORNER_CACHE_PAYLOADS:
             per_model.pop(next(iter(per_model)))
-        entry = per_model[payload] = {"next": 0, "items": []}
+        entry = per_model[load] = {"next": 0, "items": []}
     cfg, st = model.cfg, model.stage1
     corners = list(itertools.product((cfg.p_min, cfg.p_max), repeat=model.A))
     while entry["next"] < len(corners):
         p = np.array(corners[entry["next"]])
         budget.take()
-        fw = solve_forward(model, p, payload, time_budget_s=budget.remaining_s())
+        fw = solve_forward(model, p, load.payload_kg, time_budget_s=budget.remaining_s(),
+                           tip_force_n=load.force_n)
         if fw.status == TIME_BUDGET:
             raise OutOfBudget(TIME_BUDGET)
         entry["next"] += 1

@@ -36,7 +36,7 @@ TIME_BUDGET = ForwardStatus.TIME_BUDGET
 ITERATION_BUDGET = ForwardStatus.ITERATION_BUDGET
 RCOND = 1e-8  # z_ee - z_target has rank 2 in 3 rows: cut the round-off direction
 # cold forward solves (done, or cut short by a budget), kept with the model:
-# {(payload, tol, P): result} (RobotModel.cached)
+# {(tip load, tol, P): result} (RobotModel.cached)
 _COLD_CACHE_SIZE = 8
 
 
@@ -158,11 +158,11 @@ class Objective:
     from (``resume``: the last accepted iterate, with its sensitivities).
     """
 
-    def __init__(self, model, position, z_axis, payload, warm, tol, budget):
-        """Set up; see the class docstring."""
+    def __init__(self, model, position, z_axis, load, warm, tol, budget):
+        """Set up; see the class docstring (``load``: the TipLoad)."""
         self.model = model
         self.target = Target(model, position, z_axis)
-        self.payload = payload
+        self.load = load
         self.warm = warm
         self.tol = tol
         self.budget = budget
@@ -194,7 +194,7 @@ class Objective:
         Only results of a solve that ran out of budget carry them (``WarmState.sensitivity``).
         """
         W = None if fw._warm is None else fw._warm.sensitivity
-        if W is None or not fw.converged or fw.payload_kg != self.payload:
+        if W is None or not fw.converged or fw.load != self.load:
             return
         lam = np.array(fw.stretch, dtype=float)
         self.warm = fw
@@ -206,16 +206,17 @@ class Objective:
         p = np.clip(m.stage1.pressure(lam), m.cfg.p_min, m.cfg.p_max)
         self.budget.take()
         if self.warm is None:
-            fw = cold_solution(m, p, self.payload, self.tol, self.budget)
+            fw = cold_solution(m, p, self.load, self.tol, self.budget)
         else:
             fw = solve_forward(
                 m,
                 p,
-                self.payload,
+                self.load.payload_kg,
                 warm_start=self.pending.pop(np.asarray(lam, dtype=float).tobytes(), self.warm),
                 check_stability=False,
                 tol=self.tol,
                 time_budget_s=self.budget.remaining_s(),
+                tip_force_n=self.load.force_n,
             )
         if fw.status == TIME_BUDGET:
             if fw.resume_state is not None and self.warm is not None:
@@ -235,15 +236,15 @@ class Objective:
             self.last = (lam.copy(), fw, None, None)
             return self.last
         self.warm = fw
-        ev = m.evaluate(fw.x, lam, 1.0, self.payload, jacobian=False, lam_derivative=True)
+        ev = m.evaluate(fw.x, lam, 1.0, self.load, jacobian=False, lam_derivative=True)
         dx = -fw.lu.solve(ev.dres_dlam)  # (N, A) implicit function theorem
         self._last_dx = dx
         self.last = (lam.copy(), fw, self.offer(lam, fw), self.target.linear(dx))
         return self.last
 
 
-def cold_solution(model, pressures, payload, tol, budget):
-    """Cold-started forward solve (no stability check), cached per model, payload and pressures.
+def cold_solution(model, pressures, load, tol, budget):
+    """Cold-started forward solve (no stability check), cached per model, tip load and pressures.
 
     The inverse solves cold only at its canonical start (the same pressures
     every time), so the solution is kept (a copy is returned), and a solve
@@ -251,12 +252,12 @@ def cold_solution(model, pressures, payload, tol, budget):
     (``ForwardResult.resume_state``): cold solves progress across budget slices.
     """
     cache = model.cached("cold_solutions", lambda m: {})
-    key = (float(payload), float(tol), np.asarray(pressures, dtype=float).tobytes())
+    key = (load, float(tol), np.asarray(pressures, dtype=float).tobytes())
     entry = cache.get(key)
     if entry is not None and entry.converged:
         return dataclasses.replace(entry)
-    fw = solve_forward(model, pressures, payload, warm_start=entry, check_stability=False,
-                       tol=tol, time_budget_s=budget.remaining_s())
+    fw = solve_forward(model, pressures, load.payload_kg, warm_start=entry, check_stability=False,
+                       tol=tol, time_budget_s=budget.remaining_s(), tip_force_n=load.force_n)
     if fw.converged or fw.resume_state is not None:
         while key not in cache and len(cache) >= _COLD_CACHE_SIZE:
             cache.pop(next(iter(cache)))

@@ -180,9 +180,9 @@ def _second_order(path, t_new, W, x, lam, lo, hi):
 class _WarmSolve:
     """State of one warm-started solve: iterate, sensitivities, factorisation, counters."""
 
-    def __init__(self, model, target, multi, payload, warm_fw, lam_ref, lo, hi, tol):
+    def __init__(self, model, target, multi, load, warm_fw, lam_ref, lo, hi, tol):
         """Set up from the warm start; see :func:`full_space_newton`."""
-        self.model, self.target, self.multi, self.payload = model, target, multi, payload
+        self.model, self.target, self.multi, self.load = model, target, multi, load
         self.warm, self.lam_ref, self.lo, self.hi, self.tol = warm_fw, lam_ref, lo, hi, tol
         self.x, self.lam = warm_fw.x.copy(), warm_fw.stretch.copy()
         ws = self.warm_state = warm_fw._warm or WarmState()
@@ -199,7 +199,7 @@ class _WarmSolve:
         return _StretchStep.of(cache, self.target, self.multi, W, self.lam_ref, self.lo, self.hi)
 
     def evaluate(self, jacobian=True, lam_derivative=True):
-        return self.model.evaluate(self.x, self.lam, 1.0, self.payload, jacobian=jacobian,
+        return self.model.evaluate(self.x, self.lam, 1.0, self.load, jacobian=jacobian,
                                    lam_derivative=lam_derivative)
 
     def result(self, ev, rn):
@@ -208,7 +208,8 @@ class _WarmSolve:
         return ForwardResult(
             model=m,
             pressures_pa=np.clip(m.stage1.pressure(self.lam), m.cfg.p_min, m.cfg.p_max),
-            stretch=self.lam.copy(), payload_kg=self.payload, x=self.x, converged=True,
+            stretch=self.lam.copy(), payload_kg=self.load.payload_kg,
+            tip_force_n=np.array(self.load.force_n), x=self.x, converged=True,
             stable=None, status=ForwardStatus.CONVERGED, message=ForwardStatus.CONVERGED.message,
             iterations=self.newton_its + self.n_chord + self.n_refine, residual_norm=rn,
             history=self.hist, jacobian=ev.jacobian,
@@ -252,7 +253,7 @@ class _WarmSolve:
             return True, None
         # redundant robots: minimum-norm steps, no null-space term (see the module docstring)
         self.x, self.lam, status, steps, h, rn = chord_steps(
-            self.model, self.payload, self.target, lu, W_c, chord_map, self.x, self.lam,
+            self.model, self.load, self.target, lu, W_c, chord_map, self.x, self.lam,
             max(self.tol, CHORD_TOL_MULTI) if self.multi else self.tol, CHORD_RATE, MAX_CHORD,
             null_space=False)
         self.hist += h
@@ -324,7 +325,7 @@ class _WarmSolve:
 
 
 def full_space_newton(
-    model, target, multi, payload, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
+    model, target, multi, load, warm_fw, lam_ref, lo, hi, done, tol, max_iter=8,
     budget=None,
 ):
     """Newton's method on all unknowns ``[lam, q, alpha]`` at once (eqs. 29, 30), chord first.
@@ -335,7 +336,7 @@ def full_space_newton(
     when the ``budget``'s deadline has passed (checked before every
     factorisation).
     """
-    s = _WarmSolve(model, target, multi, payload, warm_fw, lam_ref, lo, hi, tol)
+    s = _WarmSolve(model, target, multi, load, warm_fw, lam_ref, lo, hi, tol)
     if not s.predict():
         return None
     first = True

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import solve_forward, solve_inverse
-from bellow_ancf_ros.core import InverseStatus, precompute_corners
+from bellow_ancf_ros.core import InverseStatus, TipLoad, precompute_corners
 from bellow_ancf_ros.core.solve import MAX_CORNERS, MAX_TARGET_LENGTHS
 
 SEED = 20261201
@@ -126,7 +126,7 @@ class _Corners:
             return []  # the inverse tries no corners either
         if payload not in self.cache:
             precompute_corners(self.model, payload)
-            entry = self.model.cached("corner_solutions", lambda m: {})[payload]
+            entry = self.model.cached("corner_solutions", lambda m: {})[TipLoad(payload)]
             assert entry["next"] == 2**self.model.A
             sols = [fw for _, fw in entry["items"]]
             for fw in sols[::16]:
