@@ -35,7 +35,7 @@ INVERSE_AXIS_COLUMNS = ('zx', 'zy', 'zz')
 
 
 # ------------------------------------------------------------- input
-def _check_pressures_kpa(model: RobotModel, values_kpa) -> np.ndarray:
+def check_pressures_kpa(model: RobotModel, values_kpa) -> np.ndarray:
     """Pressures in kPa -> Pa, checked for count and hardware limits."""
     p = np.asarray(values_kpa, dtype=float)
     cfg = model.cfg
@@ -127,7 +127,7 @@ def _cmd_forward(args) -> int:
     model = load_model(args)
     if args.pressures_csv is not None:
         return _forward_batch(args, model)
-    pressures = _check_pressures_kpa(model, args.pressures_kpa)
+    pressures = check_pressures_kpa(model, args.pressures_kpa)
     start = time.perf_counter()
     fw = call_solver(solve_forward, model, pressures, payload_kg=args.payload_kg,
                      tip_force_n=args.tip_force_n)
@@ -153,7 +153,7 @@ def _forward_batch(args, model: RobotModel) -> int:
     def parse_row(cells):
         if len(cells) != model.A:
             raise UsageError(f'expected {model.A} pressures in kPa, got {len(cells)} fields')
-        return _check_pressures_kpa(model, row_numbers(cells, names))
+        return check_pressures_kpa(model, row_numbers(cells, names))
 
     def solve_row(pressures, previous):
         return call_solver(solve_forward, model, pressures, payload_kg=args.payload_kg,

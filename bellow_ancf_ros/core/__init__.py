@@ -33,17 +33,18 @@ from .fit import (CalibrationError, CalibrationResult, Recording, RecordingError
 from .linalg import limit_blas_threads
 from .model import (ConfigError, PccModel, RobotConfig, RobotModel, SegmentConfig, Stage1,
                     TipLoad, load_robot, parameter_keys, robot_from_dict)
-from .solve import (ForwardResult, InverseResult, payload_problem, precompute_corners,
-                    solve_forward, solve_inverse, warm_up)
+from .solve import (ForwardResult, InverseResult, TipCompliance, payload_problem,
+                    precompute_corners, solve_forward, solve_inverse, tip_compliance, warm_up)
 from .status import ForwardStatus, InverseStatus
 
 __all__ = [
-    "CalibrationError", "CalibrationResult", "ConfigError", "FEEDBACK_MODES", "FeedbackSettings",
-    "ForwardResult", "ForwardStatus", "IntegralFeedback", "InverseResult", "InverseStatus",
-    "PccModel", "PressureRegulators", "Recording", "RecordingError", "RobotConfig", "RobotModel",
-    "SegmentConfig", "SimulatedRobot", "Stage1", "TipLoad", "calibrate", "calibration", "control",
-    "experiments", "fit", "geometry", "identification", "limit_blas_threads", "linalg",
-    "load_robot", "model", "numba_cache", "parameter_keys", "payload_problem",
-    "precompute_corners", "read_recording", "robot_from_dict", "solve", "solve_forward",
-    "solve_inverse", "status", "studies", "trajectories", "warm_up",
+    "CalibrationError", "CalibrationResult", "ConfigError", "FEEDBACK_MODES",
+    "FeedbackSettings", "ForwardResult", "ForwardStatus", "IntegralFeedback", "InverseResult",
+    "InverseStatus", "PccModel", "PressureRegulators", "Recording", "RecordingError",
+    "RobotConfig", "RobotModel", "SegmentConfig", "SimulatedRobot", "Stage1", "TipCompliance",
+    "TipLoad", "calibrate", "calibration", "control", "experiments", "fit", "geometry",
+    "identification", "limit_blas_threads", "linalg", "load_robot", "model", "numba_cache",
+    "parameter_keys", "payload_problem", "precompute_corners", "read_recording",
+    "robot_from_dict", "solve", "solve_forward", "solve_inverse", "status", "studies",
+    "tip_compliance", "trajectories", "warm_up",
 ]

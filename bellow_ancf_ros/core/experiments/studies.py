@@ -25,6 +25,12 @@ and ``bellow_ancf_ros.cli.track`` draws).  Every study takes an optional
   :mod:`.trajectories`, warm-started point to point; the errors are those of
   a forward solve at the returned pressures (the model's prediction of where
   the feedforward sends the tip).
+* :func:`stiffness_study` (the paper's claim that the model predicts the
+  "vertical stiffness with different actuation pressures"): the tip's
+  vertical stiffness at equal pressures from ``p_min`` to ``p_max``, per
+  payload; :func:`stiffness_along_trajectory`: the tip stiffness at the
+  feedforward answers along a trajectory (both from
+  :func:`~bellow_ancf_ros.core.solve.tip_compliance`, exact at each equilibrium).
 """
 
 from __future__ import annotations
@@ -38,13 +44,14 @@ import numpy as np
 
 from ..geometry import angle_between
 from ..model import ConfigError, PccModel, RobotConfig, RobotModel
-from ..solve import solve_forward, solve_inverse
+from ..solve import solve_forward, solve_inverse, tip_compliance
 from . import trajectories
 
 __all__ = [
     'nodes_on_plates', 'extreme_actuations', 'ConvergenceRow', 'ConvergenceResult',
     'convergence_study', 'Scheme', 'workspace_schemes', 'elongation_scheme', 'sweep_scheme',
-    'workspace_study', 'compare_pcc', 'TrackResult', 'tracking_study',
+    'workspace_study', 'compare_pcc', 'TrackResult', 'tracking_study', 'stiffness_study',
+    'stiffness_along_trajectory',
 ]
 
 Progress = Callable[[int, int, str], None]
@@ -510,3 +517,74 @@ def tracking_study(model: RobotModel, name: str, n_points: int = 100, payload_kg
     merged['center'] = list(merged['center'])
     return TrackResult(cfg.name, name, float(payload_kg), t, pos, zax, P, pred, pred_z, perr, aerr,
                        reach, succ, times, params=merged, controller=controller)
+
+
+# ============================================================== stiffness
+def _stiffness_row(fw) -> dict:
+    """Vertical and lateral tip stiffness [N/m] of a usable equilibrium (else None figures)."""
+    if not fw.success:
+        return dict(usable=False, vertical_n_per_m=None, lateral_x_n_per_m=None,
+                    lateral_y_n_per_m=None, stiffness_n_per_m=None)
+    c = tip_compliance(fw)
+    C = c.translational_m_per_n
+    return dict(usable=True, vertical_n_per_m=float(1.0 / C[2, 2]),
+                lateral_x_n_per_m=float(1.0 / C[0, 0]), lateral_y_n_per_m=float(1.0 / C[1, 1]),
+                stiffness_n_per_m=c.stiffness_n_per_m)
+
+
+def stiffness_study(cfg: RobotConfig, payloads_kg: Sequence[float] = (0.0, 0.05, 0.1),
+                    n_levels: int = 9, n_elements: int | None = None,
+                    progress: Progress | None = None) -> dict[str, Any]:
+    """Tip stiffness against equal actuation pressure, per payload.
+
+    Every actuator at the same pressure, ``n_levels`` levels from ``p_min`` to
+    ``p_max`` (warm-started forward solves).  A row per payload and level:
+    ``payload_kg, pressure_pa, usable`` (a converged, stable equilibrium),
+    ``vertical_n_per_m`` (a vertical force over the vertical motion it
+    causes, the other force components zero: ``1/C_zz``),
+    ``lateral_x_n_per_m``, ``lateral_y_n_per_m`` (``1/C_xx``, ``1/C_yy``) and
+    the stiffness matrix ``K = C^{-1}``; None figures where not usable.
+    """
+    if n_levels < 2:
+        raise ValueError(f'n_levels must be at least 2, got {n_levels}')
+    progress = progress or _noop
+    model = RobotModel(cfg, n_elements)
+    levels = np.linspace(cfg.p_min, cfg.p_max, int(n_levels))
+    rows = []
+    for i, m in enumerate(payloads_kg):
+        progress(i, len(payloads_kg), f'payload {m:g} kg')
+        prev = None
+        for p in levels:
+            fw = solve_forward(model, np.full(model.A, p), float(m), warm_start=prev)
+            if not fw.converged and prev is not None:
+                fw = solve_forward(model, np.full(model.A, p), float(m))
+            prev = fw if fw.converged else None
+            rows.append(dict(payload_kg=float(m), pressure_pa=float(p), **_stiffness_row(fw)))
+    progress(len(payloads_kg), len(payloads_kg), 'done')
+    return dict(config=cfg.name, n_elements=model.n, payloads_kg=[float(m) for m in payloads_kg],
+                rows=rows)
+
+
+def stiffness_along_trajectory(model: RobotModel, name: str, n_points: int = 50,
+                               payload_kg: float = 0.0, params: dict | None = None) -> dict:
+    """Tip stiffness at the feedforward answers along trajectory ``name`` (warm-started).
+
+    Returns ``times_s`` and, per sample, ``vertical_n_per_m``,
+    ``lateral_x_n_per_m``, ``lateral_y_n_per_m`` (NaN where the answer is not
+    usable) and ``usable``.
+    """
+    res = tracking_study(model, name, n_points=n_points, payload_kg=payload_kg, params=params)
+    keys = ('vertical_n_per_m', 'lateral_x_n_per_m', 'lateral_y_n_per_m')
+    out = {k: np.full(n_points, np.nan) for k in keys}
+    usable = np.zeros(n_points, bool)
+    prev = None
+    for k, p in enumerate(res.pressures_pa):
+        fw = solve_forward(model, p, payload_kg, warm_start=prev)
+        prev = fw if fw.converged else None
+        row = _stiffness_row(fw)
+        usable[k] = row['usable']
+        if usable[k]:
+            for key in keys:
+                out[key][k] = row[key]
+    return dict(config=model.cfg.name, trajectory=name, payload_kg=float(payload_kg),
+                times_s=res.times_s, usable=usable, **out)

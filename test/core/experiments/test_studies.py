@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import RobotModel, load_robot, studies
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward, studies, tip_compliance
 
 
 def test_nodes_on_plates(one_cfg):
@@ -146,3 +146,27 @@ def test_compare_pcc_says_when_no_point_is_usable():
     assert s[(0.0, 'elongation')]['usable'] == s[(0.0, 'elongation')]['points'] == 3
     heavy = s[(0.1, 'elongation')]
     assert heavy['points'] == 3 and heavy['usable'] == 0 and heavy['rms_m'] is None
+
+
+def test_stiffness_study_vertical_stiffness_against_pressure_and_payload(one_cfg):
+    res = studies.stiffness_study(one_cfg, payloads_kg=(0.0, 0.05), n_levels=3)
+    rows = res['rows']
+    assert len(rows) == 6 and all(r['usable'] for r in rows)
+    mid = 0.5 * (one_cfg.p_min + one_cfg.p_max)
+    assert [r['pressure_pa'] for r in rows[:3]] == [one_cfg.p_min, mid, one_cfg.p_max]
+    model = RobotModel(one_cfg)
+    for r in rows:
+        fw = solve_forward(model, np.full(3, r['pressure_pa']), r['payload_kg'])
+        C = tip_compliance(fw).translational_m_per_n
+        assert r['vertical_n_per_m'] == pytest.approx(1 / C[2, 2], rel=1e-9)
+        # a symmetric robot under equal pressures: alike in x and y, far stiffer vertically
+        assert r['lateral_x_n_per_m'] == pytest.approx(r['lateral_y_n_per_m'], rel=1e-6)
+        assert r['vertical_n_per_m'] > 10 * r['lateral_x_n_per_m']
+
+
+def test_stiffness_along_a_trajectory(one):
+    res = studies.stiffness_along_trajectory(one, 'planar_circle', n_points=6)
+    assert res['usable'].all() and len(res['times_s']) == 6
+    # the circle is symmetric about the axis: the vertical stiffness varies little along it
+    v = res['vertical_n_per_m']
+    assert np.all(np.isfinite(v)) and (v.max() - v.min()) < 0.05 * v.mean()
