@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import rotation_from_vector
-from ..model import RobotConfig, RobotModel, load_robot
+from ..model import RobotConfig, RobotModel, load_robot, tip_load
 from ..solve import ForwardResult, solve_forward
 
 __all__ = [
@@ -130,8 +130,8 @@ class SimulatedRobot:
         on any solve that needed continuation); it costs as much as the solve.
 
     Threads: :meth:`step` from one thread only; :meth:`measure`,
-    :meth:`command` and :meth:`set_payload` may be called from others (the
-    state, the set-points and the payload are replaced whole, never mutated).
+    :meth:`command`, :meth:`set_payload` and :meth:`set_tip_force` may be called from
+    others (the state, the set-points and the loads are replaced whole, never mutated).
 
     A failed equilibrium solve (not converged, or unstable when checked)
     keeps the last good state and is counted in :attr:`failures` with its
@@ -163,6 +163,7 @@ class SimulatedRobot:
                                              time_constant_s, slew_rate_pa_per_s)
         self.rng = np.random.default_rng(seed)
         self.stability_every = max(1, int(stability_every))
+        self.tip_force_n = (0.0, 0.0, 0.0)  # a push on the end effector [N], set_tip_force
         self.failures = 0
         self.last_failure = ''
         self.solves = 0
@@ -176,7 +177,7 @@ class SimulatedRobot:
     def _solve(self, p: np.ndarray, warm: ForwardResult | None, check: bool) -> ForwardResult:
         self.solves += 1
         return solve_forward(self.model, p, payload_kg=self.payload_kg, warm_start=warm,
-                             check_stability=check)
+                             check_stability=check, tip_force_n=self.tip_force_n)
 
     def command(self, pressures_pa: Any) -> None:
         """Set the regulators' set-points [Pa] (clipped into the hardware limits)."""
@@ -189,13 +190,17 @@ class SimulatedRobot:
             raise ValueError(f'payload_kg must be a finite non-negative mass, got {payload_kg}')
         self.payload_kg = m
 
+    def set_tip_force(self, force_n: Any) -> None:
+        """Push the end effector with ``force_n`` [N, base frame]; the next :meth:`step` solves."""
+        self.tip_force_n = tip_load(0.0, force_n).force_n
+
     def step(self, dt: float) -> ForwardResult:
         """Advance the regulators by ``dt`` and return the equilibrium at their pressures."""
         p = self.regulators.step(dt)
         self.time_s += float(dt)
         st = self.state
         if (np.max(np.abs(p - st.pressures_pa)) < RESOLVE_THRESHOLD_PA
-                and st.payload_kg == self.payload_kg):
+                and st.load == (self.payload_kg, self.tip_force_n)):
             return st
         check = (self.solves % self.stability_every) == 0
         fw = self._solve(p, st, check)
