@@ -63,6 +63,7 @@ setup(
             'simulated_robot_node = bellow_ancf_ros.nodes.simulated_robot_node:main',
             'mocap_relay = bellow_ancf_ros.nodes.mocap_relay:main',
             'regulator_driver = bellow_ancf_ros.nodes.regulator_driver:main',
+            'wrench_estimator_node = bellow_ancf_ros.nodes.wrench_estimator_node:main',
         ],
     },
 )

@@ -48,6 +48,7 @@ from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noq
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
 from bellow_ancf_ros.nodes.mocap_relay import MocapRelay  # noqa: E402
 from bellow_ancf_ros.nodes.regulator_driver import RegulatorDriver  # noqa: E402
+from bellow_ancf_ros.nodes.wrench_estimator_node import WrenchEstimatorNode  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / 'README.md'
@@ -58,7 +59,8 @@ NODES = {'mocap_relay': MocapRelay, 'regulator_driver': RegulatorDriver,
          'forward_kinetostatic_node': ForwardKinetostaticNode,
          'trajectory_publisher': TrajectoryPublisher,
          'excitation_publisher': ExcitationPublisher,
-         'simulated_robot_node': SimulatedRobotNode}
+         'simulated_robot_node': SimulatedRobotNode,
+         'wrench_estimator_node': WrenchEstimatorNode}
 #: studies that take 25-45 s on the 2-core machine; only their options are checked here
 SLOW = ('workspace', 'compare-pcc')
 #: commands that read the user's own recording; test/test_cli_calibrate.py runs them on

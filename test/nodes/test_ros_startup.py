@@ -188,6 +188,7 @@ BAD_STARTUP = [
     ('forward_kinetostatic_node', 'backbone_points:=1', 'backbone_points', '1', 'from 2 to 200'),
     ('trajectory_publisher', 'trajectory:=figure_eight', 'trajectory', "'figure_eight'",
      'planar_circle'),
+    ('wrench_estimator_node', 'mode:=torque', 'mode', "'torque'", "one of: 'force', 'mass'"),
 ]
 
 

@@ -1,0 +1,217 @@
+"""The robot as a force sensor: ``measured_pose`` + pressures -> ``estimated_wrench``.
+
+Feeds :class:`~bellow_ancf_ros.core.control.TipForceEstimator` (an extended
+Kalman filter of the tip force, or of an unknown payload, on the robot's own
+compliance) and publishes its reading:
+
+* subscribes ``measured_pose`` (geometry_msgs/PoseStamped in ``base_frame``,
+  the robot file's mocap frame, or any frame tf2 knows), ``measured_pressure``
+  (the regulators' measured pressures, std_msgs/Float64MultiArray in
+  ``pressure_unit``) and ``pressure_command`` (used while no measured
+  pressures younger than ``pressure_timeout_s`` arrived);
+* publishes ``estimated_wrench`` (geometry_msgs/WrenchStamped in
+  ``base_frame``: the force in N, torque zero: the model has no tip torque)
+  at ``rate_hz``, once the first sample is in;
+* ``~/tare`` (std_srvs/Trigger): zero the reading at the current estimate;
+* ``/diagnostics`` heartbeat: the force and its standard deviations, the
+  directions the data cannot see yet (WARN), samples and refusals.
+
+Use the calibrated robot file: the estimator reads any model error as a force.
+
+    ros2 run bellow_ancf_ros wrench_estimator_node --ros-args -p robot_config:=my_robot.yaml
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rcl_interfaces.msg import ParameterType
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from ..core import ConfigError, RobotModel, load_robot
+from ..core.control import ESTIMATOR_MODES, TipForceEstimator
+from ..core.geometry import z_axis_from_quaternion
+from . import contract
+from .diagnostics import Heartbeat, Refusals, publish_diagnostic
+from .frames import PoseFrames
+from .measured_feedback import measured_pose_qos
+from .ros_util import (StartupParameterError, command_qos, declare, descriptor, diagnostics_qos,
+                       main_for)
+
+__all__ = ['WrenchEstimatorNode', 'main']
+
+NODE_NAME = 'wrench_estimator_node'
+
+
+class WrenchEstimatorNode(Node):
+    """Tip force from poses and pressures (module docstring)."""
+
+    NODE_NAME = NODE_NAME
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+        """Declare the parameters (read at start-up), build the estimator, wire the topics."""
+        super().__init__(node_name, **kwargs)
+        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                   ParameterType.PARAMETER_BOOL)
+        ro = dict(read_only=True)
+        robot = declare(self, 'robot_config', 'one_segment', descriptor(
+            'The calibrated robot file (shipped name or YAML path): its model error reads as '
+            'a force.', S, constraints='a shipped robot name or a robot YAML path', **ro))
+        mode = declare(self, 'mode', 'force', descriptor(
+            "'force': the tip force (3 components); 'mass': an unknown payload along gravity.",
+            S, constraints="one of: 'force', 'mass'", **ro))
+        payload = declare(self, 'payload_kg', 0.0, descriptor(
+            "The known payload [kg] (mode 'force'), or the first guess (mode 'mass').", D,
+            lo=0.0, hi=contract.PAYLOAD_MAX_KG, **ro))
+        sigma_p = declare(self, 'position_noise_m', 0.15e-3, descriptor(
+            'Motion-capture position noise, standard deviation per axis [m].', D,
+            lo=1e-7, hi=0.1, **ro))
+        sigma_a = declare(self, 'angle_noise_rad', 0.0017453292519943296, descriptor(
+            'Motion-capture orientation noise, standard deviation per axis [rad].', D,
+            lo=1e-7, hi=1.0, **ro))
+        rate = declare(self, 'force_rate', 0.01, descriptor(
+            'How fast the force may change: random-walk spectral density [N^2/s] '
+            '(0.01: about 0.1 N in a second).', D, lo=0.0, hi=100.0, **ro))
+        declare(self, 'use_z_axis', True, descriptor(
+            'Use the measured z-axis as well as the position.', B, **ro))
+        declare(self, 'rate_hz', 20.0, descriptor(
+            'estimated_wrench publication rate [Hz].', D, lo=0.1, hi=1000.0, **ro))
+        declare(self, 'pressure_timeout_s', 0.5, descriptor(
+            'Measured pressures older than this give way to pressure_command [s].', D,
+            lo=0.01, hi=60.0, **ro))
+        declare(self, 'pressure_unit', 'Pa', descriptor(
+            'Unit of measured_pressure and pressure_command: Pa or kPa (gauge).', S,
+            constraints="one of: 'Pa', 'kPa'", **ro))
+        declare(self, 'base_frame', 'base', descriptor(
+            'Frame of estimated_wrench (the robot base).', S, **ro))
+        if mode not in ESTIMATOR_MODES:
+            raise StartupParameterError('mode', mode, "one of: 'force', 'mass'")
+        try:
+            contract.check_unit(self.get_parameter('pressure_unit').value)
+        except ValueError:
+            raise StartupParameterError('pressure_unit', self.get_parameter('pressure_unit').value,
+                                        "one of: 'Pa', 'kPa'") from None
+        try:
+            self.cfg = load_robot(robot)
+        except ConfigError as exc:
+            raise StartupParameterError('robot_config', robot,
+                                        'a shipped robot name or a robot YAML path',
+                                        str(exc)) from None
+        self.estimator = TipForceEstimator(RobotModel(self.cfg), mode=mode, payload_kg=payload,
+                                           position_noise_m=sigma_p, angle_noise_rad=sigma_a,
+                                           force_rate=rate)
+        self.unit = self.get_parameter('pressure_unit').value
+        self.use_z = bool(self.get_parameter('use_z_axis').value)
+        self.timeout = float(self.get_parameter('pressure_timeout_s').value)
+        self.frames = PoseFrames(self, self.get_parameter('base_frame').value,
+                                 self.cfg.mocap_frame)
+        self._pressures = {'measured': (None, -np.inf), 'command': (None, -np.inf)}
+        self.stats = {'poses': 0, 'refused': 0, 'published': 0}
+        self._pub = self.create_publisher(WrenchStamped, 'estimated_wrench', command_qos())
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self._refusals = Refusals(self, 'samples', self._publish_diag)
+        self.heartbeat = Heartbeat(self, self._pub_diag, self._status, lambda: self.cfg.name)
+        self.create_subscription(PoseStamped, 'measured_pose', self._on_pose, measured_pose_qos())
+        for topic, key in (('measured_pressure', 'measured'), ('pressure_command', 'command')):
+            self.create_subscription(Float64MultiArray, topic,
+                                     lambda m, key=key: self._on_pressures(m, key), command_qos())
+        self.create_service(Trigger, '~/tare', self._on_tare)
+        self.create_timer(1.0 / float(self.get_parameter('rate_hz').value), self._publish)
+        self.get_logger().info(
+            f"estimating the tip {'force' if mode == 'force' else 'payload'} of robot "
+            f"{self.cfg.name!r} from measured_pose and measured_pressure (else pressure_command) "
+            f"in {self.unit}; publishing estimated_wrench in {self.frames.base_frame!r}")
+
+    # -------------------------------------------------------------- inputs
+    def _on_pressures(self, msg: Float64MultiArray, key: str) -> None:
+        label = msg.layout.dim[0].label if msg.layout.dim else None
+        try:
+            p = contract.validate_pressure_input(msg.data, self.unit, self.estimator.model.A,
+                                                 self.cfg.p_min, self.cfg.p_max, label)
+        except contract.InputError as exc:
+            self._refuse(f'{key} pressures: {exc}')
+            return
+        self._pressures[key] = (p, time.monotonic())
+
+    def _current_pressures(self):
+        now = time.monotonic()
+        p, t = self._pressures['measured']
+        if p is not None and now - t <= self.timeout:
+            return p
+        return self._pressures['command'][0]
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        self.stats['poses'] += 1
+        p = self._current_pressures()
+        if p is None:
+            self._refuse('no pressures yet (measured_pressure or pressure_command)')
+            return
+        pos, o = msg.pose.position, msg.pose.orientation
+        try:
+            xyz = np.array([pos.x, pos.y, pos.z], dtype=float)
+            if not np.all(np.isfinite(xyz)):
+                raise contract.InputError(f'measured position is not finite: {xyz.tolist()}')
+            xyz, quat = self.frames.to_base(msg.header.frame_id, xyz, (o.x, o.y, o.z, o.w),
+                                            msg.header.stamp)
+        except ValueError as exc:
+            self._refuse(str(exc))
+            return
+        z = z_axis_from_quaternion(quat) if self.use_z else None
+        if not self.estimator.update(p, xyz, z, time_s=time.monotonic()):
+            self._refuse(self.estimator.last_reason)
+
+    def _refuse(self, reason: str) -> None:
+        self.stats['refused'] += 1
+        self._refusals.report(reason, self.stats['refused'])
+
+    def _on_tare(self, request, response):
+        self.estimator.tare()
+        response.success = True
+        response.message = 'estimated_wrench zeroed at the current estimate'
+        self.get_logger().info('tare: ' + response.message)
+        return response
+
+    # -------------------------------------------------------------- output
+    def _publish(self) -> None:
+        if self.estimator.samples == 0:
+            return
+        e = self.estimator.estimate()
+        msg = WrenchStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.frames.base_frame
+        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in e.force_n)
+        self._pub.publish(msg)
+        self.stats['published'] += 1
+
+    def _status(self) -> tuple:
+        e = self.estimator.estimate()
+        values = dict(self.stats, samples=e.samples, mode=self.estimator.mode,
+                      force_n=np.round(e.force_n, 5).tolist(),
+                      std_n=np.round(e.std_n, 5).tolist(),
+                      blind_directions=[np.round(v, 3).tolist() for v in e.blind])
+        if e.payload_kg is not None:
+            values.update(payload_kg=round(e.payload_kg, 5),
+                          payload_std_kg=round(e.payload_std_kg, 5))
+        if e.samples == 0:
+            return DiagnosticStatus.WARN, 'no sample yet', values
+        if e.blind:
+            return (DiagnosticStatus.WARN, f'{len(e.blind)} direction(s) not seen yet '
+                    f'(std above {self.estimator.blind_std_n:g} N)', values)
+        return DiagnosticStatus.OK, 'estimating', values
+
+    def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
+        publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: samples', self.cfg.name,
+                           level, message, dict(values, **self.stats))
+
+
+main = main_for(WrenchEstimatorNode)
+
+
+if __name__ == '__main__':
+    main()
