@@ -25,12 +25,13 @@ from typing import Any
 import numpy as np
 
 from ..core.geometry import z_axis_from_quaternion
+from ..core.model import MAX_TIP_FORCE_N
 
 __all__ = [
     'PAYLOAD_MAX_KG', 'PRESSURE_UNITS', 'InputError', 'UnsafePressureError', 'check_unit',
     'configure_failed_hint', 'configure_time_refusal', 'from_unit', 'parameter_problem',
     'pressure_label', 'safe_pressures', 'to_unit', 'unit_from_label', 'validate_payload',
-    'validate_pressure_input', 'validate_target', 'vent_pressures',
+    'validate_force', 'validate_pressure_input', 'validate_target', 'vent_pressures',
 ]
 
 #: Pressure units accepted by the ``pressure_unit`` parameters: factor to Pa.
@@ -202,6 +203,25 @@ def validate_target(position: Sequence[float], quaternion: Sequence[float] | Non
     except ValueError as exc:  # not 4 finite components, or ~zero
         raise InputError(str(exc)) from None
     return p, z
+
+
+def validate_force(force: Sequence[float], frame_id: str, base_frame: str) -> np.ndarray:
+    """Check a force at the end effector (a WrenchStamped's force) and return it [N].
+
+    Raises :class:`InputError` for a frame other than the base frame (an
+    empty one too), non-finite components, or a magnitude above
+    ``MAX_TIP_FORCE_N`` (a unit mistake).
+    """
+    if frame_id != base_frame:
+        raise InputError(f"force frame {frame_id!r} is not the base frame {base_frame!r} "
+                         '(no tf2 transform is done)')
+    f = np.array(force, dtype=float).ravel()
+    if f.size != 3 or not np.all(np.isfinite(f)):
+        raise InputError(f'force must be 3 finite numbers, got {f.tolist()}')
+    size = float(np.linalg.norm(f))
+    if size > MAX_TIP_FORCE_N:
+        raise InputError(f'force of {size:.3g} N is above {MAX_TIP_FORCE_N:g} N (a unit mistake?)')
+    return f
 
 
 # ------------------------------------------------------- recovery texts

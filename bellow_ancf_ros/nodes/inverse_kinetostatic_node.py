@@ -127,6 +127,7 @@ from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_
                     precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
 from . import contract, worker
+from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETERS, FeedbackLink
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
@@ -192,6 +193,12 @@ class InverseKinetostaticNode(LifecycleNode):
         declare(self, 'allow_other_publishers', False, descriptor(
             'Publish pressure_command even while another node publishes it (default false: '
             'refuse, ERROR diagnostics, until this node is the only publisher).', B))
+        declare(self, 'use_estimated_force', False, descriptor(
+            'Compensate the force of estimated_wrench (wrench_estimator_node) in the '
+            'feedforward, as external_force is; read at start-up.', B, read_only=True))
+        declare(self, 'external_force_timeout_s', 1.0, descriptor(
+            'A force (external_force, estimated_wrench) older than this is no longer '
+            'compensated [s].', D, lo=0.01, hi=3600.0, read_only=True))
         declare(self, 'autostart', True, descriptor(
             'Configure and activate at start-up (so that a plain ros2 run works).', B,
             read_only=True))
@@ -213,6 +220,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._worker: worker.LatestWorker | None = None
         self._pub_cmd = self._pub_pose = None
         self._sub = None
+        self._force: ExternalForce | None = None   # external_force input (configured)
         self._said_orientation_ignored = False
         self._refusals = Refusals(self, 'targets', self._publish_diag)
         self.last_command_pa: np.ndarray | None = None
@@ -235,6 +243,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self._cfg.name if self._cfg is not None else '')
         self.heartbeat.add_source(self._feedback_heartbeat)
+        self.heartbeat.add_source(lambda: {} if self._force is None else self._force.status())
 
         if self.get_parameter('autostart').value:
             if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
@@ -292,9 +301,13 @@ class InverseKinetostaticNode(LifecycleNode):
                     f'{self._time_budget() * 1e3:g} ms, from the next solve')
             elif p.name == 'payload_kg':
                 self.get_logger().info(f'payload_kg {p.value:g}: the held target is re-solved')
-                item = self._held_item
-                if item is not None and self._worker is not None and self.is_active:
-                    self._worker.submit(item)
+                self._resolve_held()
+
+    def _resolve_held(self) -> None:
+        """Solve the held target again (a new payload or force at the end effector)."""
+        item = self._held_item
+        if item is not None and self._worker is not None and self.is_active:
+            self._worker.submit(item)
 
     def _payload_check(self, payload: float) -> str:
         """Why the configured robot cannot carry ``payload`` where it is, or ''."""
@@ -345,6 +358,10 @@ class InverseKinetostaticNode(LifecycleNode):
         self._owner = TopicOwner(self, 'pressure_command')
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
+        self._force = ExternalForce(
+            self, self.get_parameter('base_frame').value,
+            self.get_parameter('external_force_timeout_s').value,
+            self.get_parameter('use_estimated_force').value, self._refuse, self._resolve_held)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            name='inverse-solver')
         rate = float(self.get_parameter('command_rate_hz').value)
@@ -423,6 +440,9 @@ class InverseKinetostaticNode(LifecycleNode):
         if self._worker is not None:
             self._worker.stop()
             self._worker = None
+        if self._force is not None:
+            self._force.destroy()
+            self._force = None
         for attr, destroy in (('_sub', self.destroy_subscription),
                               ('_pub_cmd', self.destroy_publisher),
                               ('_pub_pose', self.destroy_publisher)):
@@ -580,12 +600,13 @@ class InverseKinetostaticNode(LifecycleNode):
         if resume is not None and resume[0] is item:
             warm = resume[1]   # the next slice of a solve with no usable answer yet
         payload = float(self.get_parameter('payload_kg').value)
+        force = None if self._force is None else self._force.current()
         t0 = time.perf_counter()
         try:
             pos, z = self._feedback.correct(pos, z)   # closed loop: the shifted target
             with self._solve_lock:
                 inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
-                                    time_budget_s=self._time_budget())
+                                    time_budget_s=self._time_budget(), tip_force_n=force)
         except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
             dt = time.perf_counter() - t0
             self.solve_stats.record(dt, ok=False)

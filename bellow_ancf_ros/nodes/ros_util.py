@@ -383,6 +383,12 @@ def run_node(node, before_destroy=None) -> None:
             executor.remove_node(node)
             node.destroy_node()
             rclpy.try_shutdown()
+            # the vent is out and the process exits: a late signal must not kill it now.
+            # Python resets its own handlers (_ShuttingDown) to the default at exit, and a
+            # SIGINT arriving then ended the process with -2 after a clean vent (seen in
+            # test_double_sigint_still_vents); an ignored signal stays ignored.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def init_rclpy(args=None) -> None:

@@ -1,4 +1,4 @@
-"""wrench_estimator_node (issue 20, item 3): poses and pressures in, the tip force out.
+"""wrench_estimator_node and the inverse node's force input (issue 20, item 3).
 
 The poses come from the core's simulated robot under a known tip force
 (its own robot file is the node's model), published by this test at 100 Hz
@@ -20,7 +20,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from bellow_ancf_ros.core import geometry  # noqa: E402
+from bellow_ancf_ros.core import geometry, solve_forward, solve_inverse  # noqa: E402
 from bellow_ancf_ros.core.control import SimulatedRobot  # noqa: E402
 from bellow_ancf_ros.nodes.measured_feedback import measured_pose_qos  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
@@ -82,3 +82,36 @@ def test_estimated_wrench_tare_and_bad_samples(h):
     samples = node.estimator.samples
     _stream(h, sim, pub_pose, pub_p, 20)
     wait_for(lambda: node.estimator.samples > samples, what='samples after the bad ones')
+
+
+def _wrench(force, frame='base'):
+    m = WrenchStamped()
+    m.header.frame_id = frame
+    m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(v) for v in force)
+    return m
+
+
+def test_inverse_node_compensates_an_external_force(h, one):
+    """external_force goes into the feedforward; a stale one no longer does; bad ones refused."""
+    node, pub, _ = _rn.setup_inverse(h, external_force_timeout_s=0.5)
+    target = solve_forward(one, [50e3, 20e3, 30e3]).position
+    p0 = np.array(_rn.send_and_wait_command(h, pub, target_msg(target)).data)
+    np.testing.assert_allclose(p0, solve_inverse(one, target).pressures_pa, atol=1.0)
+    force_pub = h.publisher(WrenchStamped, 'external_force')
+    F = [0.1, -0.05, 0.0]
+    n0 = h.count('pressure_command')
+    force_pub.publish(_wrench(F))    # re-solves the held target under the force
+    wait_for(lambda: h.count('pressure_command') > n0, what='the held target re-solved')
+    wait_for(lambda: np.allclose(h.last('pressure_command').data,
+                                 solve_inverse(one, target, tip_force_n=F).pressures_pa,
+                                 atol=1.0), what='the answer under the force')
+    assert np.max(np.abs(np.array(h.last('pressure_command').data) - p0)) > 1e3
+    refused = node.stats['refused']
+    force_pub.publish(_wrench(F, frame='world'))
+    force_pub.publish(_wrench([math.nan, 0.0, 0.0]))
+    wait_for(lambda: node.stats['refused'] == refused + 2, what='two refused forces')
+    assert 'force' in node.last_refusal_reason
+    time.sleep(0.6)   # the force is stale now: the next target is solved without it
+    p = np.array(_rn.send_and_wait_command(h, pub, target_msg(target + [1e-3, 0, 0])).data)
+    np.testing.assert_allclose(p, solve_inverse(one, target + [1e-3, 0, 0]).pressures_pa,
+                               atol=1.0)
