@@ -169,6 +169,16 @@ def add_config(p):
                    help=config_help() + '; default: %(default)s')
 
 
+def add_loads(p):
+    """Add ``--payload-kg M`` and ``--tip-force-n FX FY FZ`` (a single solve's loads)."""
+    p.add_argument('--payload-kg', type=payload_mass, default=0.0, metavar='M',
+                   help='payload at the end effector [kg]; default: %(default)s')
+    p.add_argument('--tip-force-n', type=finite_float, nargs=3, default=None,
+                   metavar=('FX', 'FY', 'FZ'),
+                   help='force at the end effector [N, base frame], a dead load on top of the '
+                        "payload's weight; default: none")
+
+
 def add_out(p, json_help='print one JSON object (SI units) instead of the table'):
     """Add ``--plot`` and ``--json``."""
     p.add_argument('--plot', metavar='PNG', help='write a PNG plot to this file')

@@ -22,9 +22,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..core import limit_blas_threads, solve_forward, studies, tip_compliance
-from .common import (EXIT_FAILED, EXIT_OK, add_config, add_out, add_quiet, call_solver,
-                     element_count, emit_json, finite_float, int_at_least, load_config,
-                     load_model, make_model, payload_mass, print_lines, progress, run_study)
+from .common import (EXIT_FAILED, EXIT_OK, add_config, add_loads, add_out, add_quiet,
+                     call_solver, element_count, emit_json, finite_float, int_at_least,
+                     load_config, load_model, make_model, payload_mass, print_lines, progress,
+                     run_study)
 from .output import figure, save_figure, table
 from .solve import check_pressures_kpa
 
@@ -159,10 +160,7 @@ def register(subparsers) -> None:
     add_config(p)
     p.add_argument('--pressures-kpa', type=finite_float, nargs='+', required=True, metavar='P',
                    help='one gauge pressure per actuator [kPa]')
-    p.add_argument('--payload-kg', type=payload_mass, default=0.0, metavar='M',
-                   help='payload at the end effector [kg]; default: %(default)s')
-    p.add_argument('--tip-force-n', type=finite_float, nargs=3, default=None,
-                   metavar=('FX', 'FY', 'FZ'), help='force at the end effector [N, base frame]')
+    add_loads(p)
     p.add_argument('--elements', type=element_count, default=None, metavar='N',
                    help="ANCF elements per actuator; default: the robot file's value")
     p.add_argument('--json', action='store_true', help='print one JSON object (SI units)')

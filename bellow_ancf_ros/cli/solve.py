@@ -26,8 +26,8 @@ import numpy as np
 
 from ..core import RobotModel, solve_forward, solve_inverse
 from .batch import CsvRows, require_json, row_numbers, run_batch
-from .common import (EXIT_FAILED, EXIT_OK, UsageError, call_solver, config_help, element_count,
-                     emit_json, finite_float, is_number, load_model, payload_mass, print_lines,
+from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_loads, call_solver, config_help,
+                     element_count, emit_json, finite_float, is_number, load_model, print_lines,
                      warn)
 
 INVERSE_POSITION_COLUMNS = ('x', 'y', 'z')
@@ -252,12 +252,7 @@ def _inverse_batch(args, model: RobotModel) -> int:
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument('--config', default='one_segment', metavar='C',
                    help=config_help() + '; default: %(default)s')
-    p.add_argument('--payload-kg', type=payload_mass, default=0.0, metavar='M',
-                   help='payload at the end effector [kg]; default: %(default)s')
-    p.add_argument('--tip-force-n', type=finite_float, nargs=3, default=None,
-                   metavar=('FX', 'FY', 'FZ'),
-                   help='force at the end effector [N, base frame], a dead load on top of the '
-                        "payload's weight; default: none")
+    add_loads(p)
     p.add_argument('--elements', type=element_count, default=None, metavar='N',
                    help="ANCF elements per actuator; default: the robot file's value")
     p.add_argument('--json', action='store_true',

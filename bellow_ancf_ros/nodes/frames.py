@@ -51,6 +51,20 @@ class PoseFrames:
             names.append('any frame tf2 can transform into it')
         return ', '.join(names)
 
+    def pose_in_base(self, msg, orientation: bool = True):
+        """A PoseStamped's ``(position, quaternion or None)`` in the base frame.
+
+        InputError for a non-finite position or a frame it cannot transform;
+        a quaternion that cannot be normalised raises ValueError later, where
+        it is used.  ``orientation`` False: the position only.
+        """
+        p, o = msg.pose.position, msg.pose.orientation
+        pos = np.array([p.x, p.y, p.z], dtype=float)
+        if not np.all(np.isfinite(pos)):
+            raise contract.InputError(f'measured position is not finite: {pos.tolist()}')
+        quat = (o.x, o.y, o.z, o.w) if orientation else None
+        return self.to_base(msg.header.frame_id, pos, quat, msg.header.stamp)
+
     def to_base(self, frame_id: str, position, quaternion=None, stamp=None):
         """``(position, quaternion or None)`` in the base frame; InputError when not possible."""
         p = np.asarray(position, dtype=float).reshape(3)

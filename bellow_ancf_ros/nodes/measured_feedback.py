@@ -32,7 +32,6 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from ..core import geometry
-from . import contract
 from .diagnostics import Refusals
 from .frames import PoseFrames
 from .ros_util import QOS_DEPTH, descriptor
@@ -172,13 +171,8 @@ class FeedbackLink:
         if frames is None:   # released meanwhile
             return
         self.received += 1
-        p, o = msg.pose.position, msg.pose.orientation
         try:
-            pos = np.array([p.x, p.y, p.z], dtype=float)
-            if not np.all(np.isfinite(pos)):
-                raise contract.InputError(f'measured position is not finite: {pos.tolist()}')
-            quat = (o.x, o.y, o.z, o.w) if self._use_orientation else None
-            pos, quat = frames.to_base(msg.header.frame_id, pos, quat, msg.header.stamp)
+            pos, quat = frames.pose_in_base(msg, self._use_orientation)
             z = None if quat is None else geometry.z_axis_from_quaternion(quat)
         except ValueError as exc:  # contract.InputError, or a bad quaternion (core.geometry)
             self.refused += 1

@@ -18,14 +18,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
 
 from ..core import load_robot
-from . import contract
 from .diagnostics import Refusals, publish_diagnostic
 from .frames import PoseFrames
 from .measured_feedback import measured_pose_qos
@@ -60,13 +58,8 @@ class MocapRelay(Node):
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.stats['received'] += 1
-        p, o = msg.pose.position, msg.pose.orientation
         try:
-            pos = np.array([p.x, p.y, p.z], dtype=float)
-            if not np.all(np.isfinite(pos)):
-                raise contract.InputError(f'mocap position is not finite: {pos.tolist()}')
-            pos, quat = self.frames.to_base(msg.header.frame_id, pos, (o.x, o.y, o.z, o.w),
-                                            msg.header.stamp)
+            pos, quat = self.frames.pose_in_base(msg)
         except ValueError as exc:   # InputError, or a quaternion that cannot be normalised
             self.stats['refused'] += 1
             self._refusals.report(str(exc), self.stats['refused'])

@@ -152,17 +152,12 @@ class WrenchEstimatorNode(Node):
         if p is None:
             self._refuse('no pressures yet (measured_pressure or pressure_command)')
             return
-        pos, o = msg.pose.position, msg.pose.orientation
         try:
-            xyz = np.array([pos.x, pos.y, pos.z], dtype=float)
-            if not np.all(np.isfinite(xyz)):
-                raise contract.InputError(f'measured position is not finite: {xyz.tolist()}')
-            xyz, quat = self.frames.to_base(msg.header.frame_id, xyz, (o.x, o.y, o.z, o.w),
-                                            msg.header.stamp)
-        except ValueError as exc:
+            xyz, quat = self.frames.pose_in_base(msg, self.use_z)
+            z = z_axis_from_quaternion(quat) if self.use_z else None
+        except ValueError as exc:   # contract.InputError, or a bad quaternion
             self._refuse(str(exc))
             return
-        z = z_axis_from_quaternion(quat) if self.use_z else None
         if not self.estimator.update(p, xyz, z, time_s=time.monotonic()):
             self._refuse(self.estimator.last_reason)
 
