@@ -82,6 +82,10 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('payload_kg', 0.0, descriptor(
             'Payload the simulated robot carries [kg] (settable at run time).', D,
             lo=0.0, hi=contract.PAYLOAD_MAX_KG))
+        self.declare_parameter('tip_force_n', [0.0, 0.0, 0.0], descriptor(
+            'A force pushing the end effector [N, base frame, 3 numbers] (settable at run '
+            'time: a push, a tool pressing on a surface; the controller is not told).',
+            ParameterType.PARAMETER_DOUBLE_ARRAY))
         self.declare_parameter('base_frame', 'base', descriptor(
             'frame_id of measured_pose (unless mocap_frame_id is set).', S, **ro))
         self.declare_parameter('mocap_frame_id', '', descriptor(
@@ -132,6 +136,12 @@ class SimulatedRobotNode(Node):
             position_noise_m=1e-3 * float(g('position_noise_mm').value),
             angle_noise_rad=math.radians(float(g('angle_noise_deg').value)),
             seed=None if seed < 0 else seed)
+        try:
+            self.robot.set_tip_force(list(g('tip_force_n').value))
+        except ValueError as exc:
+            raise StartupParameterError('tip_force_n', list(g('tip_force_n').value),
+                                        'three finite numbers [N], at most 1000 N',
+                                        str(exc)) from None
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
         self._mocap_frame = None   # MocapFrame: the base's pose in the mocap frame
         if g('mocap_frame_id').value:
@@ -179,6 +189,12 @@ class SimulatedRobotNode(Node):
                     self.get_logger().warning(f'refused parameter change: {reason}')
                     return SetParametersResult(successful=False, reason=reason)
                 self.robot.set_payload(float(p.value))
+            elif p.name == 'tip_force_n':
+                try:
+                    self.robot.set_tip_force(list(p.value))
+                except ValueError as exc:
+                    self.get_logger().warning(f'refused parameter change: {exc}')
+                    return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ input
@@ -245,6 +261,7 @@ class SimulatedRobotNode(Node):
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK
         p, solves, payload = self.robot.pressures_pa, self.robot.solves, self.robot.payload_kg
         values = dict(self.stats, solves=solves, payload_kg=payload,
+                      tip_force_n=' '.join(f'{v:g}' for v in self.robot.tip_force_n),
                       pressures=' '.join(f'{v:.6g}' for v in contract.to_unit(p, self._unit)))
         self._publish_diag(level, 'simulating', values)
 

@@ -4,6 +4,7 @@ Same idioms as test_ros_nodes.py (its Harness: isolated random domain,
 namespaced nodes, one executor thread, polling with deadlines).
 """
 
+import math
 import time
 
 import numpy as np
@@ -83,6 +84,19 @@ def test_simulated_robot_node_regulates_measures_and_refuses_bad_input(h, one):
         return n > 40 and np.linalg.norm(
             positions(h, 'measured_pose', 30).mean(axis=0) - loaded) < 0.15e-3
     wait_for(sank, what='measured pose at the loaded equilibrium')
+
+    # a push at run time: the robot yields towards it, as its own model says
+    from rclpy.parameter import Parameter
+    push = [0.1, 0.0, 0.0]
+    for bad in ([math.nan, 0.0, 0.0], [0.0, 0.0], [5000.0, 0.0, 0.0]):
+        assert not node.set_parameters([Parameter('tip_force_n', value=bad)])[0].successful
+    assert node.set_parameters([Parameter('tip_force_n', value=push)])[0].successful
+    pushed = solve_forward(node.robot.model, p, payload_kg=0.05, tip_force_n=push).position
+    assert pushed[0] > loaded[0] + 0.3e-3
+
+    def yielded():
+        return np.linalg.norm(positions(h, 'measured_pose', 30).mean(axis=0) - pushed) < 0.15e-3
+    wait_for(yielded, what='measured pose at the pushed equilibrium')
 
 
 def sim_set(node, payload):
