@@ -12,6 +12,9 @@ compliance) and publishes its reading:
 * publishes ``estimated_wrench`` (geometry_msgs/WrenchStamped in
   ``base_frame``: the force in N, torque zero: the model has no tip torque)
   at ``rate_hz``, once the first sample is in;
+* ``estimated_wrench_marker`` (visualization_msgs/Marker): the force as an
+  arrow from the newest measured tip position (``marker_scale_m_per_n``,
+  default 0.1 m per newton), for RViz;
 * ``~/tare`` (std_srvs/Trigger): zero the reading at the current estimate;
 * ``/diagnostics`` heartbeat: the force and its standard deviations, the
   directions the data cannot see yet (WARN), samples and refusals.
@@ -31,8 +34,10 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
+from geometry_msgs.msg import Point
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker
 
 from ..core import ConfigError, RobotModel, load_robot
 from ..core.control import ESTIMATOR_MODES, TipForceEstimator
@@ -82,6 +87,9 @@ class WrenchEstimatorNode(Node):
             'Use the measured z-axis as well as the position.', B, **ro))
         declare(self, 'rate_hz', 20.0, descriptor(
             'estimated_wrench publication rate [Hz].', D, lo=0.1, hi=1000.0, **ro))
+        declare(self, 'marker_scale_m_per_n', 0.1, descriptor(
+            'Length of the estimated_wrench_marker arrow per newton [m/N].', D,
+            lo=1e-4, hi=100.0, **ro))
         declare(self, 'pressure_timeout_s', 0.5, descriptor(
             'Measured pressures older than this give way to pressure_command [s].', D,
             lo=0.01, hi=60.0, **ro))
@@ -114,6 +122,9 @@ class WrenchEstimatorNode(Node):
         self._pressures = {'measured': (None, -np.inf), 'command': (None, -np.inf)}
         self.stats = {'poses': 0, 'refused': 0, 'published': 0}
         self._pub = self.create_publisher(WrenchStamped, 'estimated_wrench', command_qos())
+        self._pub_marker = self.create_publisher(Marker, 'estimated_wrench_marker', command_qos())
+        self._marker_scale = float(self.get_parameter('marker_scale_m_per_n').value)
+        self._tip = None   # newest measured tip position in the base frame (the arrow's tail)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._refusals = Refusals(self, 'samples', self._publish_diag)
         self.heartbeat = Heartbeat(self, self._pub_diag, self._status, lambda: self.cfg.name)
@@ -158,6 +169,7 @@ class WrenchEstimatorNode(Node):
         except ValueError as exc:   # contract.InputError, or a bad quaternion
             self._refuse(str(exc))
             return
+        self._tip = xyz
         if not self.estimator.update(p, xyz, z, time_s=time.monotonic()):
             self._refuse(self.estimator.last_reason)
 
@@ -183,6 +195,20 @@ class WrenchEstimatorNode(Node):
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in e.force_n)
         self._pub.publish(msg)
         self.stats['published'] += 1
+        if self._tip is not None:
+            self._pub_marker.publish(self._arrow(msg.header, self._tip, e.force_n))
+
+    def _arrow(self, header, tip, force) -> Marker:
+        """The force as an arrow from the measured tip (RViz)."""
+        m = Marker()
+        m.header = header
+        m.ns, m.id, m.type, m.action = 'estimated_force', 0, Marker.ARROW, Marker.ADD
+        head = np.asarray(tip) + self._marker_scale * np.asarray(force)
+        m.points = [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in (tip, head)]
+        m.scale.x, m.scale.y, m.scale.z = 0.002, 0.004, 0.004   # shaft, head diameter, length
+        m.color.r, m.color.g, m.color.b, m.color.a = 1.0, 0.4, 0.0, 1.0
+        m.pose.orientation.w = 1.0
+        return m
 
     def _status(self) -> tuple:
         e = self.estimator.estimate()

@@ -19,6 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import Marker  # noqa: E402
 
 from bellow_ancf_ros.core import geometry, solve_forward, solve_inverse  # noqa: E402
 from bellow_ancf_ros.core.control import SimulatedRobot  # noqa: E402
@@ -43,6 +44,7 @@ def _stream(h, sim, pub_pose, pub_p, n, rate=100.0):
 
 def test_estimated_wrench_tare_and_bad_samples(h):
     h.record(WrenchStamped, 'estimated_wrench')
+    h.record(Marker, 'estimated_wrench_marker')
     h.record(DiagnosticArray, '/diagnostics', command_qos())
     node = h.add(WrenchEstimatorNode, robot_config='one_segment_mismatched', rate_hz=50.0,
                  force_rate=0.0)
@@ -64,6 +66,12 @@ def test_estimated_wrench_tare_and_bad_samples(h):
     assert w.header.frame_id == 'base'
     assert w.wrench.torque.x == w.wrench.torque.y == w.wrench.torque.z == 0.0
     assert math.isclose(w.wrench.force.x, e.force_n[0], abs_tol=0.02)
+    # the RViz arrow: from the measured tip, 0.1 m per newton along the force
+    wait_for(lambda: h.count('estimated_wrench_marker') > 0, what='the force arrow')
+    arrow = h.last('estimated_wrench_marker')
+    tail, head = (np.array([p.x, p.y, p.z]) for p in arrow.points)
+    assert arrow.type == Marker.ARROW and np.linalg.norm(tail - sim.true_pose()[0]) < 1e-3
+    np.testing.assert_allclose((head - tail) / 0.1, e.force_n, atol=0.02)
     # tare: the reading goes to zero at the current estimate
     res = h.call(h.service(Trigger, f'{h.ns}/wrench_estimator_node/tare'), Trigger.Request())
     assert res.success
