@@ -21,9 +21,11 @@ $(STAMP): requirements.txt setup.py
 	  [warm_up(RobotModel(load_robot(n))) for n in ('one_segment', 'two_segment')]"
 	touch $@
 
-# main job: model vs a mismatched simulated robot, feedforward then closed loop (ROS processes, ~2 min)
+# main job: model vs a mismatched simulated robot, feedforward then closed loop, then the loads
+# phase (an unannounced payload and a push, sensed and compensated; ROS processes, ~2.5 min)
 demo: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demos.closed_loop
+	$(VENV)/bin/python -m bellow_ancf_ros.demos.forces
 
 # calibration end to end: excitation -> simulated mismatched robot seen by an offset mocap ->
 # rosbag2 -> bellow-ancf calibrate -> feedforward tracking with the nominal and calibrated files

@@ -6,6 +6,10 @@ Each runs as ``python -m bellow_ancf_ros.demos.<module>``:
   as separate processes against a mismatched simulated robot, feedforward
   then integral feedback, one and two segments, next to the paper's
   figures; a plot.
+* :mod:`.forces` -- the main job's loads phase (``make demo`` runs it after
+  :mod:`.closed_loop`, about 40 s): an unannounced payload and a push on the
+  simulated robot, the force estimator's reading against the truth, and
+  tracking with integral feedback alone and with force compensation.
 * :mod:`.calibration` -- ``make demo-calibrate`` (about 2.5 min): excitation
   -> simulated robot seen by an offset motion capture -> rosbag2 ->
   ``bellow-ancf calibrate`` -> tracking with the nominal and the

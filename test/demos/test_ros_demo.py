@@ -65,3 +65,20 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
             shift = 0.0 if line.get_label() == 'target' else 1.0   # measured = target + 1 mm
             np.testing.assert_allclose(xs[-1], circle[-1, 0] * 1e3 + shift)
     plt.close(fig)
+
+
+@pytest.mark.slow
+def test_loads_phase_short_run(tmp_path):
+    """make demo's loads phase, on a shorter path: the estimator reads the loads, both ways."""
+    env = dict(os.environ)
+    env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.forces', '--period', '12'],
+                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150,
+                         stdin=subprocess.DEVNULL)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0 and 'PASS' in out, out
+    assert out.count('(within 0.03 N sideways, 0.1 N vertically)') == 4
+    assert out.count('all finite and within the limits: yes; ends with the vent: yes') == 2
+    for name in ('integral feedback alone', 'integral feedback + force compensation'):
+        assert f'  {name}:' in out
