@@ -69,7 +69,7 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
 
 @pytest.mark.slow
 def test_loads_phase_short_run(tmp_path):
-    """make demo's loads phase, on a shorter path: the estimator reads the loads, both ways."""
+    """The loads phase of make demo, on a shorter path: the estimator reads the loads."""
     env = dict(os.environ)
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
