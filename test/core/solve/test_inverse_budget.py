@@ -154,3 +154,24 @@ def test_cold_solve_cut_by_the_budget_is_continued_by_the_next_call(two):
     assert len(cached) == 1
     fresh = solve_forward(two, cached[0].pressures_pa, payload, check_stability=False)
     assert norm(cached[0].position - fresh.position) < 1e-9
+
+
+def test_slices_under_a_tip_force_end_at_its_unbudgeted_answer(two):
+    """The tip load travels with the resume state: slices under a force end where one call does."""
+    F = [0.05, -0.03, -0.1]
+    aim = solve_forward(two, [60e3, 0.0, 10e3, 5e3, 40e3, 0.0], tip_force_n=F)
+    position, z_axis = aim.position, aim.z_axis   # reachable under the force
+    straight = solve_forward(two, np.zeros(6), tip_force_n=F)
+    ref = solve_inverse(two, position, z_axis, warm_start=straight, tip_force_n=F)
+    assert ref.success
+    final, seen = _slices(two, position, z_axis, straight, 60, max_forward_solves=2,
+                          tip_force_n=F)
+    assert seen and all(inv.resume.load.force_n == tuple(F) for inv in seen)
+    assert final.success and final.forward.load.force_n == tuple(F)
+    np.testing.assert_allclose(final.pressures_pa, ref.pressures_pa, atol=1.0)
+    # a forward solve cut short and continued under the force gives the unbudgeted equilibrium
+    cut = solve_forward(two, [60e3, 0, 0, 0, 60e3, 0], tip_force_n=F, iteration_budget=3)
+    assert cut.status == ForwardStatus.ITERATION_BUDGET and cut.resume_state is not None
+    done = solve_forward(two, [60e3, 0, 0, 0, 60e3, 0], tip_force_n=F, warm_start=cut)
+    np.testing.assert_allclose(done.x, solve_forward(two, [60e3, 0, 0, 0, 60e3, 0],
+                                                     tip_force_n=F).x, atol=1e-9)
