@@ -70,15 +70,14 @@ def tip_compliance(fw) -> TipCompliance:
     else:
         ev = model.evaluate(fw.x, fw.stretch, 1.0, load, jacobian=True)
         lu = kkt_solver(model).bound(ev.jacobian)
-    # dR/dF, one column per force component: the residual is linear in the force (exact)
-    r0 = model.evaluate(fw.x, fw.stretch, 1.0, load, jacobian=False).residual
-    dR = np.empty((r0.size, 3))
+    # dR/dF = -B^T on the coordinate rows, 0 on the constraint rows: the generalised force
+    # of a unit force along each axis (model.point_forces, eq. 14), exact since Q is linear in F
+    dR = np.zeros((model.N, 3))
+    q0 = model.point_forces(load)
     for j in range(3):
         f = np.array(load.force_n, dtype=float)
         f[j] += 1.0
-        rj = model.evaluate(fw.x, fw.stretch, 1.0, TipLoad(load.payload_kg, tuple(f)),
-                            jacobian=False).residual
-        dR[:, j] = rj - r0
+        dR[:model.nq, j] = q0 - model.point_forces(TipLoad(load.payload_kg, tuple(f)))
     dx = -lu.solve(dR)
     pd = model.plate_dofs[model.ee_plate]
     dd3 = dx[pd[9:12], :]
