@@ -183,6 +183,13 @@ def parameter_problem(name: str, value: Any) -> str:
 
 
 # ---------------------------------------------------------------- targets
+def _require_base_frame(what: str, frame_id: str, base_frame: str) -> None:
+    """Raise InputError unless ``frame_id`` is ``base_frame`` (an empty one too: no tf2 here)."""
+    if frame_id != base_frame:
+        raise InputError(f"{what} frame {frame_id!r} is not the base frame {base_frame!r} "
+                         '(no tf2 transform is done)')
+
+
 def validate_target(position: Sequence[float], quaternion: Sequence[float] | None,
                     frame_id: str, base_frame: str, use_orientation: bool):
     """Check a target pose; return ``(position (3,), z_axis (3,) or None)``.
@@ -192,9 +199,7 @@ def validate_target(position: Sequence[float], quaternion: Sequence[float] | Non
     non-finite or cannot be normalised.  An empty ``frame_id`` is refused too:
     without tf2 the node cannot know what frame was meant.
     """
-    if frame_id != base_frame:
-        raise InputError(f"target frame {frame_id!r} is not the base frame {base_frame!r} "
-                         '(no tf2 transform is done)')
+    _require_base_frame('target', frame_id, base_frame)
     p = np.array(position, dtype=float).ravel()
     if p.size != 3 or not np.all(np.isfinite(p)):
         raise InputError(f'target position must be 3 finite numbers, got {p.tolist()}')
@@ -212,9 +217,7 @@ def validate_force(force: Sequence[float], frame_id: str, base_frame: str) -> np
     empty one too), non-finite components, or a magnitude above
     ``MAX_TIP_FORCE_N`` (a unit mistake).
     """
-    if frame_id != base_frame:
-        raise InputError(f"force frame {frame_id!r} is not the base frame {base_frame!r} "
-                         '(no tf2 transform is done)')
+    _require_base_frame('force', frame_id, base_frame)
     f = np.array(force, dtype=float).ravel()
     if f.size != 3 or not np.all(np.isfinite(f)):
         raise InputError(f'force must be 3 finite numbers, got {f.tolist()}')
