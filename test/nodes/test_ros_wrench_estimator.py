@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
 from bellow_ancf_ros.core import geometry, solve_forward, solve_inverse  # noqa: E402
-from bellow_ancf_ros.core.control import SimulatedRobot  # noqa: E402
+from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot  # noqa: E402
 from bellow_ancf_ros.nodes.measured_feedback import measured_pose_qos  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.wrench_estimator_node import WrenchEstimatorNode  # noqa: E402
@@ -51,7 +51,7 @@ def test_estimated_wrench_tare_and_bad_samples(h):
     pub_p = h.publisher(Float64MultiArray, 'measured_pressure')
     pub_pose = h.client.create_publisher(PoseStamped, 'measured_pose', measured_pose_qos())
     wait_for(lambda: pub_pose.get_subscription_count() >= 1, what='measured_pose matched')
-    sim = SimulatedRobot('one_segment_mismatched', seed=7)
+    sim = SimulatedRobot('one_segment_mismatched', seed=7, effects=PlantEffects.ideal())
     sim.command([30e3, 10e3, 50e3])
     for _ in range(150):
         sim.step(0.01)

@@ -1,24 +1,32 @@
 """Closing the loop without ROS: the feedback law and the simulated robot's physics.
 
 * :class:`IntegralFeedback`, :class:`FeedbackSettings`: the measured-pose
-  correction of the target (integral action, anti-windup, jump test);
-* :class:`SimulatedRobot`, :class:`PressureRegulators`: a robot that is not
-  the model (its own robot file), regulators with lag and slew, motion
-  capture with noise;
+  correction of the target (integral action, anti-windup, outlier gate,
+  hold through dropouts, capture-time matching); :func:`loop_margins`: its
+  stability margins with the loop's lag and delay;
+* :class:`SimulatedRobot`: a robot that is not the model (its own robot
+  file), with the hardware's effects of :class:`PlantEffects` (regulators
+  :class:`PressureRegulators` with dead time, hysteresis and lag; bellows
+  creep :class:`BellowCreep`; :class:`MotionCapture` with noise, latency,
+  outliers and dropouts);
+* :class:`LoopSimulation`: controller and simulated robot in simulated time
+  (tests, benchmark);
 * :class:`TipForceEstimator`, :class:`ForceEstimate`: the tip force (or an
   unknown payload) from measured poses and the applied pressures.
 The ROS nodes only feed these.
 """
 
-from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
+from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, loop_margins
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
-from ._simulated_robot import (DEFAULT_ANGLE_NOISE_RAD, DEFAULT_POSITION_NOISE_M,
-                               DEFAULT_SLEW_RATE_PA_PER_S, DEFAULT_TIME_CONSTANT_S,
-                               PressureRegulators, SimulatedRobot)
+from ._loop_simulation import LoopRecord, LoopSimulation
+from ._motion_capture import MocapSample, MotionCapture
+from ._plant_effects import EFFECTS, PlantEffects
+from ._regulators import BellowCreep, PressureRegulators
+from ._simulated_robot import SimulatedRobot
 
 __all__ = [
-    "DEFAULT_ANGLE_NOISE_RAD", "DEFAULT_POSITION_NOISE_M", "DEFAULT_SLEW_RATE_PA_PER_S",
-    "DEFAULT_TIME_CONSTANT_S", "ESTIMATOR_MODES", "FEEDBACK_MODES", "FeedbackSettings",
-    "ForceEstimate", "IntegralFeedback", "PressureRegulators", "SimulatedRobot",
-    "TipForceEstimator",
+    "EFFECTS", "ESTIMATOR_MODES", "FEEDBACK_MODES", "BellowCreep", "FeedbackSettings",
+    "ForceEstimate", "IntegralFeedback", "LoopRecord", "LoopSimulation", "MocapSample",
+    "MotionCapture", "PlantEffects", "PressureRegulators", "SimulatedRobot",
+    "TipForceEstimator", "loop_margins",
 ]

@@ -1,4 +1,4 @@
-"""Tests of the simulated robot (core/simulated_robot.py): regulators, physics, mocap noise."""
+"""Tests of the simulated robot (core/control): regulators, creep, physics, motion capture."""
 
 import math
 
@@ -8,55 +8,14 @@ from bellow_ancf_ros.core.geometry import rotation_from_vector
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core.control._simulated_robot import (
-    PressureRegulators,
+from bellow_ancf_ros.core.control import (
+    EFFECTS,
+    MotionCapture,
+    PlantEffects,
     SimulatedRobot,
 )
 
-
-# ------------------------------------------------------------------ regulators
-def test_regulator_first_order_step_response_and_exact_discretisation():
-    reg = PressureRegulators(3, -50e3, 150e3, time_constant_s=0.1, slew_rate_pa_per_s=1e9)
-    reg.set_command([100e3, -40e3, 0.0])
-    p = reg.step(0.1)   # one time constant: 1 - 1/e of the step
-    np.testing.assert_allclose(p, np.array([100e3, -40e3, 0.0]) * (1 - math.exp(-1)), rtol=1e-12)
-    # the discrete step is exact: ten steps of tau/10 = one step of tau
-    reg2 = PressureRegulators(3, -50e3, 150e3, time_constant_s=0.1, slew_rate_pa_per_s=1e9)
-    reg2.set_command([100e3, -40e3, 0.0])
-    for _ in range(10):
-        q = reg2.step(0.01)
-    np.testing.assert_allclose(q, p, rtol=1e-12)
-    # settles on the set-point
-    for _ in range(100):
-        p = reg.step(0.02)
-    np.testing.assert_allclose(p, [100e3, -40e3, 0.0], atol=1e-3)
-
-
-def test_regulator_slew_limit_and_hardware_limits():
-    reg = PressureRegulators(2, -50e3, 150e3, time_constant_s=0.1, slew_rate_pa_per_s=1e6)
-    reg.set_command([500e3, -500e3])            # beyond the hardware: clipped
-    np.testing.assert_array_equal(reg.command_pa, [150e3, -50e3])
-    p = reg.step(0.01)
-    # actuator 1: the lag asks for 14.3 kPa, the slew limit allows 1e6 Pa/s * 0.01 s
-    # actuator 2: the lag's 4.76 kPa is within the slew limit
-    np.testing.assert_allclose(p, [10e3, -50e3 * (1 - math.exp(-0.1))])
-    for _ in range(200):
-        p = reg.step(0.01)
-        assert np.all(p >= -50e3) and np.all(p <= 150e3)
-    np.testing.assert_allclose(p, [150e3, -50e3], atol=1e-6)
-
-
-def test_regulator_refuses_bad_input():
-    reg = PressureRegulators(3, -50e3, 150e3)
-    with pytest.raises(ValueError, match='finite'):
-        reg.set_command([np.nan, 0.0, 0.0])
-    with pytest.raises(ValueError, match='expected 3'):
-        reg.set_command([0.0, 0.0])
-    with pytest.raises(ValueError, match='dt'):
-        reg.step(-1.0)
-    with pytest.raises(ValueError, match='time_constant_s'):
-        PressureRegulators(3, -50e3, 150e3, time_constant_s=-0.1)
-    np.testing.assert_array_equal(reg.command_pa, [0.0, 0.0, 0.0])   # old command kept
+IDEAL = PlantEffects.ideal()
 
 
 # ------------------------------------------------------------------ robot files
@@ -89,7 +48,7 @@ def test_mismatched_files_differ_exactly_as_documented(name):
 # ------------------------------------------------------------------ robot
 @pytest.fixture(scope='module')
 def robot1():
-    return SimulatedRobot('one_segment_mismatched', seed=3)
+    return SimulatedRobot('one_segment_mismatched', seed=3, effects=IDEAL)
 
 
 def test_robot_settles_on_its_own_equilibrium_not_the_models(robot1, one):
@@ -113,7 +72,7 @@ def test_robot_settles_on_its_own_equilibrium_not_the_models(robot1, one):
 
 
 def test_robot_lags_behind_a_step_command():
-    robot = SimulatedRobot('one_segment_mismatched', seed=0)
+    robot = SimulatedRobot('one_segment_mismatched', seed=0, effects=IDEAL)
     z0 = robot.true_pose()[0][2]
     robot.command([150e3, 150e3, 150e3])
     robot.step(0.05)
@@ -140,7 +99,7 @@ def test_payload_change_lowers_the_robot():
 
 def test_mocap_noise_statistics_and_seed():
     a = SimulatedRobot('one_segment_mismatched', seed=42)
-    b = SimulatedRobot('one_segment_mismatched', seed=42)
+    b = SimulatedRobot('one_segment_mismatched', seed=42)   # the realistic defaults' noise
     true_p, true_R = a.true_pose()
     samples = np.array([a.measure()[0] for _ in range(3000)])
     err = samples - true_p
@@ -151,7 +110,8 @@ def test_mocap_noise_statistics_and_seed():
     R = a.measure()[1]
     np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
     assert 0 < math.degrees(math.acos(min(1.0, R[:, 2] @ true_R[:, 2]))) < 1.0
-    exact = SimulatedRobot('one_segment_mismatched', position_noise_m=0.0, angle_noise_rad=0.0)
+    exact = SimulatedRobot('one_segment_mismatched',
+                           effects=IDEAL.replace(position_noise_m=0.0, angle_noise_rad=0.0))
     np.testing.assert_array_equal(exact.measure()[0], exact.true_pose()[0])
 
 
@@ -167,3 +127,54 @@ def test_default_robot_file_and_finer_elements():
     robot = SimulatedRobot()
     assert robot.cfg.name == 'one_segment_mismatched'
     assert isinstance(robot.model, RobotModel) and robot.model.cfg.n_elements == 12
+
+
+# ------------------------------------------------------------------ hardware effects
+def test_realistic_robot_answers_later_and_creeps():
+    """Dead time and creep: nothing in the first 15 ms, most at once, the rest over seconds."""
+    real = SimulatedRobot('one_segment_mismatched', seed=0,
+                          effects=PlantEffects(regulator_hysteresis_pa=0.0))
+    z0 = real.true_pose()[0][2]
+    real.command([100e3, 100e3, 100e3])
+    real.step(0.01)
+    assert real.true_pose()[0][2] == z0                      # within the dead time
+    for _ in range(50):                                      # 0.5 s: regulators settled
+        real.step(0.01)
+    z_fast = real.true_pose()[0][2]
+    for _ in range(300):                                     # 30 s more: creep settled
+        real.step(0.1)
+    z_end = real.true_pose()[0][2]
+    rise = (z_fast - z0) / (z_end - z0)
+    assert 0.85 < rise < 0.91      # 85 % at once, plus the creep over 0.5 s of its 2 s
+    ideal = SimulatedRobot('one_segment_mismatched', seed=0, effects=IDEAL)
+    ideal.command([100e3, 100e3, 100e3])
+    for _ in range(150):
+        ideal.step(0.01)
+    assert z_end == pytest.approx(ideal.true_pose()[0][2], abs=1e-6)   # same equilibrium
+
+
+def test_capture_sees_the_pose_one_latency_ago():
+    e = PlantEffects.ideal(position_noise_m=0.0, angle_noise_rad=0.0, mocap_latency_s=0.008,
+                           regulator_time_constant_s=0.05)
+    robot = SimulatedRobot('one_segment_mismatched', effects=e)
+    robot.command([120e3, 0.0, 0.0])
+    poses = {}
+    for i in range(1, 41):
+        robot.step(0.005)
+        poses[i] = robot.true_pose()[0]
+    s = robot.capture()
+    assert s.captured_s == pytest.approx(robot.time_s - 0.008)
+    # 8 ms before step 40 lies between steps 38 (190 ms) and 39 (195 ms): interpolated
+    a = (0.192 - 0.190) / 0.005
+    np.testing.assert_allclose(s.position, poses[38] + a * (poses[39] - poses[38]), atol=1e-12)
+    assert not np.allclose(s.position, poses[40])
+    np.testing.assert_allclose(s.rotation.T @ s.rotation, np.eye(3), atol=1e-12)
+
+
+def test_every_effect_has_a_preset_row():
+    assert set(EFFECTS) == {'regulator lag 60 ms', 'regulator dead time', 'regulator hysteresis',
+                            'bellows creep', 'mocap 120 Hz, latency', 'mocap outliers',
+                            'mocap dropouts'}
+    for name in EFFECTS:
+        PlantEffects().only(name)   # each switches on alone
+    assert MotionCapture(PlantEffects.ideal(), 0).in_dropout(1.0) is False

@@ -1,0 +1,137 @@
+"""The closed loop against the realistic simulated robot, in simulated time (core, no ROS).
+
+The issue's acceptance in the core: a mismatched robot file, regulators with
+lag, dead time and hysteresis, creeping bellows, a motion capture with 0.15
+mm noise, latency, outliers and dropouts; the controller is the default model
+with integral feedback.  Errors are true errors (the robot's pose, not the
+motion capture's samples).
+"""
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+from bellow_ancf_ros.core.control import (
+    FeedbackSettings,
+    LoopSimulation,
+    PlantEffects,
+    SimulatedRobot,
+)
+from bellow_ancf_ros.core.experiments import trajectory
+
+PREVIEW_S = 0.09     # regulator dead time + lag + half a control period
+
+
+def _circle(cfg, period):
+    name = 'planar_circle' if cfg.n_segments == 1 else 'bending_circle'
+    kw = {'period': period}
+    if cfg.n_segments > 1:
+        kw['bending_angle_deg'] = 10.0
+
+    def target(t):
+        p, z = trajectory(name, t, cfg, **kw)
+        return p[0], None if z is None else z[0]
+    return target
+
+
+def _loop(name, feedback=True, seed=1, effects=None, preview=PREVIEW_S):
+    model = RobotModel(load_robot(name))
+    robot = SimulatedRobot(name + '_mismatched', seed=seed, effects=effects)
+    return LoopSimulation(model, robot, FeedbackSettings() if feedback else None,
+                          preview_s=preview)
+
+
+def _held(model, pressures):
+    fw = solve_forward(model, pressures)
+    return lambda t: (fw.position, fw.z_axis if model.cfg.n_segments > 1 else None)
+
+
+@pytest.mark.parametrize('name, goal_mm, goal_deg',
+                         [('one_segment', 0.3, None), ('two_segment', 0.5, 0.5)])
+def test_held_target_within_the_goal(name, goal_mm, goal_deg):
+    sim = _loop(name)
+    A = sim.model.A
+    target = _held(sim.model, np.linspace(60e3, 0.0, A))
+    rec = sim.run(4.0, target)
+    s = rec.summary(start_s=3.0)
+    assert s['max_mm'] <= goal_mm, s
+    if goal_deg is not None:
+        assert s['max_deg'] <= goal_deg, s
+    assert rec.out_of_limits == 0
+
+
+@pytest.mark.parametrize('name, goal_mm, goal_deg',
+                         [('one_segment', 1.0, None), ('two_segment', 1.5, 1.0)])
+def test_circle_at_four_times_the_papers_speed(name, goal_mm, goal_deg):
+    """After one period (5 s) the circle is tracked within the goals; feedforward is not."""
+    period = 5.0
+    out = {}
+    for fb in (False, True):
+        sim = _loop(name, feedback=fb)
+        circle = _circle(sim.model.cfg, period)
+        start = circle(0.0)
+        sim.run(1.0, lambda t: start)            # lead-in at the path's first point
+        t0 = sim.robot.time_s
+        rec = sim.run(2 * period, lambda t: circle(t - t0))
+        out[fb] = rec.summary(t0 + period, t0 + 2 * period)
+        assert rec.out_of_limits == 0
+    assert out[True]['rmse_mm'] <= goal_mm, out
+    assert out[False]['rmse_mm'] > 3 * out[True]['rmse_mm'], out
+    if goal_deg is not None:
+        assert out[True]['rmse_deg'] <= goal_deg, out
+
+
+def test_an_outlier_moves_no_command():
+    """Two identical runs, one with a 25 mm swapped-marker sample: the commands are the same."""
+    runs = []
+    for corrupt in (False, True):
+        sim = _loop('one_segment', seed=4, effects=PlantEffects(outlier_probability=0.0))
+        target = _held(sim.model, [50e3, 20e3, 0.0])
+        rec = sim.run(2.0, target)
+        if corrupt:
+            def swap(s):
+                return s._replace(position=s.position + np.array([0.0, 0.025, 0.0]),
+                                  outlier=True)
+            sim.corrupt = swap
+        sim.run(1.0, target, rec)
+        runs.append(rec)
+    steps, flagged = runs[1].command_steps()
+    assert flagged.sum() == 1
+    diff = np.max(np.abs(np.array(runs[1].command_pa) - np.array(runs[0].command_pa)))
+    assert diff <= 2e3, f'{diff:.0f} Pa'
+    assert sim.feedback.rejected == 1
+
+
+def test_a_dropout_is_bridged_and_the_loop_is_back_within_2_s():
+    e = PlantEffects(outlier_probability=0.0)
+    sim = _loop('one_segment', seed=2, effects=e)
+    sim.robot.mocap.dropout_phase_s = 3.0          # 0.5 s without samples from t = 3 s
+    target = _held(sim.model, [70e3, 10e3, -30e3])
+    rec = sim.run(6.0, target)
+    t, err, _ = rec.errors()
+    assert {'holding the correction: measured_pose too old (dropout)'} <= set(rec.state)
+    during = err[(t >= 3.0) & (t <= 3.5)]
+    assert during.max() <= 0.3e-3            # the held correction keeps the robot there
+    assert err[t >= 3.5 + 2.0].max() <= 0.3e-3
+    steps, _ = rec.command_steps()
+    normal = steps[(rec.arrays()['t'][1:] > 2.0) & (rec.arrays()['t'][1:] < 3.0)].max()
+    back = steps[(rec.arrays()['t'][1:] >= 3.5) & (rec.arrays()['t'][1:] <= 4.0)].max()
+    assert back <= max(1.5 * normal, 500.0), (back, normal)   # no jump on the return
+
+
+def test_azimuthal_frame_learns_the_mismatch_once_base_frame_lags():
+    """On a circle about the axis the mismatch turns with the azimuth (symmetric robot)."""
+    out = {}
+    for frame in ('azimuthal', 'base'):
+        model = RobotModel(load_robot('two_segment'))
+        robot = SimulatedRobot('two_segment_mismatched', seed=1,
+                               effects=PlantEffects.ideal(position_noise_m=0.0,
+                                                          angle_noise_rad=0.0))
+        sim = LoopSimulation(model, robot, FeedbackSettings(correction_frame=frame),
+                             preview_s=0.1)
+        circle = _circle(model.cfg, 5.0)
+        sim.run(1.0, lambda t: circle(0.0))
+        t0 = robot.time_s
+        rec = sim.run(10.0, lambda t: circle(t - t0))
+        out[frame] = rec.summary(t0 + 5.0)
+    assert out['azimuthal']['rmse_mm'] < 0.3 and out['base']['rmse_mm'] > 1.0, out
