@@ -69,8 +69,11 @@ shifted by an integral correction of the measured task-space error
 (:mod:`bellow_ancf_ros.core.control`, wired by
 :class:`~bellow_ancf_ros.nodes.measured_feedback.FeedbackLink`); the newest
 target is re-solved at ``feedback_rate_hz``.  ``commanded_pose`` is then the
-model's pose for the shifted target.  Stale or implausible measurements:
-pure feedforward, integrator frozen, diagnostics WARN.
+model's pose for the shifted target.  A target's stamp is the time it is
+wanted at (a stamp in the future: a source that previews the regulators'
+lag); each measured pose is compared with the target wanted when it was
+captured.  Outliers are never integrated; through a dropout the correction
+is held (integrator frozen, diagnostics WARN).
 
 Lifecycle and safety
 --------------------
@@ -603,7 +606,7 @@ class InverseKinetostaticNode(LifecycleNode):
         force = None if self._force is None else self._force.current()
         t0 = time.perf_counter()
         try:
-            pos, z = self._feedback.correct(pos, z)   # closed loop: the shifted target
+            pos, z = self._feedback.correct(pos, z, stamp)   # closed loop: the shifted target
             with self._solve_lock:
                 inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
                                     time_budget_s=self._time_budget(), tip_force_n=force)
@@ -700,8 +703,8 @@ class InverseKinetostaticNode(LifecycleNode):
             self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
             self._publish_diag(DiagnosticStatus.WARN, msg, values)
         elif inv.reachable and self._feedback.fallback:
-            self._publish_diag(DiagnosticStatus.WARN, 'target reached by feedforward only: '
-                               f'feedback {values["feedback_state"]}', values)
+            self._publish_diag(DiagnosticStatus.WARN, 'target reached without fresh measured '
+                               f'poses: feedback {values["feedback_state"]}', values)
         elif inv.reachable:
             self._publish_diag(DiagnosticStatus.OK, 'target reached', values)
         else:

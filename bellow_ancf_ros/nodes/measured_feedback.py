@@ -41,7 +41,8 @@ __all__ = ['FEEDBACK_PARAMETERS', 'FeedbackLink', 'measured_pose_qos']
 #: The parameters FeedbackLink declares; all are read on configure.
 FEEDBACK_PARAMETERS = ('feedback', 'feedback_gain_per_s', 'feedback_max_correction_mm',
                        'feedback_max_correction_deg', 'measured_pose_timeout_s',
-                       'measured_pose_max_jump_mm', 'feedback_reset_jump_mm', 'feedback_rate_hz')
+                       'measured_pose_outlier_mm', 'feedback_reset_jump_mm', 'feedback_rate_hz',
+                       'feedback_correction_frame')
 
 
 def measured_pose_qos() -> QoSProfile:
@@ -73,11 +74,11 @@ class FeedbackLink:
                 ('feedback_max_correction_deg', math.degrees(d.max_correction_rad),
                  'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
                 ('measured_pose_timeout_s', d.measured_pose_timeout_s,
-                 'Older measurements: fallback to feedforward, integrator frozen [s].',
-                 0.01, 10.0),
-                ('measured_pose_max_jump_mm', d.max_measurement_jump_m * 1e3,
-                 'A measured pose this far from the previous one is implausible [mm].',
-                 0.1, 1000.0),
+                 'Older measurements (a dropout): the integrator is frozen, its correction '
+                 'stays applied [s].', 0.01, 10.0),
+                ('measured_pose_outlier_mm', d.outlier_gate_m * 1e3,
+                 'A measured pose this far from the median of the last five is an outlier, '
+                 'never integrated [mm].', 0.1, 1000.0),
                 ('feedback_reset_jump_mm', d.reset_jump_m * 1e3,
                  'A target jump this large resets the correction [mm].', 0.1, 1000.0),
                 ('feedback_rate_hz', 20.0,
@@ -85,6 +86,11 @@ class FeedbackLink:
                  0.1, 1000.0)):
             node.declare_parameter(name, float(default), descriptor(
                 text + ' Read on configure.', D, lo=lo, hi=hi))
+        node.declare_parameter('feedback_correction_frame', d.correction_frame, descriptor(
+            "Frame the correction is integrated in: 'azimuthal' (turns with the target about "
+            "the base z-axis: a symmetric robot's mismatch is constant in it) or 'base' (an "
+            "error fixed in the base frame, e.g. one stiffer actuator). Read on configure.", S,
+            constraints="one of: 'azimuthal', 'base'"))
         mode = node.get_parameter('feedback').value
         if mode not in FEEDBACK_MODES:
             raise ValueError(f"parameter feedback: {mode!r} is not one of {list(FEEDBACK_MODES)}")
@@ -112,8 +118,9 @@ class FeedbackLink:
             max_correction_m=1e-3 * g('feedback_max_correction_mm').value,
             max_correction_rad=math.radians(g('feedback_max_correction_deg').value),
             measured_pose_timeout_s=g('measured_pose_timeout_s').value,
-            max_measurement_jump_m=1e-3 * g('measured_pose_max_jump_mm').value,
-            reset_jump_m=1e-3 * g('feedback_reset_jump_mm').value)
+            outlier_gate_m=1e-3 * g('measured_pose_outlier_mm').value,
+            reset_jump_m=1e-3 * g('feedback_reset_jump_mm').value,
+            correction_frame=g('feedback_correction_frame').value)
         self._use_orientation = cfg.n_segments >= 2
         self._frame = g('base_frame').value
         self._frames = PoseFrames(self.node, self._frame, cfg.mocap_frame)
@@ -182,34 +189,40 @@ class FeedbackLink:
             if self._law is not None:
                 self._law.measurement(self._taken_at(msg.header.stamp), pos, z)
 
-    def _taken_at(self, stamp) -> float:
-        """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
+    def _monotonic(self, stamp, future: bool) -> float:
+        """A stamp as monotonic time (zero stamp: now; a future one: now unless ``future``)."""
         now = time.monotonic()
-        if stamp.sec == 0 and stamp.nanosec == 0:
+        if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
             return now
         age = 1e-9 * (self.node.get_clock().now().nanoseconds
                       - (stamp.sec * 1_000_000_000 + stamp.nanosec))
-        return now - age if age >= 0.0 else now
+        return now - age if (age >= 0.0 or future) else now
 
-    def correct(self, position: np.ndarray, z_axis: np.ndarray | None):
+    def _taken_at(self, stamp) -> float:
+        """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
+        return self._monotonic(stamp, future=False)
+
+    def correct(self, position: np.ndarray, z_axis: np.ndarray | None, stamp=None):
         """The target to hand to the inverse (unchanged when feedback is off).
 
-        A change between closed loop and the fallback to feedforward (stale
-        or implausible measurements) is logged, not only reported on
-        ``/diagnostics``.
+        ``stamp``: the target's stamp, the time it is wanted at (zero: now; in
+        the future: a target that previews the robot's lag).  A change
+        between integrating and holding the correction through a dropout is
+        logged, not only reported on ``/diagnostics``.
         """
         with self._lock:
             if self._law is None:
                 return position, z_axis
-            out = self._law.corrected_target(time.monotonic(), position, z_axis)
-            fallback, state = self._law.fallback, self._law.state
-        if fallback != self._was_fallback:
-            self._was_fallback = fallback
+            out = self._law.corrected_target(time.monotonic(), position, z_axis,
+                                             wanted_at=self._monotonic(stamp, future=True))
+            degraded, state = self._law.blind, self._law.state
+        if degraded != self._was_fallback:
+            self._was_fallback = degraded
             log = self.node.get_logger()
-            if fallback:
-                log.warning(f'feedback: {state}; pure feedforward, integrator frozen')
+            if degraded:
+                log.warning(f'feedback: {state}; integrator frozen')
             else:
-                log.info(f'feedback: measured poses back, closed loop again ({state})')
+                log.info(f'feedback: measured poses back, integrating again ({state})')
         return out
 
     def after_solve(self, inv) -> None:
@@ -228,9 +241,9 @@ class FeedbackLink:
 
     @property
     def fallback(self) -> bool:
-        """True while feedback is on but pure feedforward is used (no fresh measurement)."""
+        """True while feedback is on but not integrating: no measurement yet, or a dropout."""
         with self._lock:
-            return self._law is not None and self._law.fallback
+            return self._law is not None and self._law.blind
 
     def status(self) -> dict:
         """Diagnostics values of the loop (``feedback: none`` when off)."""
@@ -239,6 +252,6 @@ class FeedbackLink:
                 return {'feedback': 'none'}
             values = self._law.status(time.monotonic())
             # one count of the measured poses that did not reach the integrator: bad input
-            # (frame, NaN, quaternion) and implausible jumps; the latter also on their own
+            # (frame, NaN, quaternion) and outliers; the latter also on their own
             return dict(values, feedback='integral', measured_poses_refused=(
-                self.refused + values['measured_poses_implausible']))
+                self.refused + values['measured_poses_outliers']))

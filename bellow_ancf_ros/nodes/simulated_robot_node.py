@@ -1,10 +1,17 @@
 """Simulated robot node: plays the real robot (regulators, physics, motion capture).
 
 The physics is :class:`~bellow_ancf_ros.core.control.SimulatedRobot`
-(core, no ROS): pressure regulators (first-order lag, slew limit, hardware
-limits) drive the quasi-static equilibrium of the node's *own* robot file,
-by default the shipped ``one_segment_mismatched`` ("a robot that is not the
-model"), at that file's (finer) element count.
+(core, no ROS): pressure regulators (dead time, hysteresis, first-order lag,
+slew limit, hardware limits) and creeping bellows drive the quasi-static
+equilibrium of the node's *own* robot file, by default the shipped
+``one_segment_mismatched`` ("a robot that is not the model"), at that file's
+(finer) element count; a motion capture with noise, latency, outliers and
+dropouts sees it.  Parameter ``plant``: ``realistic`` (the default; every
+effect at the figures of real hardware, each its own parameter, see
+:mod:`bellow_ancf_ros.core.control._plant_effects` and docs/closed_loop.md)
+or ``ideal`` (the clean robot of earlier versions: a 0.1 s first-order
+regulator, motion capture at 100 Hz with noise only; the effect parameters
+are then ignored).
 
 Topics
 ------
@@ -16,9 +23,14 @@ subscribes
     last set-points stay.
 publishes
     ``measured_pose`` (geometry_msgs/PoseStamped) in ``base_frame`` at
-    ``mocap_rate_hz`` (default 100 Hz): the end-effector pose with Gaussian
+    ``mocap_rate_hz`` (default 120 Hz): the end-effector pose with Gaussian
     noise (``position_noise_mm``, default 0.15 mm per axis; ``angle_noise_deg``,
-    default 0.1 deg per axis), seeded by ``seed``.
+    default 0.1 deg per axis), captured ``mocap_latency_s`` before it is
+    published and stamped with that capture time; outliers and dropouts as set;
+    seeded by ``seed``.
+    ``true_pose`` (geometry_msgs/PoseStamped, ``base_frame``) at the same
+    rate: the exact pose now, the simulator's ground truth (for evaluation,
+    never for control).
     ``measured_pressure`` (std_msgs/Float64MultiArray, same layout and unit as
     the commands) at ``physics_rate_hz``: the regulated pressures.
     ``/diagnostics``: 1 Hz status (solves, failed solves, refusals), WARN per
@@ -41,11 +53,12 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import IntegerRange, ParameterType, SetParametersResult
+from rclpy.duration import Duration
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from ..core import load_robot
-from ..core.control import SimulatedRobot
+from ..core.control import PlantEffects, SimulatedRobot
 from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract
@@ -60,7 +73,73 @@ from .ros_util import (
     pressure_message,
 )
 
-__all__ = ['SimulatedRobotNode', 'main']
+__all__ = ['EFFECT_PARAMETERS', 'SimulatedRobotNode', 'main', 'plant_effects']
+
+#: The hardware effects as node parameters: (name, PlantEffects field, scale to SI, default,
+#: description, lowest, highest).  Defaults: :class:`PlantEffects`' realistic figures.
+_R = PlantEffects()
+EFFECT_PARAMETERS = (
+    ('regulator_time_constant_s', 'regulator_time_constant_s', 1.0, _R.regulator_time_constant_s,
+     'Pressure regulator time constant [s] (first-order lag).', 0.0, 10.0),
+    ('regulator_dead_time_s', 'regulator_dead_time_s', 1.0, _R.regulator_dead_time_s,
+     'Pressure regulator dead time [s] (a set-point acts this much later).', 0.0, 1.0),
+    ('regulator_hysteresis_kpa', 'regulator_hysteresis_pa', 1e3,
+     _R.regulator_hysteresis_pa / 1e3,
+     'Pressure regulator hysteresis, the width of its play [kPa].', 0.0, 50.0),
+    ('regulator_slew_rate_kpa_per_s', 'regulator_slew_rate_pa_per_s', 1e3,
+     _R.regulator_slew_rate_pa_per_s / 1e3,
+     'Pressure regulator slew-rate limit [kPa/s].', 1.0, 1e6),
+    ('creep_fraction', 'creep_fraction', 1.0, _R.creep_fraction,
+     'Part of the bellows\' elongation that creeps after a pressure change (0: none).',
+     0.0, 0.9),
+    ('creep_time_constant_s', 'creep_time_constant_s', 1.0, _R.creep_time_constant_s,
+     'Time constant of the bellows\' creep [s].', 0.01, 600.0),
+    ('mocap_rate_hz', 'mocap_rate_hz', 1.0, _R.mocap_rate_hz,
+     'measured_pose rate [Hz] (motion capture).', 1.0, 1000.0),
+    ('mocap_latency_s', 'mocap_latency_s', 1.0, _R.mocap_latency_s,
+     'Motion-capture latency [s]: a pose is published this long after it was captured, '
+     'stamped with its capture time.', 0.0, 1.0),
+    ('position_noise_mm', 'position_noise_m', 1e-3, _R.position_noise_m * 1e3,
+     'Motion-capture position noise, standard deviation per axis [mm].', 0.0, 100.0),
+    ('angle_noise_deg', 'angle_noise_rad', math.pi / 180.0, math.degrees(_R.angle_noise_rad),
+     'Motion-capture orientation noise, standard deviation per axis [deg].', 0.0, 45.0),
+    ('mocap_outlier_probability', 'outlier_probability', 1.0, _R.outlier_probability,
+     'Probability that a pose sample is an outlier (a swapped marker).', 0.0, 1.0),
+    ('mocap_outlier_min_mm', 'outlier_min_m', 1e-3, _R.outlier_min_m * 1e3,
+     'Smallest displacement of an outlier [mm].', 0.0, 1000.0),
+    ('mocap_outlier_max_mm', 'outlier_max_m', 1e-3, _R.outlier_max_m * 1e3,
+     'Largest displacement of an outlier [mm].', 0.0, 1000.0),
+    ('mocap_dropout_every_s', 'dropout_every_s', 1.0, _R.dropout_every_s,
+     'A dropout (no poses) starts every this long [s]; 0: none.', 0.0, 3600.0),
+    ('mocap_dropout_duration_s', 'dropout_duration_s', 1.0, _R.dropout_duration_s,
+     'Length of a dropout [s]; 0: none.', 0.0, 60.0),
+)
+#: Parameters that still apply to the ideal plant (noise, slew).
+_IDEAL_KEEPS = ('position_noise_mm', 'angle_noise_deg', 'regulator_slew_rate_kpa_per_s')
+
+
+def plant_effects(get) -> PlantEffects:
+    """The :class:`PlantEffects` of the node's parameters (``get``: name -> parameter).
+
+    Raises :class:`StartupParameterError` naming the parameter for a bad
+    ``plant`` or an inconsistent combination (e.g. a dropout as long as its
+    period).
+    """
+    plant = get('plant').value
+    if plant not in ('realistic', 'ideal'):
+        raise StartupParameterError('plant', plant, "'realistic' or 'ideal'")
+    values = {field: scale * float(get(name).value)
+              for name, field, scale, *_ in EFFECT_PARAMETERS
+              if plant == 'realistic' or name in _IDEAL_KEEPS}
+    try:
+        return PlantEffects(**values) if plant == 'realistic' else PlantEffects.ideal(**values)
+    except ValueError as exc:
+        field, reason = str(exc).replace('plant setting ', '').split(': ', 1)
+        name = next((n for n, f, *_ in EFFECT_PARAMETERS if f == field), field)
+        for n, f, *_ in EFFECT_PARAMETERS:   # the reason in the node's own names
+            reason = reason.replace(f'{f} (', f'{n} (')
+        raise StartupParameterError(name, get(name).value, "see the parameter's description",
+                                    reason) from None
 
 
 class SimulatedRobotNode(Node):
@@ -100,21 +179,15 @@ class SimulatedRobotNode(Node):
         self.declare_parameter('pressure_unit', 'Pa', descriptor(
             'Unit of pressure_command and measured_pressure: Pa or kPa (gauge).', S,
             constraints="one of: 'Pa', 'kPa'", **ro))
-        self.declare_parameter('regulator_time_constant_s', 0.1, descriptor(
-            'Pressure regulator time constant [s] (first-order lag).', D, lo=0.0, hi=10.0, **ro))
-        self.declare_parameter('regulator_slew_rate_kpa_per_s', 1000.0, descriptor(
-            'Pressure regulator slew-rate limit [kPa/s].', D, lo=1.0, hi=1e6, **ro))
-        self.declare_parameter('mocap_rate_hz', 100.0, descriptor(
-            'measured_pose rate [Hz] (motion capture).', D, lo=1.0, hi=1000.0, **ro))
-        self.declare_parameter('physics_rate_hz', 50.0, descriptor(
+        self.declare_parameter('plant', 'realistic', descriptor(
+            "'realistic': every hardware effect below at its parameter; 'ideal': the clean "
+            'robot (0.1 s first-order regulators, mocap 100 Hz with noise only; the effect '
+            'parameters are ignored).', S, constraints="one of: 'realistic', 'ideal'", **ro))
+        for name, _field, _scale, default, text, lo, hi in EFFECT_PARAMETERS:
+            self.declare_parameter(name, default, descriptor(text, D, lo=lo, hi=hi, **ro))
+        self.declare_parameter('physics_rate_hz', 100.0, descriptor(
             'Regulator and equilibrium update rate [Hz]; also the measured_pressure rate.', D,
             lo=1.0, hi=1000.0, **ro))
-        self.declare_parameter('position_noise_mm', 0.15, descriptor(
-            'Motion-capture position noise, standard deviation per axis [mm].', D,
-            lo=0.0, hi=100.0, **ro))
-        self.declare_parameter('angle_noise_deg', 0.1, descriptor(
-            'Motion-capture orientation noise, standard deviation per axis [deg].', D,
-            lo=0.0, hi=45.0, **ro))
         self.declare_parameter('command_timeout_s', 0.0, descriptor(
             'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
             'as a regulator driver does (the inverse node republishes at command_rate_hz); '
@@ -131,11 +204,7 @@ class SimulatedRobotNode(Node):
         self.robot = SimulatedRobot(
             cfg, n_elements=n_el or None,
             payload_kg=contract.validate_payload(g('payload_kg').value),
-            time_constant_s=float(g('regulator_time_constant_s').value),
-            slew_rate_pa_per_s=1e3 * float(g('regulator_slew_rate_kpa_per_s').value),
-            position_noise_m=1e-3 * float(g('position_noise_mm').value),
-            angle_noise_rad=math.radians(float(g('angle_noise_deg').value)),
-            seed=None if seed < 0 else seed)
+            effects=plant_effects(g), seed=None if seed < 0 else seed)
         try:
             self.robot.set_tip_force(list(g('tip_force_n').value))
         except ValueError as exc:
@@ -156,28 +225,35 @@ class SimulatedRobotNode(Node):
                                             'a non-zero quaternion (x, y, z, w)', str(exc))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
-                      'timeouts': 0}
+                      'timeouts': 0, 'dropped_poses': 0, 'outliers': 0}
         self._timeout_s = float(g('command_timeout_s').value)
         self._last_cmd_t: float | None = None
         self.last_refusal_reason = ''
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'measured_pose', qos)
+        self._pub_true = self.create_publisher(PoseStamped, 'true_pose', qos)
         self._pub_p = self.create_publisher(Float64MultiArray, 'measured_pressure', qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._refusals = Refusals(self, 'pressures', self._publish_diag)
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_command, qos)
-        self._mocap_timer = self.create_timer(1.0 / float(g('mocap_rate_hz').value), self._mocap)
+        self._mocap_timer = self.create_timer(1.0 / self.robot.effects.mocap_rate_hz,
+                                              self._mocap)
         self._diag_timer = self.create_timer(1.0, self._status)
         self._stop = threading.Event()
         self._physics_period = 1.0 / float(g('physics_rate_hz').value)
         self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
         self._thread.start()
+        e = self.robot.effects
         self.get_logger().info(
             f'simulating robot {cfg.name!r} ({self.robot.model.A} actuators, '
-            f'{self.robot.model.n} elements per actuator), '
-            f'regulator tau {self.robot.regulators.time_constant_s:g} s, mocap '
-            f'{g("mocap_rate_hz").value:g} Hz with {g("position_noise_mm").value:g} mm noise, '
+            f'{self.robot.model.n} elements per actuator), {g("plant").value} plant: '
+            f'regulators tau {e.regulator_time_constant_s:g} s, dead time '
+            f'{e.regulator_dead_time_s:g} s, hysteresis {e.regulator_hysteresis_pa / 1e3:g} kPa; '
+            f'creep {e.creep_fraction:g} over {e.creep_time_constant_s:g} s; mocap '
+            f'{e.mocap_rate_hz:g} Hz, latency {e.mocap_latency_s:g} s, '
+            f'{e.position_noise_m * 1e3:g} mm noise, outliers {e.outlier_probability:g}, '
+            f'dropouts {e.dropout_duration_s:g} s every {e.dropout_every_s:g} s; '
             f'commands in {unit}')
 
     # ------------------------------------------------------------ params
@@ -248,14 +324,24 @@ class SimulatedRobotNode(Node):
                 return
 
     def _mocap(self) -> None:
-        pos, R = self.robot.measure()   # reads the newest complete state (no lock needed)
+        now = self.get_clock().now()
+        pos, R = self.robot.true_pose()   # the newest complete state (no lock needed)
+        self._pub_true.publish(pose_message(pos, geometry.quaternion_from_rotation(R),
+                                            self._frame, now.to_msg()))
+        sample = self.robot.capture()
+        if sample is None:   # a dropout: the motion capture delivers nothing
+            self.stats['dropped_poses'] += 1
+            return
+        pos, R = sample.position, sample.rotation
         frame = self._frame
         if self._mocap_frame is not None:   # as a motion capture in its own frame sees it
             frame = self._mocap_frame.frame_id
             pos, R = self._mocap_frame.from_base(pos, R)
+        stamp = now - Duration(nanoseconds=int((self.robot.time_s - sample.captured_s) * 1e9))
         self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), frame,
-                                            self.get_clock().now().to_msg()))
+                                            stamp.to_msg()))
         self.stats['published_poses'] += 1
+        self.stats['outliers'] += int(sample.outlier)
 
     def _status(self) -> None:
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK

@@ -230,6 +230,11 @@ class IntegralFeedback:
         return self.state == WAITING
 
     @property
+    def blind(self) -> bool:
+        """True while no fresh measurement arrives: none yet, or a dropout (state ``STALE``)."""
+        return self.state in (WAITING, STALE)
+
+    @property
     def frozen(self) -> bool:
         """True while the integrator holds its correction (dropout, outlier, no command)."""
         return self.state in (STALE, OUTLIER, HELD)
