@@ -29,7 +29,10 @@ def plot(results: dict, cases, path: Path) -> None:
 
 
 def figure(results: dict, cases):
-    """3-D paths (target, measured FF, measured CL) and errors over time, one column per case.
+    """3-D paths (target, robot under FF and CL) and errors over time, one column per case.
+
+    ``cases``: objects with ``key`` (into ``results``), ``label`` and
+    ``bending_angle_deg`` (None: one segment).
 
     Only the evaluated period is drawn (no lead-in from the straight robot, no hold), and
     the 3-D axes use plain tick labels (no offset label that would collide with them).
@@ -39,11 +42,11 @@ def figure(results: dict, cases):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import ScalarFormatter
 
-    fig = plt.figure(figsize=(13, 11))
+    fig = plt.figure(figsize=(6.5 * len(cases), 11))
     gs = fig.add_gridspec(3, len(cases), height_ratios=[2.2, 1, 1], hspace=0.45, wspace=0.25)
     colours = {'none': 'tab:orange', 'integral': 'tab:green'}
     for col, case in enumerate(cases):
-        res = results.get(case.robot, {})
+        res = results.get(case.key, {})
         ax = fig.add_subplot(gs[0, col], projection='3d')
         ref = res.get('none') or res.get('integral')
         for mode in MODES:
@@ -51,7 +54,7 @@ def figure(results: dict, cases):
             if r and 'measured' in r:
                 mp = r['measured'] * 1e3   # the evaluated period only: no lead-in, no return
                 ax.plot(mp[:, 0], mp[:, 1], mp[:, 2], '-', lw=0.8, color=colours[mode],
-                        label=f'measured, {MODE_NAMES[mode]}')
+                        label=f'robot, {MODE_NAMES[mode]}')
         if ref and 'target' in ref:   # drawn last, dashed: visible over the closed loop
             tp = ref['target'] * 1e3
             ax.plot(tp[:, 0], tp[:, 1], tp[:, 2], '--', lw=1.4, color='k', label='target',
@@ -91,6 +94,6 @@ def figure(results: dict, cases):
             a.set_ylim(bottom=0.0)
             a.legend(fontsize=8, loc='lower center', bbox_to_anchor=(0.5, 1.0), ncol=2,
                      frameon=False)   # above the plot, not over the data
-    fig.suptitle('bellow_ancf_ros: mismatched simulated robot, measured pose vs target '
+    fig.suptitle('bellow_ancf_ros: mismatched simulated robot, true pose vs target '
                  f'({PAPER})', fontsize=10)
     return fig

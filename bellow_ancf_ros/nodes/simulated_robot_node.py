@@ -29,8 +29,8 @@ publishes
     published and stamped with that capture time; outliers and dropouts as set;
     seeded by ``seed``.
     ``true_pose`` (geometry_msgs/PoseStamped, ``base_frame``) at the same
-    rate: the exact pose now, the simulator's ground truth (for evaluation,
-    never for control).
+    rate: the exact pose of the newest physics step, stamped with that step's
+    time: the simulator's ground truth (for evaluation, never for control).
     ``measured_pressure`` (std_msgs/Float64MultiArray, same layout and unit as
     the commands) at ``physics_rate_hz``: the regulated pressures.
     ``/diagnostics``: 1 Hz status (solves, failed solves, refusals), WARN per
@@ -241,6 +241,7 @@ class SimulatedRobotNode(Node):
                                               self._mocap)
         self._diag_timer = self.create_timer(1.0, self._status)
         self._stop = threading.Event()
+        self._state_stamp = self.get_clock().now()   # when the robot reached its state
         self._physics_period = 1.0 / float(g('physics_rate_hz').value)
         self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
         self._thread.start()
@@ -310,6 +311,7 @@ class SimulatedRobotNode(Node):
                                           f'{self._timeout_s:g} s (controller dead or stopped)')
             failures = self.robot.failures
             self.robot.step(now - last)   # only this thread steps the robot
+            self._state_stamp = self.get_clock().now()
             failed = self.robot.failures > failures
             p = self.robot.pressures_pa
             last = now
@@ -324,11 +326,12 @@ class SimulatedRobotNode(Node):
                 return
 
     def _mocap(self) -> None:
-        now = self.get_clock().now()
-        pos, R = self.robot.true_pose()   # the newest complete state (no lock needed)
+        # the newest complete state (no lock needed) and when it was reached, on the ROS clock
+        state_t, state_stamp = self.robot.time_s, self._state_stamp
+        pos, R = self.robot.true_pose()
         self._pub_true.publish(pose_message(pos, geometry.quaternion_from_rotation(R),
-                                            self._frame, now.to_msg()))
-        sample = self.robot.capture()
+                                            self._frame, state_stamp.to_msg()))
+        sample = self.robot.capture(state_t)
         if sample is None:   # a dropout: the motion capture delivers nothing
             self.stats['dropped_poses'] += 1
             return
@@ -337,7 +340,7 @@ class SimulatedRobotNode(Node):
         if self._mocap_frame is not None:   # as a motion capture in its own frame sees it
             frame = self._mocap_frame.frame_id
             pos, R = self._mocap_frame.from_base(pos, R)
-        stamp = now - Duration(nanoseconds=int((self.robot.time_s - sample.captured_s) * 1e9))
+        stamp = state_stamp - Duration(nanoseconds=int((state_t - sample.captured_s) * 1e9))
         self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), frame,
                                             stamp.to_msg()))
         self.stats['published_poses'] += 1

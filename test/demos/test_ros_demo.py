@@ -19,8 +19,8 @@ def test_main_demo_short_run_one_segment(tmp_path):
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.closed_loop',
-                          '--cases', 'one_segment',
-                          '--period-scale', '0.25', '--lead-in', '1', '--hold', '1.5',
+                          '--cases', 'one_segment', '--speeds', '4',
+                          '--period-scale', '0.5', '--lead-in', '1', '--hold', '1.5',
                           '--no-goals', '--plot', str(plot)],
                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150,
                          stdin=subprocess.DEVNULL)
@@ -34,6 +34,7 @@ def test_main_demo_short_run_one_segment(tmp_path):
     assert out.count('all finite and within the limits: yes') == 2
     assert out.count('last (vent): [0.0, 0.0, 0.0]') == 2
     assert 'closed-loop / feedforward position RMSE' in out
+    assert 'realistic plant' in out and 'outliers (largest command step after one' in out
     assert plot.is_file() and plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
@@ -49,11 +50,11 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
                               0.02 * np.sin(t / 20 * 2 * np.pi), np.full_like(t, 0.20912)])
     res = {'t': t, 'target': circle, 'measured': circle + 1e-3, 'pos_err': np.full_like(t, 1e-3),
            'ang_err': np.full_like(t, 0.01)}
-    fig = ros_demo_plot.figure({'one_segment': {'none': res, 'integral': res},
-                                'two_segment': {'none': res, 'integral': res}}, ros_demo.CASES)
+    cols = ros_demo.columns()
+    fig = ros_demo_plot.figure({c.key: {'none': res, 'integral': res} for c in cols}, cols)
     fig.canvas.draw()
     axes3d = [a for a in fig.axes if a.name == '3d']
-    assert len(axes3d) == 2
+    assert len(axes3d) == 4
     for ax in axes3d:
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             assert axis.get_major_formatter().get_offset() == ''

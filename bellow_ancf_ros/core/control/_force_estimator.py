@@ -25,12 +25,15 @@ seen (:meth:`TipForceEstimator.blind_directions`); for one segment that is
 the vertical force for the first samples (0.55 mm/N against 8.2 mm/N
 sideways).  :meth:`TipForceEstimator.tare` zeroes the reading at the
 current estimate, as a force sensor's tare does.  A sample whose model
-solve fails is refused (counted), never folded in.
+solve fails is refused (counted), never folded in; so is an outlier (a
+swapped marker): a position farther than ``outlier_gate_m`` from the median
+of the last five received, the same gate as the closed loop's.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,7 +75,7 @@ class TipForceEstimator:
     def __init__(self, model: RobotModel, mode: str = "force", payload_kg: float = 0.0,
                  position_noise_m: float = 0.15e-3, angle_noise_rad: float = math.radians(0.1),
                  initial_std_n: float = 1.0, force_rate: float = 0.0,
-                 blind_std_n: float = 0.05) -> None:
+                 blind_std_n: float = 0.05, outlier_gate_m: float = 0.005) -> None:
         """Set up; raises ValueError naming a bad argument, its value and what is allowed."""
         if mode not in ESTIMATOR_MODES:
             raise ValueError(f"mode {mode!r} is not allowed; allowed: "
@@ -80,7 +83,8 @@ class TipForceEstimator:
         for name, v, lo in (("position_noise_m", position_noise_m, 0.0),
                             ("angle_noise_rad", angle_noise_rad, 0.0),
                             ("initial_std_n", initial_std_n, 0.0),
-                            ("force_rate", force_rate, -1.0), ("blind_std_n", blind_std_n, 0.0)):
+                            ("force_rate", force_rate, -1.0), ("blind_std_n", blind_std_n, 0.0),
+                            ("outlier_gate_m", outlier_gate_m, 0.0)):
             if not (math.isfinite(float(v)) and float(v) > lo):
                 raise ValueError(f"{name} = {v!r} is not allowed; allowed: a finite number "
                                  f"{'>= 0' if lo < 0 else '> 0'}")
@@ -98,6 +102,8 @@ class TipForceEstimator:
         self._n = n
         self.tare_offset = np.zeros(n)
         self.samples = self.refused = 0
+        self.outlier_gate_m = float(outlier_gate_m)
+        self._window: deque = deque(maxlen=5)   # received positions (outlier gate)
         self.last_reason = ""
         self._fw = None
         self._t = None
@@ -138,6 +144,11 @@ class TipForceEstimator:
             return self._refuse("non-finite sample")
         if np.any(p < cfg.p_min - 1.0) or np.any(p > cfg.p_max + 1.0):
             return self._refuse("pressures outside the limits")
+        window = list(self._window)
+        self._window.append(y)
+        if len(window) >= 3 and (np.linalg.norm(y - np.median(window, axis=0))
+                                 > self.outlier_gate_m):
+            return self._refuse("outlier: the position is far from the recent ones")
         p = np.clip(p, cfg.p_min, cfg.p_max)
         if time_s is not None:
             if self._t is not None and self.force_rate > 0:

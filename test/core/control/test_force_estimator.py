@@ -96,6 +96,19 @@ def test_bad_samples_are_refused_and_counted_bad_settings_named(calibrated):
         TipForceEstimator(calibrated, position_noise_m=-1)
 
 
+def test_an_outlier_is_refused_and_moves_nothing(calibrated):
+    sim = _settled_robot(6)
+    est = TipForceEstimator(calibrated)
+    for _ in range(20):
+        pos, R = sim.measure()
+        assert est.update(sim.pressures_pa, pos, R[:, 2])
+    before = est.estimate().force_n.copy()
+    pos, R = sim.measure()
+    assert not est.update(sim.pressures_pa, pos + np.array([0.0, 0.02, 0.0]), R[:, 2])
+    assert 'outlier' in est.last_reason and est.refused == 1
+    np.testing.assert_array_equal(est.estimate().force_n, before)
+
+
 def test_an_uncalibrated_model_reads_a_force_that_is_not_there():
     """Why the estimator needs the calibrated robot file.
 
