@@ -131,14 +131,14 @@ def columns(cases=CASES, speeds=SPEEDS, period_scale: float = 1.0) -> list:
 
 
 # ---------------------------------------------------------------- one run
-def _recorder(domain: int) -> Recorder:
+def _recorder(domain: int, name: str) -> Recorder:
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
     from std_msgs.msg import Float64MultiArray
     return Recorder(domain, {
         'target_pose': PoseStamped, 'pressure_command': Float64MultiArray,
         'measured_pose': PoseStamped, 'true_pose': PoseStamped, 'predicted_pose': PoseStamped,
-        '/diagnostics': DiagnosticArray})
+        '/diagnostics': DiagnosticArray}, name=name)
 
 
 class Run:
@@ -150,7 +150,7 @@ class Run:
         self.case, self.col, self.mode, self.args, self.log_dir = case, col, mode, args, log_dir
         self.name = f'{col.label}, {MODE_NAMES[mode]}'
         self.env = child_env(domain)
-        self.rec = _recorder(domain)
+        self.rec = _recorder(domain, f'ros_demo_recorder_{mode}')
         self.procs: dict[str, NodeProcess] = {}
         self.tag = f'{case.robot}_{col.speed:g}x_{mode}_'
         self.ok = True
