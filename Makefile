@@ -54,6 +54,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/fuzz_bench.py
 	$(VENV)/bin/python bench/budget_bench.py
 	$(VENV)/bin/python bench/redundant_bench.py
+	$(VENV)/bin/python bench/effects_bench.py
 	$(VENV)/bin/python bench/stream_latency.py one_segment
 	$(VENV)/bin/python bench/stream_latency.py two_segment
 

@@ -117,7 +117,7 @@ def main(argv=None) -> int:
     for r in robots:
         two = r == 'two_segment'
         for v in speeds:
-            print(f'\n{r}, {v:g}x the paper\'s speed ({PAPER_PERIOD_S / v:g} s period):')
+            print(f'\n{r}, {v:g}x the paper speed ({PAPER_PERIOD_S / v:g} s period):')
             head = f'  {"row":30s} {"RMSE mm":>8s} {"max mm":>7s} {"cost mm":>8s}'
             if two:
                 head += f' {"RMSE deg":>8s} {"max deg":>7s}'

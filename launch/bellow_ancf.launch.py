@@ -14,8 +14,9 @@ unless ``with_trajectory:=false`` ``trajectory_publisher``, and with
 ``rviz:=true`` rviz2 with the installed ``rviz/bellow_ancf.rviz`` (where
 rviz2 is installed; otherwise a log line says it is not), and with
 ``sim:=true`` ``simulated_robot_node`` (``sim_robot_config``, default the
-mismatched one-segment robot; it vents after ``command_timeout_s`` 0.5 s
-without a command, as a regulator driver does).  ``feedback`` and
+mismatched one-segment robot, ``sim_plant`` realistic or ideal hardware; it
+vents after ``command_timeout_s`` 0.5 s without a command, as a regulator
+driver does).  ``feedback`` and
 ``payload_kg`` go to the controller (and the payload to the forward node).
 
 One outcome: a node that ends (a robot file that does not load ends the
@@ -105,6 +106,10 @@ def generate_launch_description():
         DeclareLaunchArgument('sim_robot_config', default_value='one_segment_mismatched',
                               description="the simulated robot's own file (two segments: "
                                           'two_segment_mismatched)'),
+        DeclareLaunchArgument('sim_plant', default_value='realistic',
+                              description="the simulated robot's hardware: realistic (lag, "
+                                          'dead time, hysteresis, creep, mocap latency, '
+                                          'outliers, dropouts) or ideal'),
         DeclareLaunchArgument('rviz', default_value='false',
                               description='start rviz2 with the package RViz config'),
         DeclareLaunchArgument('rviz_config', default_value=default_rviz,
@@ -139,6 +144,7 @@ def generate_launch_description():
         output='screen',
         parameters=[params_file, {'robot_config': _typed('sim_robot_config', str),
                                   'base_frame': _typed('base_frame', str),
+                                  'plant': _typed('sim_plant', str),
                                   'command_timeout_s': 0.5}, unit],
         condition=IfCondition(LaunchConfiguration('sim')), on_exit=ends_all,
     )

@@ -327,11 +327,11 @@ class InverseKinetostaticNode(LifecycleNode):
                                    time_budget_s=PAYLOAD_CHECK_BUDGET_S)
 
     def _feedback_heartbeat(self):
-        """Feedback state for the heartbeat; WARN while it falls back to feedforward."""
+        """Feedback state for the heartbeat; WARN while no fresh measured pose arrives."""
         values = self._feedback.status()
         if self._feedback.fallback and self._active:
             return (DiagnosticStatus.WARN,
-                    f'feedback fallback, pure feedforward: {values.get("feedback_state", "")}',
+                    f'feedback without measured poses: {values.get("feedback_state", "")}',
                     values)
         return values
 

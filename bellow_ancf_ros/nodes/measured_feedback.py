@@ -12,10 +12,12 @@ poses may come in ``base_frame``, in the robot file's mocap frame
 any frame tf2 knows (:class:`~bellow_ancf_ros.nodes.frames.PoseFrames`);
 poses in another frame, with NaN/inf or (two or more segments) an
 orientation that cannot be normalised are refused (throttled warning,
-diagnostics WARN) and never reach the integrator.  A measured pose's stamp
-says when it was taken: its age decides the fallback to feedforward, and it
-is compared with the target in effect at that time (a zero stamp, or one in
-the future, counts as taken on arrival).
+diagnostics WARN) and never reach the integrator; so are outliers (far from
+the median of the last five).  A measured pose's stamp says when it was
+taken: its age decides whether the integrator holds its correction (a
+dropout), and it is compared with the target wanted at that time (a zero
+stamp, or one in the future, counts as taken on arrival; a target's stamp is
+the time it is wanted at).
 """
 
 from __future__ import annotations

@@ -32,10 +32,11 @@ symmetric about its base z-axis (identical actuators at equal angles), so the
 error a mismatch of its shared parameters (pitch radius, ``D_a``, stiffness,
 masses) causes turns with the azimuth: constant in this frame, it is learned
 once, and a circle about the axis is tracked without the lag a base-frame
-integrator has while its correction turns (measured on the two-segment
-bending circle at four times the paper's speed: 0.18 mm RMSE against 5.5 mm
-in the base frame).  An error fixed in the base frame (a mocap offset, one
-actuator stiffer than the others) turns in this frame instead:
+integrator has while its correction turns (``bench/effects_bench.py``, the
+realistic robot, two-segment bending circle at four times the paper's speed:
+0.155 mm RMSE against 5.187 mm in the base frame).  An error fixed in the
+base frame (a mocap offset, one actuator stiffer than the others) turns in
+this frame instead:
 ``correction_frame = 'base'`` integrates in the base frame.  Within
 :data:`AZIMUTH_MIN_RADIUS_M` of the axis the azimuth is undefined and the
 last one is kept.
