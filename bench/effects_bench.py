@@ -29,7 +29,7 @@ import numpy as np
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 from bellow_ancf_ros.core.control import (EFFECTS, FeedbackSettings, LoopSimulation,
                                           PlantEffects, SimulatedRobot)
-from bellow_ancf_ros.core.experiments import trajectory
+from bellow_ancf_ros.core.experiments import trajectory_target
 
 PAPER_PERIOD_S = 20.0
 CONTROL_HZ = 50.0
@@ -47,15 +47,10 @@ def _rows():
 
 
 def _circle(cfg, period):
-    name = 'planar_circle' if cfg.n_segments == 1 else 'bending_circle'
-    kw = {'period': period}
-    if cfg.n_segments > 1:
-        kw['bending_angle_deg'] = 10.0
-
-    def target(t):
-        p, z = trajectory(name, t, cfg, **kw)
-        return p[0], None if z is None else z[0]
-    return target
+    """The paper's circle for this robot (two segments: bending at 10 deg) as target(t)."""
+    if cfg.n_segments == 1:
+        return trajectory_target('planar_circle', cfg, period=period)
+    return trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0)
 
 
 def run_one(job):

@@ -811,6 +811,28 @@ def test_trajectory_publisher_bending_circle(h, two):
     np.testing.assert_allclose(ppos, pos[0], atol=1e-15)
 
 
+def test_trajectory_publisher_preview_stamps_the_pose_with_the_time_it_is_wanted(h, one):
+    """preview_s: the pose wanted that far ahead, stamped with that time (in the future)."""
+    got = h.record(PoseStamped, 'target_pose')
+    h.add(TrajectoryPublisher, rate_hz=50.0, period_s=4.0, preview_s=0.2, ramp_in_s=0.0)
+    wait_for(lambda: h.count('target_pose') >= 20, what='targets')
+    ros_minus_mono = h.client.get_clock().now().nanoseconds * 1e-9 - time.monotonic()
+    p = trajectories.default_parameters('planar_circle', one.cfg)
+    c = np.asarray(p['center'])
+    msgs = list(got)
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for _, m in msgs])
+    lead = stamps - (np.array([t for t, _ in msgs]) + ros_minus_mono)
+    assert 0.15 < np.median(lead) < 0.21, lead      # wanted 0.2 s after it was sent
+    # the path's clock: the first target is already 0.2 s along the circle
+    pos = pose_of(msgs[0][1])[0] - c
+    assert math.atan2(pos[1], pos[0]) % (2 * math.pi) >= 0.9 * 2 * math.pi * 0.2 / 4.0
+    # consecutive targets: the pose at each stamp (the same clock)
+    for (_, a), (_, b), sa, sb in zip(msgs, msgs[1:], stamps, stamps[1:]):
+        pa, pb = pose_of(a)[0] - c, pose_of(b)[0] - c
+        turn = (math.atan2(pb[1], pb[0]) - math.atan2(pa[1], pa[0])) % (2 * math.pi)
+        assert turn == pytest.approx(2 * math.pi * (sb - sa) / 4.0, abs=2e-3)
+
+
 def test_trajectory_publisher_one_segment_rejects_bending(h, one):
     got = h.record(PoseStamped, 'target_pose')
     node = h.add(TrajectoryPublisher, rate_hz=50.0, trajectory='planar_rose')

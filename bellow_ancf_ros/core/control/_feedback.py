@@ -106,6 +106,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
+from ._history import bracket
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback', 'LoopMargins', 'loop_margins']
 
@@ -337,12 +338,7 @@ class IntegralFeedback:
         wanted at or before ``t`` and the next one; the newest one after the
         last; None before the first one since a reset.
         """
-        before = after = None
-        for entry in self._history:
-            if entry[0] > t:
-                after = entry
-                break
-            before = entry
+        before, after = bracket(self._history, t)
         if before is None:
             return None
         if after is None or after[0] <= before[0]:

@@ -37,6 +37,7 @@ from ..model import RobotConfig, RobotModel, load_robot, tip_load
 from ..solve import ForwardResult, solve_forward
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import PlantEffects
+from ._history import bracket
 from ._regulators import BellowCreep, PressureRegulators
 
 __all__ = ['SimulatedRobot']
@@ -178,12 +179,7 @@ class SimulatedRobot:
         Before the oldest kept step: that step; after the newest: the newest.
         """
         with self._lock:
-            before = after = None
-            for entry in self._history:
-                if entry[0] > t:
-                    after = entry
-                    break
-                before = entry
+            before, after = bracket(self._history, t)
         if before is None:
             before = after
         if after is None or after[0] <= before[0]:

@@ -66,6 +66,7 @@ from ..model import RobotConfig, Stage1, load_robot
 
 __all__ = [
     'lead_in',
+    'trajectory_target',
     'MULTI_SEGMENT_TRAJECTORIES',
     'ONE_SEGMENT_TRAJECTORIES',
     'PAPER_BENDING_ANGLES_DEG',
@@ -305,6 +306,24 @@ def trajectory(name: str, t: Any, config: Any = 'one_segment', **params: Any):
         np.full_like(phi, math.cos(beta)),
     ])
     return pos, z_axes
+
+
+def trajectory_target(name: str, config: Any = 'one_segment', **params: Any):
+    """Trajectory ``name`` as a function of time: ``target(t) -> (position (3,), z-axis or None)``.
+
+    The parameters are checked once, here (``ValueError`` as
+    :func:`trajectory`); the z-axis is None for one segment.  What a
+    closed-loop simulation (:class:`~bellow_ancf_ros.core.control.LoopSimulation`)
+    is fed.
+    """
+    cfg = _config(config)
+    _check_name(name, cfg)
+    _merge(name, cfg, params)
+
+    def target(t: float):
+        pos, z = trajectory(name, t, cfg, **params)
+        return pos[0], None if z is None else z[0]
+    return target
 
 
 def lead_in(start_position, start_z, end_position, end_z, fraction):
