@@ -257,7 +257,8 @@ def test_closed_loop_vents_on_deactivate_and_stays_vented(h, one):
     from lifecycle_msgs.srv import ChangeState
 
     h.record(Float64MultiArray, 'pressure_command')
-    sim = h.add(SimulatedRobotNode, seed=4)
+    # the ideal robot: its poses come at a steady 100 Hz (no dropout), this test's clock
+    sim = h.add(SimulatedRobotNode, seed=4, plant='ideal')
     node = h.add(InverseKinetostaticNode, feedback='integral')
     pub = h.publisher(PoseStamped, 'target_pose')
     wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')

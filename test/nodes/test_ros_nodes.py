@@ -879,10 +879,15 @@ def test_trajectory_publisher_leads_in_from_the_held_pose(h, one):
     assert np.linalg.norm(start - held) > 5e-3
     wait_for(lambda: h.count('target_pose') > n0 + 80, what='80 targets')
     with h.lock:
-        pos = np.array([pose_of(m)[0] for _, m in h.msgs['target_pose'][n0 + 1:]])
+        msgs = [m for _, m in h.msgs['target_pose'][n0 + 1:]]
+    pos = np.array([pose_of(m)[0] for m in msgs])
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in msgs])
     assert np.linalg.norm(pos[0] - held) < 0.5e-3                  # from where it was
-    steps = np.linalg.norm(np.diff(pos, axis=0), axis=1)
-    assert steps.max() < 1.5e-3, steps.max()                       # 50 Hz, no 13 mm jump
+    # no 13 mm jump: no faster than the minimum-jerk peak (1.875 * distance / duration) plus
+    # the path's own speed, per the time between the targets (a late tick is a longer step)
+    speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / np.maximum(np.diff(stamps), 1e-3)
+    limit = 1.875 * np.linalg.norm(start - held) / 1.0 + 0.01
+    assert speed.max() < 1.2 * limit, (speed.max(), limit)
     k = int(np.argmin(np.linalg.norm(pos - start, axis=1)))
     assert np.linalg.norm(pos[k] - start) < 0.5e-3                 # then onto the path
 
