@@ -18,10 +18,13 @@ as a unit quaternion ``x, y, z, w``).
   ``geometry_msgs/PoseStamped`` in the motion-capture frame.  Times are the
   bag's receive times.  :func:`settled_samples` turns the two streams into
   samples: a command that repeats the previous one continues its step; poses
-  within ``settle_s`` after a command change are dropped, the rest of the step
-  is averaged (position mean, sign-aligned normalised quaternion mean); a step
-  whose poses still drift (first half and second half of the kept poses differ
-  by more than ``drift_tol_m``) is dropped as not settled.
+  within ``settle_s`` after a command change are dropped, and so are outliers
+  (a swapped marker: farther than :data:`OUTLIER_M` from the median of the
+  five poses around it; a smooth motion is no outlier); the rest of the step
+  is averaged (position mean,
+  sign-aligned normalised quaternion mean); a step whose poses still drift
+  (first half and second half of the kept poses differ by more than
+  ``drift_tol_m``) is dropped as not settled.
 
 Every problem is a :class:`RecordingError` (a ``ValueError``) with a one-line
 message naming the file, line or topic.  No ROS import.
@@ -185,6 +188,18 @@ def write_csv(path, recording: Recording) -> None:
 
 
 # --------------------------------------------------------- settled samples
+#: A pose this far from the median of the five around it is an outlier [m] (the loop's gate).
+OUTLIER_M = 0.005
+
+
+def _not_spikes(pos: np.ndarray) -> np.ndarray:
+    """True for the poses within :data:`OUTLIER_M` of the median of the five around them."""
+    n = len(pos)
+    idx = np.clip(np.arange(n)[:, None] + np.arange(-2, 3)[None, :], 0, n - 1)
+    med = np.median(pos[idx], axis=1)
+    return np.linalg.norm(pos - med, axis=1) <= OUTLIER_M
+
+
 def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float = 0.5,
                     drift_tol_m: float = 0.5e-3, source: str = '') -> Recording:
     """Average the poses of every command step after ``settle_s`` (see the module doc).
@@ -209,7 +224,7 @@ def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float =
     starts = [0] + [k for k in range(1, len(cmd_t)) if not np.array_equal(cmd_p[k], cmd_p[k - 1])]
     ends = list(cmd_t[starts[1:]]) + [np.inf]
     out_p, out_x, out_q, out_t = [], [], [], []
-    no_pose = drifting = nonfinite = 0
+    no_pose = drifting = nonfinite = outliers = 0
     for k, end in zip(starts, ends):
         if not np.all(np.isfinite(cmd_p[k])):
             nonfinite += 1
@@ -221,6 +236,10 @@ def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float =
                   & np.all(np.isfinite(pose_quat[sel]), axis=1))
             ok &= np.linalg.norm(pose_quat[sel], axis=1) > _MIN_QUAT_NORM
             sel = sel[ok]
+        if sel.size >= 3:
+            inlier = _not_spikes(pose_pos[sel])
+            outliers += int(np.count_nonzero(~inlier))
+            sel = sel[inlier]
         if sel.size == 0:
             no_pose += 1
             continue
@@ -244,6 +263,9 @@ def settled_samples(cmd_t, cmd_p, pose_t, pose_pos, pose_quat, settle_s: float =
                      f'{drift_tol_m * 1e3:g} mm dropped (not settled)')
     if nonfinite:
         notes.append(f'{nonfinite} command(s) with NaN or inf pressures dropped')
+    if outliers:
+        notes.append(f'{outliers} pose(s) farther than {OUTLIER_M * 1e3:g} mm from the median '
+                     'of the five around them dropped (outliers)')
     if not out_p:
         raise RecordingError(
             f'{source}: the poses never settle: none of the {len(starts)} command steps has '

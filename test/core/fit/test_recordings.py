@@ -135,3 +135,21 @@ def test_poses_that_never_settle_are_refused():
     # at rest, every step is one sample
     rec = settled_samples(cmd_t, cmd_p, t, 0 * drifting, quat, settle_s=0.5)
     assert len(rec) == 3 and not rec.notes
+
+
+def test_a_swapped_marker_sample_is_dropped_not_averaged_in():
+    t = np.arange(0.0, 3.0, 0.01)
+    cmd_t = [0.0, 1.0, 2.0]
+    cmd_p = [[1.0, 0, 0], [2.0, 0, 0], [3.0, 0, 0]]
+    rng = np.random.default_rng(0)
+    pos = np.array([0.01, 0.0, 0.1]) + rng.normal(0.0, 0.15e-3, (len(t), 3))
+    quat = np.tile([0.0, 0, 0, 1], (len(t), 1))
+    clean = settled_samples(cmd_t, cmd_p, t, pos, quat, settle_s=0.3)
+    bad = pos.copy()
+    bad[150] += [0.0, 0.02, 0.0]                 # 20 mm off, in the second step's window
+    rec = settled_samples(cmd_t, cmd_p, t, bad, quat, settle_s=0.3)
+    assert len(rec) == 3
+    # the step without it is the mean of one sample less: within the noise of the mean
+    assert np.linalg.norm(rec.positions_m[1] - clean.positions_m[1]) < 0.05e-3
+    assert any('1 pose(s) farther than 5 mm' in n for n in rec.notes)
+    # averaged in, it would have moved that step by 20 mm / 70 samples = 0.29 mm
