@@ -20,6 +20,12 @@
    after the best common delay (regulator lag) within one second:
    RMSE before and after, ``demo_calibration_tracking.png``.
 
+The simulated robot is the ideal one (``plant: ideal``) unless
+``--realistic``: with the realistic one the bellows' creep (15 % over 2 s)
+is still moving at the end of 1.2 s steps, which the quasi-static
+calibration reads as a model error (docs/calibration.md gives the measured
+figures); on real bellows, hold each step for several creep time constants.
+
 All nodes are separate processes on an isolated random ``ROS_DOMAIN_ID``
 (localhost discovery).  Exit status 0 when every stage ran and the calibrated
 file tracks better than the nominal one; 1 otherwise.
@@ -122,6 +128,9 @@ def _parse(argv):
     ap.add_argument('--settle-s', type=float, default=0.6)
     ap.add_argument('--track-s', type=float, default=20.0, help='tracking run per robot file [s]')
     ap.add_argument('--out-dir', default='.', help='where the bag, robot file and plots go')
+    ap.add_argument('--realistic', dest='plant', action='store_const', const='realistic',
+                    default='ideal', help='the realistic simulated robot (creep, hysteresis, '
+                                          'mocap outliers and dropouts) instead of the ideal one')
     return ap.parse_args(argv)
 
 
@@ -228,7 +237,8 @@ def main(argv=None) -> int:
           f'rotation vector {MOCAP_ROTVEC_DEG.tolist()} deg')
     rec = _MocapRecorder(domain)
     sim = NodeProcess('simulated_robot_node',
-                      {'robot_config': f'{args.robot}_mismatched', 'seed': 1},
+                      {'robot_config': f'{args.robot}_mismatched', 'seed': 1,
+                       'plant': args.plant},
                       env, logs, remaps={'measured_pose': 'sim/measured_pose'})
     procs = [sim]
     try:
