@@ -131,6 +131,15 @@ def plant_effects(get) -> PlantEffects:
     values = {field: scale * float(get(name).value)
               for name, field, scale, *_ in EFFECT_PARAMETERS
               if plant == 'realistic' or name in _IDEAL_KEEPS}
+    if plant == 'realistic':   # the pairs, in the node's own units
+        lo, hi = get('mocap_outlier_min_mm').value, get('mocap_outlier_max_mm').value
+        if hi < lo:
+            raise StartupParameterError('mocap_outlier_max_mm', hi,
+                                        f'at least mocap_outlier_min_mm ({lo:g})')
+        dur, every = get('mocap_dropout_duration_s').value, get('mocap_dropout_every_s').value
+        if dur > 0 and every > 0 and dur >= every:
+            raise StartupParameterError('mocap_dropout_duration_s', dur,
+                                        f'shorter than mocap_dropout_every_s ({every:g})')
     try:
         return PlantEffects(**values) if plant == 'realistic' else PlantEffects.ideal(**values)
     except ValueError as exc:
