@@ -264,11 +264,14 @@ class TrajectoryPublisher(Node):
             f'({np.linalg.norm(held[0] - start) * 1e3:.1f} mm to the path)')
         return (held[0], held[1], duration)
 
-    def _stamp(self, ahead_s: float):
-        """Now plus ``ahead_s`` on the node's clock, as a message stamp."""
-        return (self.get_clock().now() + Duration(nanoseconds=int(ahead_s * 1e9))).to_msg()
+    @staticmethod
+    def _stamp(now, ahead_s: float):
+        """``now`` plus ``ahead_s``, as a message stamp."""
+        return (now + Duration(nanoseconds=int(ahead_s * 1e9))).to_msg()
 
     def _tick(self) -> None:
+        # one instant for the path's clock and the stamp: the pose is the one wanted at it
+        now = self.get_clock().now()
         t = time.monotonic() - self._t0
         if t < 0 or self.finished:
             return
@@ -289,7 +292,7 @@ class TrajectoryPublisher(Node):
                                  t / duration)
                 q = geometry.quaternion_from_z_axis(z) if multi else np.array([0, 0, 0, 1.0])
                 self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
-                                               self._stamp(preview)))
+                                               self._stamp(now, preview)))
                 return
             t -= duration
         if not self.get_parameter('loop').value and t > self._period():
@@ -298,7 +301,7 @@ class TrajectoryPublisher(Node):
             return
         pos, q = self.pose_at(t)
         self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
-                                       self._stamp(preview)))
+                                       self._stamp(now, preview)))
         self.published += 1
 
 
