@@ -59,11 +59,9 @@ def run_one(job):
     limit_blas_threads()
     model = RobotModel(load_robot(robot_name))
     robot = SimulatedRobot(robot_name + '_mismatched', seed=SEED, effects=effects)
-    preview = (effects.regulator_dead_time_s + effects.regulator_time_constant_s
-               + 0.5 / CONTROL_HZ)
     sim = LoopSimulation(model, robot,
                          FeedbackSettings(correction_frame=frame) if feedback else None,
-                         control_rate_hz=CONTROL_HZ, preview_s=preview)
+                         control_rate_hz=CONTROL_HZ, preview_s=effects.preview_s(CONTROL_HZ))
     period = PAPER_PERIOD_S / speed
     circle = _circle(model.cfg, period)
     t_wall = time.perf_counter()

@@ -307,8 +307,7 @@ def preview_s(plant: str) -> float:
     """The trajectory's preview: the regulators' dead time and lag, half a target period."""
     from ..core.control import PlantEffects
     e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
-    return round(e.regulator_dead_time_s + e.regulator_time_constant_s
-                 + 0.5 / TARGET_RATE_HZ, 3)
+    return round(e.preview_s(TARGET_RATE_HZ), 3)
 
 
 def run_column(col: Column, args, domains: list, log_dir: Path) -> dict:
@@ -491,8 +490,7 @@ def _fmt(r: dict, two: bool) -> str:
 
 def _goals(col: Column, cl: dict, two: bool) -> tuple[bool, str]:
     """Whether the closed loop met the column's goals, and the line that says so."""
-    goal_mm, goal_deg = GOALS[(2 if two else 1, col.speed)] if (
-        (2 if two else 1, col.speed) in GOALS) else (math.inf, None)
+    goal_mm, goal_deg = GOALS.get((2 if two else 1, col.speed), (math.inf, None))
     s_mm, s_deg = STEADY_GOALS[2 if two else 1]
     ok = _rms(cl['pos_err']) * 1e3 <= goal_mm and (
         goal_deg is None or math.degrees(_rms(cl['ang_err'])) <= goal_deg)

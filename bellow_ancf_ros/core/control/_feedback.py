@@ -107,13 +107,14 @@ from scipy.optimize import brentq
 
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ._history import bracket
+from ._median_gate import WINDOW, MedianGate
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback', 'LoopMargins', 'loop_margins']
 
 #: Targets older than this are forgotten [s] (measurements are compared with the target then).
 HISTORY_S = 2.0
 #: Received measurements whose median an accepted one must lie near (outlier gate).
-OUTLIER_WINDOW = 5
+OUTLIER_WINDOW = WINDOW
 
 #: Values of the inverse node's ``feedback`` parameter.
 FEEDBACK_MODES = ('none', 'integral')
@@ -160,6 +161,12 @@ class FeedbackSettings:
                                  f'got {v!r}')
 
 
+def _turn_from_median(z: np.ndarray, median: np.ndarray) -> float:
+    """Angle [rad] from the (renormalised) median z-axis to ``z``; 0 for a zero median."""
+    n = float(np.linalg.norm(median))
+    return float(np.linalg.norm(rotation_between(median / n, z))) if n > 0 else 0.0
+
+
 def _clamp(v: np.ndarray, limit: float) -> np.ndarray:
     n = float(np.linalg.norm(v))
     return v * (limit / n) if n > limit else v
@@ -181,7 +188,9 @@ class IntegralFeedback:
         self.reset()
         self._meas_t: float | None = None
         self._meas_p = self._meas_z = None
-        self._window: deque = deque(maxlen=OUTLIER_WINDOW)   # received samples (p, z)
+        s = self.settings
+        self._gate_p = MedianGate(s.outlier_gate_m)
+        self._gate_z = MedianGate(s.outlier_gate_rad, distance=_turn_from_median)
         self._outlier = False       # the newest received sample was an outlier
         self.rejected = 0
         self.resets = 0
@@ -242,22 +251,6 @@ class IntegralFeedback:
         return self.state in (STALE, OUTLIER, HELD)
 
     # ------------------------------------------------------------ inputs
-    def _is_outlier(self, p: np.ndarray, z: np.ndarray | None) -> bool:
-        """Farther than the gate from the median of the recent received samples."""
-        if len(self._window) < 3:
-            return False
-        s = self.settings
-        med_p = np.median(np.array([w[0] for w in self._window]), axis=0)
-        if np.linalg.norm(p - med_p) > s.outlier_gate_m:
-            return True
-        zs = [w[1] for w in self._window if w[1] is not None]
-        if self.use_orientation and z is not None and len(zs) >= 3:
-            med_z = np.median(np.array(zs), axis=0)
-            n = float(np.linalg.norm(med_z))
-            if n > 0 and np.linalg.norm(rotation_between(med_z / n, z)) > s.outlier_gate_rad:
-                return True
-        return False
-
     def measurement(self, t: float, position: Any, z_axis: Any = None) -> bool:
         """Record a pose captured at time ``t``; False if refused as an outlier.
 
@@ -271,8 +264,10 @@ class IntegralFeedback:
             raise ValueError('measured pose must be finite')
         if z is not None:
             z = z / np.linalg.norm(z)
-        self._outlier = self._is_outlier(p, z)
-        self._window.append((p, z))
+        # both gates see every sample (each remembers it), then either may refuse it
+        far_p = self._gate_p.refuses(p)
+        far_z = self.use_orientation and z is not None and self._gate_z.refuses(z)
+        self._outlier = far_p or far_z
         if self._outlier:
             self.rejected += 1
             return False

@@ -33,13 +33,13 @@ of the last five received, the same gate as the closed loop's.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..model import RobotModel, tip_load
 from ..solve import solve_forward, tip_compliance
+from ._median_gate import MedianGate
 
 __all__ = ["ESTIMATOR_MODES", "ForceEstimate", "TipForceEstimator"]
 
@@ -103,7 +103,7 @@ class TipForceEstimator:
         self.tare_offset = np.zeros(n)
         self.samples = self.refused = 0
         self.outlier_gate_m = float(outlier_gate_m)
-        self._window: deque = deque(maxlen=5)   # received positions (outlier gate)
+        self._gate = MedianGate(self.outlier_gate_m)   # received positions
         self.last_reason = ""
         self._fw = None
         self._t = None
@@ -144,10 +144,7 @@ class TipForceEstimator:
             return self._refuse("non-finite sample")
         if np.any(p < cfg.p_min - 1.0) or np.any(p > cfg.p_max + 1.0):
             return self._refuse("pressures outside the limits")
-        window = list(self._window)
-        self._window.append(y)
-        if len(window) >= 3 and (np.linalg.norm(y - np.median(window, axis=0))
-                                 > self.outlier_gate_m):
+        if self._gate.refuses(y):
             return self._refuse("outlier: the position is far from the recent ones")
         p = np.clip(p, cfg.p_min, cfg.p_max)
         if time_s is not None:

@@ -129,6 +129,16 @@ class PlantEffects:
             raise ValueError(f'effect {effect!r}: not one of {list(EFFECTS)}')
         return PlantEffects.ideal(**{k: getattr(self, k) for k in EFFECTS[effect]})
 
+    def preview_s(self, target_rate_hz: float) -> float:
+        """How far ahead to command a trajectory: dead time + time constant + half a period.
+
+        The regulators' known lag, and half the period of a target stream at
+        ``target_rate_hz`` (a target holds for one period); what
+        ``trajectory_publisher``'s ``preview_s`` compensates.
+        """
+        return (self.regulator_dead_time_s + self.regulator_time_constant_s
+                + 0.5 / float(target_rate_hz))
+
     def replace(self, **changes: float) -> 'PlantEffects':
         """A copy with ``changes`` (checked like the constructor)."""
         return dataclasses.replace(self, **changes)

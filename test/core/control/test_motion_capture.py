@@ -60,6 +60,8 @@ def test_plant_effects_presets_and_checks():
         0.06, 0.015, 1e3, 0.15, 120.0, 0.008, 0.005, 0.5)
     assert (ideal.regulator_time_constant_s, ideal.regulator_dead_time_s, ideal.creep_fraction,
             ideal.outlier_probability, ideal.dropout_every_s) == (0.1, 0.0, 0.0, 0.0, 0.0)
+    assert real.preview_s(50.0) == pytest.approx(0.015 + 0.06 + 0.01)
+    assert ideal.preview_s(10.0) == pytest.approx(0.1 + 0.05)
     only = real.only('bellows creep')
     assert only.creep_fraction == 0.15 and only.regulator_dead_time_s == 0.0
     with pytest.raises(ValueError, match="effect 'wind'"):
