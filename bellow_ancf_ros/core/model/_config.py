@@ -103,6 +103,8 @@ class SegmentConfig:
     connector_height: height ``h_c`` of the connector below this segment [m]
         (0.0 for segment 1, which stands on the fixed base).
     connector_mass: mass of that connector [kg] (0.0 for segment 1).
+    plate_radius: radius of this segment's plates as thin discs [m] (dynamics only,
+        ``plate_radius_mm``); None: ``R + D_a/2`` (:func:`RobotConfig.plate_radius_of`).
     """
 
     n_actuators: int
@@ -113,6 +115,7 @@ class SegmentConfig:
     top_plate_mass: float
     connector_height: float = 0.0
     connector_mass: float = 0.0
+    plate_radius: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'plate_fractions',
@@ -204,6 +207,10 @@ class RobotConfig:
     payload: point mass at the end effector [kg].
     mocap_frame: where the motion capture sees the robot (:class:`MocapFrame`),
         or None (measured poses come in the base frame).
+    damping_time: Kelvin-Voigt retardation time ``beta`` of the actuator strains [s]
+        (dynamics only, ``dynamics.damping_time_s``; default :data:`DEFAULT_DAMPING_TIME_S`).
+    mass_damping: mass-proportional (air) damping ``alpha`` [1/s] (dynamics only,
+        ``dynamics.mass_damping_per_s``; default 0).
     source: where the description came from (not compared by ``==``).
     """
 
@@ -221,6 +228,8 @@ class RobotConfig:
     tool_length: float
     payload: float
     mocap_frame: MocapFrame | None = None
+    damping_time: float = 0.005
+    mass_damping: float = 0.0
     source: str = field(default='<dict>', compare=False)
 
     def __post_init__(self) -> None:
@@ -248,6 +257,13 @@ class RobotConfig:
             start += seg.n_actuators
         return out
 
+    def plate_radius_of(self, j: int) -> float:
+        """Radius of segment ``j``'s plates as thin discs [m]: its ``plate_radius_mm``,
+        else ``R + D_a/2`` (the discs reach the actuators' outer edges)."""
+        seg = self.segments[j]
+        return seg.plate_radius if seg.plate_radius is not None \
+            else seg.pitch_radius + 0.5 * self.d_a
+
     def replace(self, **changes: Any) -> 'RobotConfig':
         """Copy with some fields changed (:func:`dataclasses.replace`, no validation)."""
         return dataclasses.replace(self, **changes)
@@ -267,6 +283,8 @@ class RobotConfig:
             if j > 0:
                 d['connector_height_mm'] = seg.connector_height * 1e3
                 d['connector_mass_kg'] = seg.connector_mass
+            if seg.plate_radius is not None:
+                d['plate_radius_mm'] = seg.plate_radius * 1e3
             segments.append(d)
         d = {
             'name': self.name,
@@ -285,6 +303,8 @@ class RobotConfig:
                 'tool_length_mm': self.tool_length * 1e3,
             },
             'payload_kg': self.payload,
+            'dynamics': {'damping_time_s': self.damping_time,
+                         'mass_damping_per_s': self.mass_damping},
         }
         if self.mocap_frame is not None:
             d['mocap_frame'] = self.mocap_frame.to_dict()
@@ -293,7 +313,12 @@ class RobotConfig:
 
 # --------------------------------------------------------------------- schema
 _TOP_KEYS = ('name', 'actuator', 'segments', 'pressure_limits', 'model', 'payload_kg')
-_OPTIONAL_TOP_KEYS = ('mocap_frame',)
+_OPTIONAL_TOP_KEYS = ('mocap_frame', 'dynamics')
+_DYNAMICS_KEYS = ('damping_time_s', 'mass_damping_per_s')
+#: Kelvin-Voigt retardation time of a robot file without ``dynamics.damping_time_s`` [s]:
+#: a loss factor of about 0.1 at a few Hz (polyurethane and silicone elastomers of
+#: Shore 30-60 A: tan delta 0.05-0.3), docs/dynamics.md.
+DEFAULT_DAMPING_TIME_S = 0.005
 _MOCAP_KEYS = ('frame_id', 'position_m', 'quaternion_xyzw')
 _ACTUATOR_KEYS = ('l0_m', 'stiffness_coeffs_n_per_m', 'd_eff_mm', 'd_a_mm',
                   'linear_density_kg_per_m')
@@ -435,9 +460,11 @@ def _segment(chk: _Checker, value: Any, j: int) -> SegmentConfig | None:
     if j == 0:
         reason = ('not allowed on the first segment (it stands on the fixed base plate); '
                   'connector keys belong to segments 2..m')
-        m = chk.mapping(value, path, _SEGMENT_KEYS, dict.fromkeys(_CONNECTOR_KEYS, reason))
+        m = chk.mapping(value, path, _SEGMENT_KEYS, dict.fromkeys(_CONNECTOR_KEYS, reason),
+                        optional=('plate_radius_mm',))
     else:
-        m = chk.mapping(value, path, _SEGMENT_KEYS + _CONNECTOR_KEYS)
+        m = chk.mapping(value, path, _SEGMENT_KEYS + _CONNECTOR_KEYS,
+                        optional=('plate_radius_mm',))
     if m is None:
         return None
     n_a = chk.integer(m, path, 'n_actuators', 3, ' (three actuators determine a plate)')
@@ -461,6 +488,12 @@ def _segment(chk: _Checker, value: Any, j: int) -> SegmentConfig | None:
     else:
         h_c = m_c = 0.0
     values = (n_a, radius, theta0, fractions, m_plate, m_top, h_c, m_c)
+    r_plate = None
+    if 'plate_radius_mm' in m:
+        r_plate = chk.number(m, path, 'plate_radius_mm', positive=True)
+        if r_plate is None:
+            return None
+        r_plate *= 1e-3
     if any(v is None for v in values):
         return None
     return SegmentConfig(
@@ -472,6 +505,7 @@ def _segment(chk: _Checker, value: Any, j: int) -> SegmentConfig | None:
         top_plate_mass=m_top,
         connector_height=h_c * 1e-3,
         connector_mass=m_c,
+        plate_radius=r_plate,
     )
 
 
@@ -610,6 +644,14 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
 
     payload = chk.number(top, '', 'payload_kg', nonneg=True)
     mocap = _mocap_frame(chk, top['mocap_frame']) if 'mocap_frame' in top else None
+    damping_time, mass_damping = DEFAULT_DAMPING_TIME_S, 0.0
+    if 'dynamics' in top:
+        dyn = chk.mapping(top['dynamics'], 'dynamics', (), optional=_DYNAMICS_KEYS)
+        if dyn is not None:
+            if 'damping_time_s' in dyn:
+                damping_time = chk.number(dyn, 'dynamics', 'damping_time_s', nonneg=True)
+            if 'mass_damping_per_s' in dyn:
+                mass_damping = chk.number(dyn, 'dynamics', 'mass_damping_per_s', nonneg=True)
 
     # Stage 1 must map [p_min, p_max] monotonically (docs/model.md section 2).
     if None not in (coeffs, l0, d_eff, p_min, p_max):
@@ -641,6 +683,8 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
         tool_length=tool * 1e-3,
         payload=payload,
         mocap_frame=mocap,
+        damping_time=damping_time,
+        mass_damping=mass_damping,
         source=source,
     )
 

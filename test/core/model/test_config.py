@@ -139,7 +139,40 @@ def test_to_dict_round_trip():
         assert again.mocap_frame is None and cfg.mocap_frame is None
         for s_a, s_b in zip(again.segments, cfg.segments):
             for f in dataclasses.fields(SegmentConfig):
-                assert getattr(s_a, f.name) == pytest.approx(getattr(s_b, f.name), rel=1e-15)
+                if getattr(s_b, f.name) is None:
+                    assert getattr(s_a, f.name) is None
+                else:
+                    assert getattr(s_a, f.name) == pytest.approx(getattr(s_b, f.name),
+                                                                 rel=1e-15)
+
+
+def test_dynamics_keys_defaults_round_trip_and_refusals():
+    """damping_time_s, mass_damping_per_s (section dynamics) and plate_radius_mm (per segment)."""
+    d = load_robot('one_segment').to_dict()
+    del d['dynamics']
+    cfg = robot_from_dict(d)
+    assert cfg.damping_time == 0.005 and cfg.mass_damping == 0.0
+    # default disc radius: the actuators' outer edge, R + D_a/2
+    assert cfg.plate_radius_of(0) == pytest.approx(0.020 + 0.0179 / 2, rel=1e-12)
+    d['dynamics'] = {'damping_time_s': 0.01, 'mass_damping_per_s': 0.5}
+    d['segments'][0]['plate_radius_mm'] = 35.0
+    cfg = robot_from_dict(d)
+    assert (cfg.damping_time, cfg.mass_damping) == (0.01, 0.5)
+    assert cfg.plate_radius_of(0) == pytest.approx(0.035)
+    again = robot_from_dict(cfg.to_dict())
+    assert again.segments[0].plate_radius == pytest.approx(0.035)
+    assert (again.damping_time, again.mass_damping) == (0.01, 0.5)
+    for key, value, words in (('damping_time_s', -1.0, 'dynamics.damping_time_s'),
+                              ('mass_damping_per_s', 'x', 'dynamics.mass_damping_per_s'),
+                              ('damping_s', 0.1, "did you mean 'damping_time_s'")):
+        bad = load_robot('one_segment').to_dict()
+        bad['dynamics'] = {key: value}
+        with pytest.raises(ConfigError, match=words.replace('.', r'\.').replace("'", "'")):
+            robot_from_dict(bad)
+    bad = load_robot('one_segment').to_dict()
+    bad['segments'][0]['plate_radius_mm'] = 0.0
+    with pytest.raises(ConfigError, match=r'segments\[0\]\.plate_radius_mm'):
+        robot_from_dict(bad)
 
 
 def test_mocap_frame_entry_validated_and_round_tripped(one):

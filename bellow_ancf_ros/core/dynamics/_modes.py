@@ -1,0 +1,227 @@
+"""Natural modes of an equilibrium: frequencies, damping ratios and mode shapes (docs/dynamics.md).
+
+At an equilibrium of eq. (25) the linearised motion on the constraint
+manifold is::
+
+    M_r z'' + D_r z' + K_r z = 0,   q = q* + Z z,   C_q Z = 0,
+
+with ``K_r = Z^T H Z`` the reduced Hessian of the Lagrangian (the matrix of
+the stability test: elastic tangent, gravity through the multipliers, eq.
+27), ``M_r = Z^T M Z`` and ``D_r = Z^T D Z`` (module ``_inertia``).  The
+undamped natural frequencies solve ``K_r v = w^2 M_r v``; the damped ones
+and the damping ratios ``zeta = -Re(s)/|s|`` come from the quadratic
+eigenvalue problem ``(s^2 M_r + s D_r + K_r) v = 0``, solved as a
+first-order pencil.  The eigenvalues do not depend on the coordinates, so the
+analysis runs in the static (stretched) coordinates of the equilibrium,
+where ``M_s = T M T`` and ``D_s = T D T``.
+
+The robot is symmetric about its axis: lateral bending modes come in
+pairs of equal frequency.  Inside such a pair any combination is a mode;
+the pair is turned so that the end effector's motions come as close as they can
+to the base x and y axes (orthogonal Procrustes), which makes them
+reproducible.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+from ..model import RobotModel, TipLoad
+from ._inertia import Inertia
+
+__all__ = ["Mode", "ModalAnalysis", "natural_modes", "ModalError"]
+
+_CLUSTER_RTOL = 1e-6
+
+
+class ModalError(ValueError):
+    """An equilibrium whose modes cannot be computed (unstable, not converged, no inertia)."""
+
+
+@dataclass
+class Mode:
+    """One natural mode.
+
+    ``frequency_hz``: undamped natural frequency; ``damped_frequency_hz`` and
+    ``damping_ratio`` from the damped problem (``damped_frequency_hz`` is 0
+    for an overdamped mode); ``direction``: unit vector of the end
+    effector's motion in the base frame; ``tip_rotation``: the motion of the
+    end effector's z-axis per metre of tip motion along ``direction``;
+    ``shape``: the static-coordinate mode shape (``nq``), scaled to 1 mm of
+    tip motion (unit modal mass if the tip does not move).
+    """
+
+    frequency_hz: float
+    damped_frequency_hz: float
+    damping_ratio: float
+    direction: np.ndarray
+    tip_rotation: np.ndarray
+    shape: np.ndarray = field(repr=False)
+
+    def to_dict(self) -> dict:
+        return {"frequency_hz": float(self.frequency_hz),
+                "damped_frequency_hz": float(self.damped_frequency_hz),
+                "damping_ratio": float(self.damping_ratio),
+                "direction": [float(v) for v in self.direction]}
+
+
+@dataclass
+class ModalAnalysis:
+    """The lowest modes of one equilibrium (``modes``, lowest first)."""
+
+    model: RobotModel
+    q: np.ndarray
+    stretch: np.ndarray
+    load: TipLoad
+    damping_time_s: float
+    mass_damping_per_s: float
+    modes: list
+
+    @property
+    def first(self) -> Mode:
+        return self.modes[0]
+
+    def backbones(self, mode: int, amplitude_m: float = 0.01, n_points: int = 20):
+        """Backbones ``(A, n_points, 3)`` of the equilibrium moved along a mode.
+
+        ``amplitude_m``: tip displacement of the drawn shape (the shape is
+        linear: this only scales the picture).
+        """
+        sh = self.modes[mode].shape * (amplitude_m / 1e-3)
+        return self.model.backbones(self.q + sh, self.stretch, n_points)
+
+    def to_dict(self) -> dict:
+        return {"modes": [m.to_dict() for m in self.modes],
+                "payload_kg": float(self.load.payload_kg),
+                "tip_force_n": [float(f) for f in self.load.force_n],
+                "damping_time_s": self.damping_time_s,
+                "mass_damping_per_s": self.mass_damping_per_s}
+
+
+def _tip_rows(model):
+    """Rows mapping static coordinates to the tip's position and its z-axis (both linear)."""
+    pd = model.plate_dofs[model.ee_plate]
+    P = np.zeros((3, model.nq))
+    P[np.arange(3), pd[0:3]] = 1.0
+    P[np.arange(3), pd[9:12]] = model.cfg.tool_length
+    Zr = np.zeros((3, model.nq))
+    Zr[np.arange(3), pd[9:12]] = 1.0
+    return P, Zr
+
+
+def natural_modes(fw, n_modes: int = 6, inertia: Inertia | None = None,
+                  damping_time_s: float | None = None,
+                  mass_damping_per_s: float | None = None) -> ModalAnalysis:
+    """Natural frequencies, damping ratios and mode shapes of an equilibrium.
+
+    Parameters
+    ----------
+    fw : ForwardResult
+        A converged, stable equilibrium (:func:`~bellow_ancf_ros.core.solve_forward`,
+        or the ``forward`` of an inverse result), any segment count, with its
+        payload and tip force.
+    n_modes : how many of the lowest modes to return.
+    inertia : an :class:`Inertia` of ``fw.model`` to reuse (else one is made).
+    damping_time_s, mass_damping_per_s : override the robot file's damping.
+
+    Returns
+    -------
+    ModalAnalysis
+
+    Raises
+    ------
+    ModalError
+        The equilibrium did not converge, is not stable (a non-positive
+        reduced stiffness), or the mass is not positive on the constraints'
+        tangent space.
+    """
+    model = fw.model
+    if not fw.converged:
+        raise ModalError("the equilibrium did not converge: no modes")
+    inertia = inertia or Inertia(model, damping_time_s, mass_damping_per_s)
+    if damping_time_s is not None or mass_damping_per_s is not None:
+        inertia = Inertia(model, inertia.damping_time if damping_time_s is None
+                          else damping_time_s,
+                          inertia.mass_damping if mass_damping_per_s is None
+                          else mass_damping_per_s)
+    lam = np.asarray(fw.stretch, dtype=float)
+    load = fw.load
+    nq = model.nq
+    ev = model.evaluate(fw.x, lam, 1.0, load, jacobian=True)
+    J = ev.jacobian.toarray()
+    H = 0.5 * (J[:nq, :nq] + J[:nq, :nq].T)
+    Cq = J[nq:, :nq]
+    T = inertia.scale(lam)
+    M = inertia.mass_matrix(load).toarray() * T[:, None] * T[None, :]
+    q_mat = inertia.to_material(fw.q, lam)
+    D = inertia.damping_matrix(q_mat, lam, load).toarray() * T[:, None] * T[None, :]
+    Z = sla.null_space(Cq)
+    Kr = Z.T @ H @ Z
+    Mr = Z.T @ M @ Z
+    Dr = Z.T @ D @ Z
+    Kr, Mr, Dr = (0.5 * (A + A.T) for A in (Kr, Mr, Dr))
+    try:
+        w2, V = sla.eigh(Kr, Mr)
+    except np.linalg.LinAlgError as exc:
+        raise ModalError("the mass is not positive definite on the constraints' tangent "
+                         "space (massless parts?)") from exc
+    if w2[0] <= 0.0:
+        raise ModalError(f"the equilibrium is not stable (smallest reduced stiffness "
+                         f"eigenvalue {w2[0]:.3g}): no oscillation about it")
+    k = min(int(n_modes), len(w2))
+    w = np.sqrt(w2[:k])
+    V = V[:, :k]
+    P, Zrow = _tip_rows(model)
+    Phi = Z @ V  # static-coordinate shapes, unit modal mass
+    # turn degenerate clusters (the x/y pairs) to the tip's principal directions
+    i = 0
+    while i < k:
+        j = i + 1
+        while j < k and abs(w[j] - w[i]) <= _CLUSTER_RTOL * w[i]:
+            j += 1
+        if j - i > 1:  # orthogonal Procrustes: tip motions as close as may be to x, y, z
+            tip = P @ Phi[:, i:j]
+            U, _, Vt = np.linalg.svd(tip.T @ np.eye(3)[:, :j - i])
+            R = U @ Vt
+            Phi[:, i:j] = Phi[:, i:j] @ R
+            V[:, i:j] = V[:, i:j] @ R
+        i = j
+    # damped modes: (s^2 Mr + s Dr + Kr) x = 0 as a first-order pencil
+    n = Kr.shape[0]
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-Kr, -Dr]])
+    B = np.block([[np.eye(n), np.zeros((n, n))], [np.zeros((n, n)), Mr]])
+    s, X = sla.eig(A, B)
+    X = X[:n]
+    used = np.zeros(len(s), bool)
+    modes = []
+    for m in range(k):
+        # the damped mode whose shape is closest to this undamped one (M-weighted), s.Im >= 0
+        v = V[:, m]
+        mv = Mr @ v
+        num = np.abs(X.T @ mv) ** 2
+        den = np.real(np.einsum("ij,ij->j", X.conj(), Mr @ X)) * (v @ mv)
+        mac = np.where((s.imag >= -1e-12 * np.abs(s)) & ~used & np.isfinite(s),
+                       num / np.maximum(den, 1e-300), -1.0)
+        c = int(np.argmax(mac))
+        used[c] = True
+        sc = s[c]
+        zeta = float(-sc.real / abs(sc)) if abs(sc) > 0 else 1.0
+        tip = P @ Phi[:, m]
+        amp = float(np.linalg.norm(tip))
+        if amp > 1e-12 * np.linalg.norm(Phi[:, m]):
+            d = tip / amp
+            sgn = 1.0 if d[np.argmax(np.abs(d))] >= 0 else -1.0
+            d = sgn * d
+            shape = Phi[:, m] * (sgn * 1e-3 / amp)
+            rot = Zrow @ shape / 1e-3
+        else:
+            d, shape, rot = np.zeros(3), Phi[:, m].copy(), np.zeros(3)
+        modes.append(Mode(frequency_hz=float(w[m] / (2 * np.pi)),
+                          damped_frequency_hz=float(abs(sc.imag) / (2 * np.pi)),
+                          damping_ratio=zeta, direction=d, tip_rotation=rot, shape=shape))
+    return ModalAnalysis(model=model, q=fw.q.copy(), stretch=lam.copy(), load=load,
+                         damping_time_s=inertia.damping_time,
+                         mass_damping_per_s=inertia.mass_damping, modes=modes)
