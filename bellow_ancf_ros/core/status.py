@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-__all__ = ["ForwardStatus", "InverseStatus", "MESSAGES", "usable"]
+__all__ = ["DynamicsStatus", "ForwardStatus", "InverseStatus", "MESSAGES", "usable"]
 
 
 class ForwardStatus(IntEnum):
@@ -53,6 +53,22 @@ class InverseStatus(IntEnum):
         return MESSAGES[InverseStatus][self]
 
 
+class DynamicsStatus(IntEnum):
+    """Why a time integration (the dynamic model, docs/dynamics.md) stopped."""
+
+    COMPLETED = 0
+    MAX_ITER = 1
+    SINGULAR = 3
+    NONFINITE = 4
+    STEP_TOO_SMALL = 5
+    TIME_BUDGET = 7
+
+    @property
+    def message(self) -> str:
+        """The one-line text of the code (:data:`MESSAGES`)."""
+        return MESSAGES[DynamicsStatus][self]
+
+
 #: The one message table: ``MESSAGES[ForwardStatus][code]``, ``MESSAGES[InverseStatus][code]``
 #: (two vocabularies: an ``IntEnum`` member hashes as its number, and 0 means "converged" in one
 #: and "target reached" in the other).  Codes 6 to 8 share their text.
@@ -75,8 +91,18 @@ MESSAGES = {
         InverseStatus.UNREACHABLE: "target unreachable within the pressure limits",
         InverseStatus.FAILED: "no solution",
     },
+    DynamicsStatus: {
+        DynamicsStatus.COMPLETED: "integrated to the end time",
+        DynamicsStatus.MAX_ITER: "a step's Newton iterations did not converge",
+        DynamicsStatus.SINGULAR: "singular iteration matrix",
+        DynamicsStatus.NONFINITE: "non-finite state or residual",
+        DynamicsStatus.STEP_TOO_SMALL: "step halved to its limit without converging",
+        DynamicsStatus.TIME_BUDGET: "wall-clock budget exhausted",
+    },
 }
 for _enum, _table in MESSAGES.items():
+    if _enum is DynamicsStatus:
+        continue
     _table.update({_enum(code): text for code, text in _SHARED.items()})
 
 

@@ -5,11 +5,17 @@
   Kelvin-Voigt and air damping, the static <-> material coordinate map;
 * :func:`natural_modes`: natural frequencies, damping ratios and mode shapes
   of any equilibrium (:class:`ModalAnalysis`, :class:`Mode`);
+* :class:`GeneralizedAlpha`: the index-3 time integrator (Arnold & Bruels),
+  pressures, payload and tip force functions of time;
 
 docs/dynamics.md states the model and its sources.
 """
 
 from ._inertia import Inertia
+from ._integrator import (MAX_DEFAULT_STEP_S, MIN_STEPS_PER_PERIOD, STEPS_PER_PERIOD,
+                          DynamicsError, DynamicState, GeneralizedAlpha, StepReport, default_step)
 from ._modes import ModalAnalysis, ModalError, Mode, natural_modes
 
-__all__ = ["Inertia", "ModalAnalysis", "ModalError", "Mode", "natural_modes"]
+__all__ = ["DynamicState", "DynamicsError", "GeneralizedAlpha", "Inertia",
+           "MAX_DEFAULT_STEP_S", "MIN_STEPS_PER_PERIOD", "ModalAnalysis", "ModalError", "Mode",
+           "STEPS_PER_PERIOD", "StepReport", "default_step", "natural_modes"]

@@ -144,9 +144,20 @@ class Inertia:
             nq = self.model.nq
             M = sp.csc_matrix((v, (r, c)), shape=(nq, nq))
             M.sum_duplicates()
-            if len(self._mass_cache) > 8:
+            if len(self._mass_cache) > 16:
                 self._mass_cache.clear()
             self._mass_cache[m_p] = M
+        return M
+
+    def mass_matrix_csr(self, payload=0.0) -> sp.csr_matrix:
+        """:meth:`mass_matrix` in CSR storage (kept: the integrator's products)."""
+        m_p = float(as_tip_load(payload).payload_kg)
+        key = ("csr", m_p)
+        M = self._mass_cache.get(key)
+        if M is None:
+            M = self.mass_matrix(m_p).tocsr()
+            M.sort_indices()
+            self._mass_cache[key] = M
         return M
 
     # ---------------------------------------------------------- coordinates

@@ -1,0 +1,429 @@
+"""Time integration of the constrained dynamics: generalized-alpha for index 3 (docs/dynamics.md).
+
+The equations (model_spec, docs/dynamics.md section 2), in material coordinates::
+
+    M q'' + beta K_m(q) q' + alpha M q' + Q(q, lam(t), load(t)) + C_q^T mu = 0,   C(q) = 0,
+
+with ``Q + C_q^T mu`` the static residual of eq. (25) seen through the
+coordinate map ``q_static = T(lam)^-1 q`` (module ``_inertia``): at constant
+pressures the rest state is exactly the static solution.
+
+Integrator: the generalized-alpha method of Chung & Hulbert (1993) in the
+form of Arnold & Bruels (2007, "Convergence of the generalized-alpha scheme
+for constrained mechanical systems", Multibody System Dynamics 18), which
+keeps the equations of motion and the position constraints at ``t_{n+1}``
+(index 3, no drift) and is second-order accurate in the positions.  Its
+high-frequency dissipation is set by the spectral radius ``rho_inf``
+(``alpha_m = (2 rho - 1)/(rho + 1)``, ``alpha_f = rho/(rho + 1)``,
+``gamma = 1/2 + alpha_f - alpha_m``, ``beta = (gamma + 1/2)^2 / 4``).
+
+Each step solves its nonlinear equations by Newton's method on the KKT
+matrix of the static solver (eq. 27: the compiled residual and Jacobian
+kernel) plus ``beta' M + gamma' D``, scaled as Arnold & Bruels advise (the
+dynamic rows by ``1/beta'``, the multipliers by ``beta'``) so that its
+conditioning does not degrade as ``h -> 0``.  The factorisation is kept
+from step to step (a chord method) and refreshed only when the iterations
+slow down or the step or the mass changes.  A step that does not converge
+within its budget is retried as two half steps, down to a limit; past it
+the integration stops with a :class:`~bellow_ancf_ros.core.status.DynamicsStatus`
+that says why, and the state stays at the last converged step: never a
+silently wrong answer.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..model import RobotModel, TipLoad, as_tip_load
+from ..status import DynamicsStatus
+from ._inertia import Inertia
+from ._kernels import dynamic_rhs
+
+__all__ = ["DynamicState", "GeneralizedAlpha", "StepReport", "DynamicsError",
+           "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step"]
+
+#: Default steps per period of the first mode: period error of the scheme about
+#: ``(2 pi / 40)^2 / 12 = 0.2 %`` (Chung & Hulbert 1993).
+STEPS_PER_PERIOD = 40
+#: Fewest steps per first-mode period a simulated robot accepts (period error about 0.8 %).
+MIN_STEPS_PER_PERIOD = 20
+#: Longest default step [s], whatever the first mode (higher modes still matter).
+MAX_DEFAULT_STEP_S = 0.01
+
+
+def default_step(first_mode_hz: float) -> float:
+    """The default step [s]: ``1 / (STEPS_PER_PERIOD f1)``, at most :data:`MAX_DEFAULT_STEP_S`."""
+    return min(MAX_DEFAULT_STEP_S, 1.0 / (STEPS_PER_PERIOD * float(first_mode_hz)))
+
+
+class DynamicsError(RuntimeError):
+    """An integration that could not continue (``status``: a DynamicsStatus)."""
+
+    def __init__(self, status: DynamicsStatus, detail: str = ""):
+        self.status = DynamicsStatus(status)
+        super().__init__(self.status.message + (f" ({detail})" if detail else ""))
+
+
+@dataclass
+class DynamicState:
+    """The robot's state at time ``t`` (material coordinates, SI units).
+
+    ``q, v, acc``: coordinates, velocities, accelerations; ``aux``: the
+    generalized-alpha acceleration-like variable; ``mu``: multipliers;
+    ``stretch``: stage-1 stretches; ``load``: payload and tip force.
+    """
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    acc: np.ndarray
+    aux: np.ndarray
+    mu: np.ndarray
+    stretch: np.ndarray
+    load: TipLoad
+
+    def copy(self) -> "DynamicState":
+        return DynamicState(self.t, self.q.copy(), self.v.copy(), self.acc.copy(),
+                            self.aux.copy(), self.mu.copy(), self.stretch.copy(), self.load)
+
+
+@dataclass
+class StepReport:
+    """What :meth:`GeneralizedAlpha.advance` did: status, steps, iterations, refreshes."""
+
+    status: DynamicsStatus = DynamicsStatus.COMPLETED
+    message: str = ""
+    steps: int = 0
+    iterations: int = 0
+    factorizations: int = 0
+    halvings: int = 0
+    wall_s: float = 0.0
+    history: list = field(default_factory=list, repr=False)
+
+    @property
+    def success(self) -> bool:
+        return self.status == DynamicsStatus.COMPLETED
+
+
+class GeneralizedAlpha:
+    """Generalized-alpha integrator of one robot (module docstring).
+
+    Parameters
+    ----------
+    model : RobotModel
+    step_s : the step [s]; default :func:`default_step` of the first mode at
+        the start equilibrium (set by :meth:`start`).
+    rho_inf : spectral radius at infinite frequency (1: no numerical
+        dissipation; 0.9 by default damps only what the step does not resolve).
+    inertia : an :class:`Inertia` (default: the robot file's damping), or
+    damping_time_s, mass_damping_per_s : to override the robot file's.
+    tol : convergence of a step: the Newton update, positions relative to
+        the robot's length, slopes and plate axes as they are.
+    max_iter : Newton iterations per step (factorisations included).
+    max_halvings : how often a failing step may be halved.
+    """
+
+    def __init__(self, model: RobotModel, step_s: float | None = None, rho_inf: float = 0.9,
+                 inertia: Inertia | None = None, damping_time_s: float | None = None,
+                 mass_damping_per_s: float | None = None, tol: float = 1e-10,
+                 max_iter: int = 12, max_halvings: int = 6):
+        if not 0.0 <= rho_inf <= 1.0:
+            raise ValueError(f"rho_inf = {rho_inf!r} is not allowed; allowed: 0 to 1")
+        if step_s is not None and not (np.isfinite(step_s) and step_s > 0):
+            raise ValueError(f"step_s = {step_s!r} is not allowed; allowed: a positive time [s]")
+        self.model = model
+        self.inertia = inertia or Inertia(model, damping_time_s, mass_damping_per_s)
+        self.step_s = None if step_s is None else float(step_s)
+        r = float(rho_inf)
+        self.rho_inf = r
+        self.alpha_m = (2 * r - 1) / (r + 1)
+        self.alpha_f = r / (r + 1)
+        self.gamma = 0.5 + self.alpha_f - self.alpha_m
+        self.beta = 0.25 * (self.gamma + 0.5) ** 2
+        self.tol = float(tol)
+        self.max_iter = int(max_iter)
+        self.max_halvings = int(max_halvings)
+        self.state: DynamicState | None = None
+        self._inv_scale = 1.0 / np.where(model.position_dof, model.length_scale, 1.0)
+        ancf = model.kernel_args
+        self._h1, self._h2, self._gw = ancf[2], ancf[3], ancf[4]
+        self._elem_dofs = np.ascontiguousarray(model.elem_dofs, dtype=np.int64)
+        self._elem_act = np.ascontiguousarray(model.elem_act, dtype=np.int64)
+        self._build_pattern()
+        self._lu = None
+        self._lu_key = None
+        self.counters = {"steps": 0, "iterations": 0, "factorizations": 0}
+
+    # ------------------------------------------------------------ pattern
+    def _build_pattern(self):
+        """The union of the KKT pattern (eq. 27) and the mass pattern, with index maps."""
+        m = self.model
+        N, nq = m.N, m.nq
+        Js = sp.csc_matrix((np.ones(m.nnz), m.csc_indices, m.csc_indptr), shape=(N, N)).tocoo()
+        M1 = self.inertia.mass_matrix(1.0).tocoo()  # a 1 kg payload: its entries are in too
+        rows = np.concatenate([Js.row, M1.row])
+        cols = np.concatenate([Js.col, M1.col])
+        key = np.unique(cols.astype(np.int64) * N + rows)
+        self._key = key
+        self._indices = (key % N).astype(np.int32)
+        ucol = key // N
+        self._indptr = np.searchsorted(ucol, np.arange(N + 1)).astype(np.int32)
+        self._nnz = len(key)
+
+        def where(r, c):
+            return np.searchsorted(key, c.astype(np.int64) * N + r)
+
+        # the static matrix's CSC entries, in its data order
+        sc = np.repeat(np.arange(N), np.diff(m.csc_indptr))
+        sr = np.asarray(m.csc_indices)
+        self._map_static = where(sr, sc)
+        self._static_rows, self._static_cols = sr, sc
+        ed = m.elem_dofs
+        self._elem_rows = np.repeat(ed, 12, axis=1).ravel()
+        self._elem_cols = np.tile(ed, (1, 12)).ravel()
+        self._map_elem = where(self._elem_rows, self._elem_cols)
+        self._nq = nq
+
+    def _mass_map(self, M):
+        Mc = M.tocoo()
+        return np.searchsorted(self._key, Mc.col.astype(np.int64) * self.model.N + Mc.row), Mc.data
+
+    # -------------------------------------------------------------- start
+    def start(self, fw, t0: float = 0.0) -> DynamicState:
+        """Start at rest at the equilibrium ``fw`` (a converged ForwardResult) at time ``t0``.
+
+        Sets the default step from the first mode of ``fw`` when none was
+        given.  The consistent accelerations are those of the rest state
+        under ``fw``'s own loads: zero.
+        """
+        if not fw.converged:
+            raise DynamicsError(DynamicsStatus.NONFINITE, "the start equilibrium did not converge")
+        lam = np.asarray(fw.stretch, dtype=float).copy()
+        q = self.inertia.to_material(fw.q, lam)
+        nq = self.model.nq
+        self.state = DynamicState(t=float(t0), q=q, v=np.zeros(nq), acc=np.zeros(nq),
+                                  aux=np.zeros(nq), mu=np.asarray(fw.x[nq:], float).copy(),
+                                  stretch=lam, load=fw.load)
+        if self.step_s is None:
+            from ._modes import natural_modes  # noqa: PLC0415 (only for the default step)
+            f1 = natural_modes(fw, 1, inertia=self.inertia).first.frequency_hz
+            self.step_s = default_step(f1)
+        return self.state
+
+    def start_released(self, fw, load_after=None, t0: float = 0.0) -> DynamicState:
+        """Start at rest at ``fw`` and change the load at ``t0`` (a release).
+
+        ``load_after``: the payload and tip force from ``t0`` on (default: the
+        payload of ``fw`` without its tip force).  The accelerations are made
+        consistent with the new load: ``[M C_q^T; C_q 0] [q''; mu] = [-f; 0]``.
+        """
+        st = self.start(fw, t0)
+        new = TipLoad(fw.load.payload_kg, (0.0, 0.0, 0.0)) if load_after is None \
+            else as_tip_load(load_after)
+        st.load = new
+        m = self.model
+        nq = m.nq
+        s = self.inertia.scale(st.stretch)
+        ev = m.evaluate(np.concatenate([st.q / s, st.mu]), st.stretch, 1.0, new, jacobian=True)
+        Ti = 1.0 / s
+        f = Ti * (ev.residual[:nq] - ev.jacobian[:nq, nq:] @ st.mu)  # forces without C^T mu
+        Cq = ev.jacobian[nq:, :nq] @ sp.diags(Ti)
+        M = self.inertia.mass_matrix(new)
+        K = sp.bmat([[M, Cq.T], [Cq, None]], format="csc")
+        sol = spla.spsolve(K, np.concatenate([-f, np.zeros(m.nc)]))
+        st.acc = sol[:nq]
+        st.aux = st.acc.copy()
+        st.mu = sol[nq:]
+        return st
+
+    # ---------------------------------------------------------------- step
+    def _factor(self, st: DynamicState, h: float, x_static):
+        m, nq = self.model, self.model.nq
+        bp = (1 - self.alpha_m) / ((1 - self.alpha_f) * h * h * self.beta)
+        gp = self.gamma / (h * self.beta)
+        s = self.inertia.scale(st.stretch)
+        Ti = 1.0 / s
+        ev = m.evaluate(x_static, st.stretch, 1.0, st.load, jacobian=True)
+        rs = np.concatenate([Ti / bp, np.ones(m.nc)])
+        cs = np.concatenate([Ti, np.full(m.nc, bp)])
+        data = np.zeros(self._nnz)
+        data[self._map_static] = ev.jacobian.data * rs[self._static_rows] * cs[self._static_cols]
+        Mmap, Mdata = self._mass_map(self.inertia.mass_matrix(st.load))
+        c = gp / bp
+        data += np.bincount(Mmap, Mdata * (1.0 + c * self.inertia.mass_damping),
+                            minlength=self._nnz)
+        if self.inertia.damping_time:
+            blocks = self.inertia.damping_blocks(st.q, st.stretch).ravel()
+            blocks = blocks * Ti[self._elem_rows] * Ti[self._elem_cols] * c
+            data += np.bincount(self._map_elem, blocks, minlength=self._nnz)
+        A = sp.csc_matrix((data, self._indices, self._indptr), shape=(m.N, m.N))
+        try:
+            self._lu = spla.splu(A, permc_spec="COLAMD")
+        except RuntimeError as exc:
+            raise DynamicsError(DynamicsStatus.SINGULAR, str(exc)) from exc
+        self._lu_key = (h, float(st.load.payload_kg))
+        self.counters["factorizations"] += 1
+        return ev
+
+    def _try_step(self, h: float, lam_next, load_next) -> DynamicState | None:
+        """One step of length ``h`` from ``self.state``; None if Newton does not converge."""
+        m = self.model
+        nq = m.nq
+        st0 = self.state
+        am, af, be, ga = self.alpha_m, self.alpha_f, self.beta, self.gamma
+        bp = (1 - am) / ((1 - af) * h * h * be)
+        gp = ga / (h * be)
+        # predictor: constant acceleration
+        acc = st0.acc.copy()
+        aux = (af * st0.acc - am * st0.aux + (1 - af) * acc) / (1 - am)
+        v = st0.v + h * ((1 - ga) * st0.aux + ga * aux)
+        q = st0.q + h * st0.v + h * h * ((0.5 - be) * st0.aux + be * aux)
+        st = DynamicState(st0.t + h, q, v, acc, aux, st0.mu.copy(),
+                          np.asarray(lam_next, dtype=float), as_tip_load(load_next))
+        M = self.inertia.mass_matrix_csr(st.load)
+        if self._lu is None or self._lu_key != (h, float(st.load.payload_kg)):
+            self._lu = None
+        refreshed = False
+        last = np.inf
+        s = self.inertia.scale(st.stretch)
+        par = m.element_parameters(st.stretch)
+        xs = np.empty(m.N)
+        rhs = np.empty(m.N)
+        kv, air = self.inertia.damping_time, self.inertia.mass_damping
+        for it in range(self.max_iter):
+            np.divide(st.q, s, out=xs[:nq])
+            xs[nq:] = st.mu
+            if self._lu is None:
+                self._factor(st, h, xs)
+                refreshed = True
+            r = m.evaluate(xs, st.stretch, 1.0, st.load, jacobian=False).residual
+            dynamic_rhs(st.q, st.v, st.acc, s, r, nq, M.indptr, M.indices, M.data,
+                        self._elem_dofs, self._elem_act, par["le"], par["kt"], par["kb"],
+                        self._h1, self._h2, self._gw, kv, air, bp, rhs)
+            if not np.isfinite(rhs.sum()):
+                return None
+            d = self._lu.solve(rhs)
+            self.counters["iterations"] += 1
+            dq = d[:nq]
+            st.q += dq
+            st.v += gp * dq
+            st.acc += bp * dq
+            st.mu += bp * d[nq:]
+            size = float(np.max(np.abs(dq * self._inv_scale)))
+            if size <= self.tol:
+                st.aux = (af * st0.acc - am * st0.aux + (1 - af) * st.acc) / (1 - am)
+                return st
+            # slow or diverging chord iterations: refactor at the current iterate
+            if it >= 1 and size > 0.25 * last and not (refreshed and size < 0.9 * last):
+                if refreshed and size > last:
+                    return None
+                self._lu = None
+            last = size
+        return None
+
+    def advance(self, t_end: float, stretch=None, load=None, pressures_pa=None,
+                time_budget_s: float | None = None) -> StepReport:
+        """Integrate from the current state to ``t_end``.
+
+        ``stretch`` or ``pressures_pa``: the stage-1 input, a constant or a
+        function of time (``f(t) -> array``); the default keeps the current
+        stretches.  ``load``: payload and tip force, a constant (a mass, a
+        :class:`TipLoad`) or a function of time; default: unchanged.  The
+        inputs are sampled at the end of every step (a pressure change moves
+        the stress-free length; the material curve stays continuous).
+
+        Returns a :class:`StepReport`; on failure the state is the last
+        converged step and ``status`` says why.
+        """
+        if self.state is None:
+            raise RuntimeError("call start(fw) first")
+        stage1 = self.model.stage1
+        rep = StepReport()
+        t0 = time.perf_counter()
+        c0 = dict(self.counters)
+
+        def stretch_at(t):
+            if pressures_pa is not None:
+                p = pressures_pa(t) if callable(pressures_pa) else pressures_pa
+                return np.asarray(stage1.stretch(np.asarray(p, dtype=float)), dtype=float)
+            if stretch is not None:
+                return np.asarray(stretch(t) if callable(stretch) else stretch, dtype=float)
+            return self.state.stretch
+
+        def load_at(t):
+            if load is None:
+                return self.state.load
+            return as_tip_load(load(t) if callable(load) else load)
+
+        h0 = self.step_s
+        eps = 1e-9 * h0
+        while self.state.t < t_end - eps:
+            if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
+                rep.status = DynamicsStatus.TIME_BUDGET
+                break
+            h = min(h0, t_end - self.state.t)
+            if t_end - self.state.t - h < 1e-3 * h0:  # no sliver of a last step
+                h = t_end - self.state.t
+            status = self._step_halving(h, stretch_at, load_at, rep)
+            if status != DynamicsStatus.COMPLETED:
+                rep.status = status
+                break
+        rep.steps = self.counters["steps"] - c0["steps"]
+        rep.iterations = self.counters["iterations"] - c0["iterations"]
+        rep.factorizations = self.counters["factorizations"] - c0["factorizations"]
+        rep.wall_s = time.perf_counter() - t0
+        rep.message = rep.status.message if rep.success else (
+            f"{rep.status.message} at t = {self.state.t:.6g} s")
+        return rep
+
+    def _step_halving(self, h, stretch_at, load_at, rep, depth=0) -> DynamicsStatus:
+        t = self.state.t
+        try:
+            new = self._try_step(h, stretch_at(t + h), load_at(t + h))
+        except DynamicsError as exc:
+            return exc.status
+        if new is not None:
+            if not (np.all(np.isfinite(new.q)) and np.all(np.isfinite(new.v))):
+                return DynamicsStatus.NONFINITE
+            self.state = new
+            self.counters["steps"] += 1
+            return DynamicsStatus.COMPLETED
+        self._lu = None
+        if depth >= self.max_halvings:
+            return DynamicsStatus.STEP_TOO_SMALL
+        rep.halvings += 1
+        for _ in range(2):
+            status = self._step_halving(0.5 * h, stretch_at, load_at, rep, depth + 1)
+            if status != DynamicsStatus.COMPLETED:
+                return status
+        self._lu = None  # the next full step needs its own factorisation
+        return DynamicsStatus.COMPLETED
+
+    # ------------------------------------------------------------ read-outs
+    def static_coordinates(self, state: DynamicState | None = None) -> np.ndarray:
+        """The state's coordinates in the static (stretched) convention (``nq``)."""
+        st = state or self.state
+        return self.inertia.to_static(st.q, st.stretch)
+
+    def end_effector(self, state: DynamicState | None = None):
+        """End-effector position and rotation (columns x, y, z) of the state."""
+        return self.model.end_effector(self.static_coordinates(state))
+
+    def constraint_violation(self, state: DynamicState | None = None) -> float:
+        """Largest constraint residual ``max |C(q)|`` (metres for the attachments)."""
+        st = state or self.state
+        xs = np.concatenate([self.static_coordinates(st), st.mu])
+        r = self.model.evaluate(xs, st.stretch, 1.0, st.load, jacobian=False).residual
+        return float(np.max(np.abs(r[self.model.nq:])))
+
+    def energy(self, state: DynamicState | None = None) -> dict:
+        """Kinetic, potential (elastic plus gravity and loads, eqs. 15-17) and total energy [J]."""
+        st = state or self.state
+        kin = self.inertia.kinetic_energy(st.v, st.load)
+        pot = float(self.model.potential(self.static_coordinates(st), st.stretch, 1.0, st.load))
+        return {"kinetic_j": kin, "potential_j": pot, "total_j": kin + pot}
