@@ -16,6 +16,8 @@ import each other (only downwards):
 * :mod:`.model`: the robot file and the model (paper section III);
 * :mod:`.solve`: forward and inverse problems, stability, budgets (section IV);
 * :mod:`.experiments`: the paper's trajectories and studies (section VI);
+* :mod:`.dynamics`: mass, damping, natural modes and time integration (the
+  robot in motion, beyond the paper);
 * :mod:`.control`: feedback law and simulated robot (closing the loop without ROS);
 * :mod:`.fit`: identification and calibration (section V).
 
@@ -24,9 +26,10 @@ subpackage.
 """
 
 from . import numba_cache  # noqa: F401  (first: where the compiled kernels are cached)
-from . import control, experiments, fit, geometry, linalg, model, solve, status
+from . import control, dynamics, experiments, fit, geometry, linalg, model, solve, status
 from .control import (FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, PressureRegulators,
                       SimulatedRobot)
+from .dynamics import GeneralizedAlpha, Inertia, ModalAnalysis, natural_modes
 from .experiments import studies, trajectories
 from .fit import (CalibrationError, CalibrationResult, Recording, RecordingError, calibrate,
                   calibration, identification, read_recording)
@@ -35,10 +38,11 @@ from .model import (ConfigError, PccModel, RobotConfig, RobotModel, SegmentConfi
                     TipLoad, load_robot, parameter_keys, robot_from_dict)
 from .solve import (ForwardResult, InverseResult, TipCompliance, payload_problem,
                     precompute_corners, solve_forward, solve_inverse, tip_compliance, warm_up)
-from .status import ForwardStatus, InverseStatus
+from .status import DynamicsStatus, ForwardStatus, InverseStatus
 
 __all__ = [
-    "CalibrationError", "CalibrationResult", "ConfigError", "FEEDBACK_MODES",
+    "CalibrationError", "CalibrationResult", "ConfigError", "DynamicsStatus", "FEEDBACK_MODES",
+    "GeneralizedAlpha", "Inertia", "ModalAnalysis", "dynamics", "natural_modes",
     "FeedbackSettings", "ForwardResult", "ForwardStatus", "IntegralFeedback", "InverseResult",
     "InverseStatus", "PccModel", "PressureRegulators", "Recording", "RecordingError",
     "RobotConfig", "RobotModel", "SegmentConfig", "SimulatedRobot", "Stage1", "TipCompliance",

@@ -14,8 +14,10 @@ docs/dynamics.md states the model and its sources.
 from ._inertia import Inertia
 from ._integrator import (MAX_DEFAULT_STEP_S, MIN_STEPS_PER_PERIOD, STEPS_PER_PERIOD,
                           DynamicsError, DynamicState, GeneralizedAlpha, StepReport, default_step)
-from ._modes import ModalAnalysis, ModalError, Mode, natural_modes
+from ._modes import (ModalAnalysis, ModalError, Mode, ReducedSystem, natural_modes,
+                     reduced_system)
 
 __all__ = ["DynamicState", "DynamicsError", "GeneralizedAlpha", "Inertia",
            "MAX_DEFAULT_STEP_S", "MIN_STEPS_PER_PERIOD", "ModalAnalysis", "ModalError", "Mode",
-           "STEPS_PER_PERIOD", "StepReport", "default_step", "natural_modes"]
+           "ReducedSystem", "STEPS_PER_PERIOD", "StepReport", "default_step", "natural_modes",
+           "reduced_system"]

@@ -82,7 +82,8 @@ class Inertia:
         L = cfg.l0 / n
         f = np.array([1.0, L, 1.0, L])
         w = _H0 * f  # (G, 4)
-        self.element_mass = cfg.rho0 * L * np.einsum("g,ga,gb->ab", GAUSS_W, w, w)
+        em = cfg.rho0 * L * np.einsum("g,ga,gb->ab", GAUSS_W, w, w)
+        self.element_mass = 0.5 * (em + em.T)  # exactly symmetric
         rows, cols, vals = [], [], []
         blk = np.kron(self.element_mass, np.eye(3))  # (12, 12)
         ed = model.elem_dofs
@@ -190,7 +191,7 @@ class Inertia:
         return Nx, Nxx, rx, w * kt[:, None], w * kb[:, None]
 
     def dissipation(self, q_mat, v_mat, lam) -> float:
-        """Rayleigh dissipation function ``D(q, qdot)`` (Kelvin-Voigt plus air), material coords."""
+        """Rayleigh dissipation function ``D(q, qdot)`` (Kelvin-Voigt plus air), material."""
         m = self.model
         s = self.scale(lam)
         qs, us = q_mat / s, v_mat / s

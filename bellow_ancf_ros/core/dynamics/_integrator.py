@@ -243,7 +243,7 @@ class GeneralizedAlpha:
 
     # ---------------------------------------------------------------- step
     def _factor(self, st: DynamicState, h: float, x_static):
-        m, nq = self.model, self.model.nq
+        m = self.model
         bp = (1 - self.alpha_m) / ((1 - self.alpha_f) * h * h * self.beta)
         gp = self.gamma / (h * self.beta)
         s = self.inertia.scale(st.stretch)

@@ -29,10 +29,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 
+from ..linalg import one_thread_call
 from ..model import RobotModel, TipLoad
 from ._inertia import Inertia
 
-__all__ = ["Mode", "ModalAnalysis", "natural_modes", "ModalError"]
+__all__ = ["Mode", "ModalAnalysis", "ModalError", "ReducedSystem", "natural_modes",
+           "reduced_system"]
 
 _CLUSTER_RTOL = 1e-6
 
@@ -112,6 +114,7 @@ def _tip_rows(model):
     return P, Zr
 
 
+@one_thread_call
 def natural_modes(fw, n_modes: int = 6, inertia: Inertia | None = None,
                   damping_time_s: float | None = None,
                   mass_damping_per_s: float | None = None) -> ModalAnalysis:
@@ -138,44 +141,14 @@ def natural_modes(fw, n_modes: int = 6, inertia: Inertia | None = None,
         reduced stiffness), or the mass is not positive on the constraints'
         tangent space.
     """
-    model = fw.model
-    if not fw.converged:
-        raise ModalError("the equilibrium did not converge: no modes")
-    inertia = inertia or Inertia(model, damping_time_s, mass_damping_per_s)
-    if damping_time_s is not None or mass_damping_per_s is not None:
-        inertia = Inertia(model, inertia.damping_time if damping_time_s is None
-                          else damping_time_s,
-                          inertia.mass_damping if mass_damping_per_s is None
-                          else mass_damping_per_s)
-    lam = np.asarray(fw.stretch, dtype=float)
-    load = fw.load
-    nq = model.nq
-    ev = model.evaluate(fw.x, lam, 1.0, load, jacobian=True)
-    J = ev.jacobian.toarray()
-    H = 0.5 * (J[:nq, :nq] + J[:nq, :nq].T)
-    Cq = J[nq:, :nq]
-    T = inertia.scale(lam)
-    M = inertia.mass_matrix(load).toarray() * T[:, None] * T[None, :]
-    q_mat = inertia.to_material(fw.q, lam)
-    D = inertia.damping_matrix(q_mat, lam, load).toarray() * T[:, None] * T[None, :]
-    Z = sla.null_space(Cq)
-    Kr = Z.T @ H @ Z
-    Mr = Z.T @ M @ Z
-    Dr = Z.T @ D @ Z
-    Kr, Mr, Dr = (0.5 * (A + A.T) for A in (Kr, Mr, Dr))
-    try:
-        w2, V = sla.eigh(Kr, Mr)
-    except np.linalg.LinAlgError as exc:
-        raise ModalError("the mass is not positive definite on the constraints' tangent "
-                         "space (massless parts?)") from exc
-    if w2[0] <= 0.0:
-        raise ModalError(f"the equilibrium is not stable (smallest reduced stiffness "
-                         f"eigenvalue {w2[0]:.3g}): no oscillation about it")
+    red = reduced_system(fw, inertia, damping_time_s, mass_damping_per_s)
+    model, Kr, Mr, w2, V = red.model, red.K, red.M, red.w2, red.V
+    Dr = red.damping(red.damping_time, red.mass_damping)
     k = min(int(n_modes), len(w2))
     w = np.sqrt(w2[:k])
     V = V[:, :k]
     P, Zrow = _tip_rows(model)
-    Phi = Z @ V  # static-coordinate shapes, unit modal mass
+    Phi = red.Z @ V  # static-coordinate shapes, unit modal mass
     # turn degenerate clusters (the x/y pairs) to the tip's principal directions
     i = 0
     while i < k:
@@ -222,6 +195,91 @@ def natural_modes(fw, n_modes: int = 6, inertia: Inertia | None = None,
         modes.append(Mode(frequency_hz=float(w[m] / (2 * np.pi)),
                           damped_frequency_hz=float(abs(sc.imag) / (2 * np.pi)),
                           damping_ratio=zeta, direction=d, tip_rotation=rot, shape=shape))
-    return ModalAnalysis(model=model, q=fw.q.copy(), stretch=lam.copy(), load=load,
-                         damping_time_s=inertia.damping_time,
-                         mass_damping_per_s=inertia.mass_damping, modes=modes)
+    return ModalAnalysis(model=model, q=fw.q.copy(), stretch=red.stretch.copy(), load=red.load,
+                         damping_time_s=red.damping_time,
+                         mass_damping_per_s=red.mass_damping, modes=modes)
+
+
+@dataclass
+class ReducedSystem:
+    """The linearised robot on the constraints' tangent space (``q = q* + Z z``).
+
+    ``K``, ``M``: reduced stiffness and mass; ``D_kv``: the Kelvin-Voigt
+    damping per second of retardation time; ``w2, V``: the undamped
+    eigenpairs (``K V = M V diag(w2)``, unit modal mass).
+    """
+
+    model: RobotModel
+    stretch: np.ndarray
+    load: TipLoad
+    Z: np.ndarray
+    K: np.ndarray
+    M: np.ndarray
+    D_kv: np.ndarray
+    w2: np.ndarray
+    V: np.ndarray
+    damping_time: float
+    mass_damping: float
+
+    def damping(self, damping_time_s: float, mass_damping_per_s: float = 0.0) -> np.ndarray:
+        """Reduced damping matrix for a retardation time and an air damping."""
+        return damping_time_s * self.D_kv + mass_damping_per_s * self.M
+
+    @one_thread_call
+    def damped_first(self, damping_time_s: float, mass_damping_per_s: float = 0.0):
+        """Damped frequency [Hz] and damping ratio of the first mode for another damping."""
+        n = self.K.shape[0]
+        D = self.damping(damping_time_s, mass_damping_per_s)
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-self.K, -D]])
+        B = np.block([[np.eye(n), np.zeros((n, n))], [np.zeros((n, n)), self.M]])
+        s, X = sla.eig(A, B)
+        v = self.V[:, 0]
+        mv = self.M @ v
+        X = X[:n]
+        num = np.abs(X.T @ mv) ** 2
+        den = np.real(np.einsum("ij,ij->j", X.conj(), self.M @ X))
+        mac = np.where((s.imag >= -1e-12 * np.abs(s)) & np.isfinite(s),
+                       num / np.maximum(den, 1e-300), -1.0)
+        sc = s[int(np.argmax(mac))]
+        return float(abs(sc.imag) / (2 * np.pi)), float(-sc.real / abs(sc))
+
+
+@one_thread_call
+def reduced_system(fw, inertia: Inertia | None = None, damping_time_s: float | None = None,
+                   mass_damping_per_s: float | None = None) -> ReducedSystem:
+    """Reduce stiffness, mass and damping of the equilibrium ``fw`` (module docstring).
+
+    Raises :class:`ModalError` (see :func:`natural_modes`).
+    """
+    model = fw.model
+    if not fw.converged:
+        raise ModalError("the equilibrium did not converge: no modes")
+    inertia = inertia or Inertia(model, damping_time_s, mass_damping_per_s)
+    beta = inertia.damping_time if damping_time_s is None else float(damping_time_s)
+    alpha = inertia.mass_damping if mass_damping_per_s is None else float(mass_damping_per_s)
+    lam = np.asarray(fw.stretch, dtype=float)
+    load = fw.load
+    nq = model.nq
+    ev = model.evaluate(fw.x, lam, 1.0, load, jacobian=True)
+    J = ev.jacobian.toarray()
+    H = 0.5 * (J[:nq, :nq] + J[:nq, :nq].T)
+    Z = sla.null_space(J[nq:, :nq])
+    T = inertia.scale(lam)
+    M = inertia.mass_matrix(load).toarray() * T[:, None] * T[None, :]
+    # Kelvin-Voigt per unit retardation time, static coordinates: the element blocks
+    ed = model.elem_dofs
+    blocks = Inertia(model, 1.0, 0.0).damping_blocks(inertia.to_material(fw.q, lam), lam)
+    Dkv = np.zeros((nq, nq))
+    np.add.at(Dkv, (np.repeat(ed, 12, axis=1).ravel(), np.tile(ed, (1, 12)).ravel()),
+              blocks.ravel())
+    Kr, Mr, Dr = (0.5 * (A + A.T) for A in (Z.T @ H @ Z, Z.T @ M @ Z, Z.T @ Dkv @ Z))
+    try:
+        w2, V = sla.eigh(Kr, Mr)
+    except np.linalg.LinAlgError as exc:
+        raise ModalError("the mass is not positive definite on the constraints' tangent "
+                         "space (massless parts?)") from exc
+    if w2[0] <= 0.0:
+        raise ModalError(f"the equilibrium is not stable (smallest reduced stiffness "
+                         f"eigenvalue {w2[0]:.3g}): no oscillation about it")
+    return ReducedSystem(model=model, stretch=lam, load=load, Z=Z, K=Kr, M=Mr, D_kv=Dr, w2=w2,
+                         V=V, damping_time=beta, mass_damping=alpha)

@@ -7,7 +7,10 @@
   ``rosbags``);
 * :mod:`.calibration`: a robot file's parameters and the base-in-mocap
   transform from recorded pressures and poses;
-* :func:`excitation_sequence`, :func:`simulate_recording`: what to record.
+* :func:`excitation_sequence`, :func:`simulate_recording`: what to record;
+* :func:`fit_free_vibration`, :func:`identify_damping`: the first mode's
+  frequency and damping from a recorded release or step, and the damping
+  time that reproduces them.
 """
 
 from . import calibration, identification
@@ -18,10 +21,14 @@ from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_TOPIC, PRESSUR
                           RecordingError, csv_header, pressure_unit, read_bag, read_csv,
                           read_recording, settled_samples, write_bag, write_csv)
 from ._sensitivities import RecordingModel
+from ._vibration import (DampingIdentification, FreeVibrationFit, fit_free_vibration,
+                         identify_damping)
 from .calibration import CalibrationError, CalibrationResult, calibrate
 
 __all__ = [
-    "BagWriter", "CalibrationError", "CalibrationResult", "Cantilever", "CantileverResult",
+    "BagWriter", "CalibrationError", "DampingIdentification", "FreeVibrationFit",
+    "fit_free_vibration", "identify_damping", "CalibrationResult", "Cantilever",
+    "CantileverResult",
     "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_TOPIC", "PRESSURE_TOPIC", "Recording",
     "RecordingError", "RecordingModel", "calibrate", "calibration", "csv_header",
     "excitation_sequence", "identification", "pressure_unit", "random_pressures", "read_bag",

@@ -258,8 +258,11 @@ class RobotConfig:
         return out
 
     def plate_radius_of(self, j: int) -> float:
-        """Radius of segment ``j``'s plates as thin discs [m]: its ``plate_radius_mm``,
-        else ``R + D_a/2`` (the discs reach the actuators' outer edges)."""
+        """Radius of segment ``j``'s plates as thin discs [m].
+
+        Its ``plate_radius_mm``, else ``R + D_a/2`` (the discs reach the
+        actuators' outer edges).
+        """
         seg = self.segments[j]
         return seg.plate_radius if seg.plate_radius is not None \
             else seg.pitch_radius + 0.5 * self.d_a

@@ -1,0 +1,160 @@
+"""Frequency and damping of a recorded free vibration, and the damping time that reproduces them.
+
+A released or stepped robot rings down in its first mode (docs/dynamics.md):
+after the faster modes have died out, the end effector moves along one
+direction as ``x(t) = c + A exp(-zeta w_n t) cos(w_d t + phi)``, ``w_d = w_n
+sqrt(1 - zeta^2)``.  :func:`fit_free_vibration` projects the recorded
+positions on their principal direction and fits that curve by nonlinear
+least squares (``scipy.optimize.least_squares``), started from the spectrum's
+peak and the envelope's logarithmic decrement.  :func:`identify_damping`
+then finds the Kelvin-Voigt retardation time for which the model's first
+mode at the recorded equilibrium has the measured damping ratio (the ratio
+grows monotonically with it; ``scipy.optimize.brentq``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq, least_squares
+
+from ..dynamics import reduced_system
+
+__all__ = ["FreeVibrationFit", "DampingIdentification", "fit_free_vibration",
+           "identify_damping"]
+
+
+@dataclass
+class FreeVibrationFit:
+    """A damped sinusoid fitted to a recorded motion (SI units)."""
+
+    frequency_hz: float          # undamped natural frequency
+    damped_frequency_hz: float
+    damping_ratio: float
+    amplitude_m: float
+    direction: np.ndarray        # unit vector of the motion (base or mocap frame)
+    rms_residual_m: float
+    t_start_s: float
+    n_samples: int
+
+    def to_dict(self) -> dict:
+        return {"frequency_hz": self.frequency_hz,
+                "damped_frequency_hz": self.damped_frequency_hz,
+                "damping_ratio": self.damping_ratio, "amplitude_m": self.amplitude_m,
+                "direction": [float(v) for v in self.direction],
+                "rms_residual_m": self.rms_residual_m, "t_start_s": self.t_start_s,
+                "n_samples": self.n_samples}
+
+
+def fit_free_vibration(times_s, positions_m, t_start_s: float | None = None,
+                       t_end_s: float | None = None) -> FreeVibrationFit:
+    """Fit ``c + A exp(-sigma t) cos(w_d t + phi)`` to the principal motion of ``positions_m``.
+
+    Parameters
+    ----------
+    times_s : (n,) sample times.
+    positions_m : (n, 3) or (n,) positions.
+    t_start_s, t_end_s : the window to fit (default: everything).
+
+    Raises ValueError with a one-line reason when the window holds too few
+    samples or no oscillation.
+    """
+    t = np.asarray(times_s, dtype=float).ravel()
+    x = np.asarray(positions_m, dtype=float)
+    if x.ndim == 1:
+        x = x[:, None]
+    keep = np.isfinite(t) & np.all(np.isfinite(x), axis=1)
+    if t_start_s is not None:
+        keep &= t >= t_start_s
+    if t_end_s is not None:
+        keep &= t <= t_end_s
+    t, x = t[keep], x[keep]
+    if len(t) < 20:
+        raise ValueError(f"only {len(t)} samples in the window; need at least 20")
+    order = np.argsort(t)
+    t, x = t[order], x[order]
+    t_first = float(t[0])
+    t = t - t_first
+    xc = x - x.mean(axis=0)
+    _, _, vt = np.linalg.svd(xc, full_matrices=False)
+    d = vt[0]
+    d = d * (1.0 if d[np.argmax(np.abs(d))] >= 0 else -1.0)
+    y = x @ d
+    # start: the spectrum's peak (uniform resampling), the envelope's decay
+    n = len(t)
+    tu = np.linspace(0.0, t[-1], n)
+    yu = np.interp(tu, t, y - y.mean())
+    spec = np.abs(np.fft.rfft(yu * np.hanning(n)))
+    freqs = np.fft.rfftfreq(n, tu[1] - tu[0])
+    k = 1 + int(np.argmax(spec[1:]))
+    f0 = freqs[k]
+    if f0 * t[-1] < 1.5:
+        raise ValueError(f"the window ({t[-1]:.3g} s) holds less than 1.5 periods of its "
+                         f"strongest oscillation ({f0:.3g} Hz)")
+    half = len(t) // 2
+    a1 = np.std(y[:half] - y.mean())
+    a2 = np.std(y[half:] - y.mean())
+    sigma0 = max(np.log(max(a1, 1e-15) / max(a2, 1e-15)) / max(t[half] - t[0], 1e-9), 1e-3)
+    w0 = 2 * np.pi * f0
+    c0 = y[-max(5, n // 10):].mean()
+    a0 = y[0] - c0
+
+    def model(p):
+        c, a, b, sigma, w = p
+        e = np.exp(-sigma * t)
+        return c + e * (a * np.cos(w * t) + b * np.sin(w * t))
+
+    res = least_squares(lambda p: model(p) - y, [c0, a0, 0.0, sigma0, w0],
+                        x_scale=[max(abs(a0), 1e-6), max(abs(a0), 1e-6), max(abs(a0), 1e-6),
+                                 max(sigma0, 0.1), w0], method="lm", max_nfev=2000)
+    c, a, b, sigma, w = res.x
+    w = abs(w)
+    zeta = sigma / np.hypot(sigma, w)
+    wn = np.hypot(sigma, w)
+    return FreeVibrationFit(frequency_hz=float(wn / (2 * np.pi)),
+                            damped_frequency_hz=float(w / (2 * np.pi)),
+                            damping_ratio=float(zeta), amplitude_m=float(np.hypot(a, b)),
+                            direction=d, rms_residual_m=float(np.sqrt(np.mean(res.fun ** 2))),
+                            t_start_s=t_first, n_samples=int(n))
+
+
+@dataclass
+class DampingIdentification:
+    """The measured first mode and the retardation time that reproduces its damping."""
+
+    fit: FreeVibrationFit
+    damping_time_s: float
+    model_frequency_hz: float
+    model_damping_ratio: float
+
+    def to_dict(self) -> dict:
+        return {**self.fit.to_dict(), "damping_time_s": self.damping_time_s,
+                "model_frequency_hz": self.model_frequency_hz,
+                "model_damping_ratio": self.model_damping_ratio}
+
+
+def identify_damping(fit: FreeVibrationFit, equilibrium, max_damping_time_s: float = 0.2
+                     ) -> DampingIdentification:
+    """The retardation time ``beta`` whose first mode at ``equilibrium`` has ``fit``'s damping.
+
+    ``equilibrium``: the ForwardResult the robot rings about (its pressures,
+    payload and tip force); the robot file's air damping is kept.  Raises
+    ValueError when no ``beta`` in ``[0, max_damping_time_s]`` gives that ratio.
+    """
+    red = reduced_system(equilibrium)
+    alpha = red.mass_damping
+    target = fit.damping_ratio
+
+    def gap(beta):
+        return red.damped_first(beta, alpha)[1] - target
+
+    lo, hi = gap(0.0), gap(max_damping_time_s)
+    if not lo <= 0.0 <= hi:
+        raise ValueError(f"damping ratio {target:.4g} is outside what damping_time_s in "
+                         f"[0, {max_damping_time_s}] gives on this robot "
+                         f"({lo + target:.4g} to {hi + target:.4g})")
+    beta = brentq(gap, 0.0, max_damping_time_s, xtol=1e-7)
+    return DampingIdentification(fit=fit, damping_time_s=float(beta),
+                                 model_frequency_hz=float(np.sqrt(red.w2[0]) / (2 * np.pi)),
+                                 model_damping_ratio=float(red.damped_first(beta, alpha)[1]))
