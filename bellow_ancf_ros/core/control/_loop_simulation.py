@@ -4,7 +4,7 @@
 simulated clock:
 
 * physics every ``1/physics_rate_hz``: :meth:`SimulatedRobot.step`
-  (regulators, creep, equilibrium);
+  (regulators, creep, the robot's motion or equilibrium);
 * motion capture every ``1/mocap_rate_hz`` (the robot's effects): a sample
   captured one latency ago reaches :meth:`IntegralFeedback.measurement` with
   its capture time (nothing during a dropout);
@@ -104,7 +104,9 @@ class LoopSimulation:
     control_rate_hz : control steps per second (the ROS pipeline: the target
         stream's rate, 50 Hz in the demo).
     physics_rate_hz : robot steps per second; commands take effect at the
-        next step (at most one physics period late).
+        next step (at most one physics period late).  With the robot's
+        dynamics it must resolve the first mode
+        (:meth:`SimulatedRobot.check_physics_rate`; ValueError otherwise).
     preview_s : the controller solves for the target wanted this far ahead
         (compensation of the regulators' known lag); measurements are
         compared with the target wanted at their capture time.
@@ -122,6 +124,7 @@ class LoopSimulation:
                 raise ValueError(f'{name} must be > 0, got {v}')
         if not (math.isfinite(preview_s) and preview_s >= 0):
             raise ValueError(f'preview_s must be >= 0, got {preview_s}')
+        robot.check_physics_rate(physics_rate_hz)
         self.model, self.robot = model, robot
         self.use_orientation = model.cfg.n_segments >= 2
         self.feedback = (None if feedback is None

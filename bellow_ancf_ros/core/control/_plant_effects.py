@@ -31,6 +31,15 @@ Bellows (elastomer, viscoelastic):
   is not modelled: no published model with parameters for such bellows was
   at hand, and the regulators' play already exercises the same protection.
 
+Robot dynamics:
+
+* ``dynamics`` = True: the robot has mass and rings (docs/dynamics.md): the
+  robot file's damping (``dynamics.damping_time_s``, 5 ms by default: a loss
+  factor of about 0.1 at a few Hz, typical of Shore 30-60 A elastomers) and
+  the generalized-alpha integrator instead of a jump from equilibrium to
+  equilibrium.  The physics rate must resolve the first mode
+  (:data:`MIN_SAMPLES_PER_PERIOD` samples per period).
+
 Motion capture (OptiTrack/Vicon class systems):
 
 * ``mocap_rate_hz`` = 120, ``mocap_latency_s`` = 0.008 (100-240 Hz, 4-10 ms
@@ -44,8 +53,9 @@ Motion capture (OptiTrack/Vicon class systems):
   set delivers nothing for a while.
 
 :meth:`PlantEffects.ideal` is the robot of earlier versions: a clean 0.1 s
-first-order regulator, no dead time, hysteresis or creep, motion capture at
-100 Hz with noise only, delivered at once.
+first-order regulator, no dead time, hysteresis or creep, quasi-static
+physics (no inertia), motion capture at 100 Hz with noise only, delivered at
+once.
 """
 
 from __future__ import annotations
@@ -54,7 +64,11 @@ import dataclasses
 import math
 from dataclasses import dataclass, fields
 
-__all__ = ['EFFECTS', 'PlantEffects']
+__all__ = ['EFFECTS', 'MIN_SAMPLES_PER_PERIOD', 'PlantEffects']
+
+#: Fewest physics steps per period of the robot's first mode (the pose history the motion
+#: capture interpolates, and the regulators' and creep's update, resolve it).
+MIN_SAMPLES_PER_PERIOD = 20
 
 #: The effects one by one (the benchmark's rows): name -> the settings it switches on
 #: (with their realistic values) over :meth:`PlantEffects.ideal`.
@@ -66,6 +80,7 @@ EFFECTS = {
     'mocap 120 Hz, latency': ('mocap_rate_hz', 'mocap_latency_s'),
     'mocap outliers': ('outlier_probability', 'outlier_min_m', 'outlier_max_m'),
     'mocap dropouts': ('dropout_every_s', 'dropout_duration_s'),
+    'robot dynamics': ('dynamics',),
 }
 
 
@@ -88,11 +103,16 @@ class PlantEffects:
     outlier_max_m: float = 0.030
     dropout_every_s: float = 15.0
     dropout_duration_s: float = 0.5
+    dynamics: bool = True
 
     def __post_init__(self) -> None:
         """Refuse a setting out of its range, naming it, its value and what is allowed."""
         positive = ('regulator_slew_rate_pa_per_s', 'mocap_rate_hz', 'creep_time_constant_s')
+        if not isinstance(self.dynamics, bool):
+            raise ValueError(f'plant setting dynamics: {self.dynamics!r} is not true or false')
         for f in fields(self):
+            if f.name == 'dynamics':
+                continue
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f'plant setting {f.name}: {v!r} is not a finite number')
@@ -119,7 +139,7 @@ class PlantEffects:
         base = dict(regulator_time_constant_s=0.1, regulator_dead_time_s=0.0,
                     regulator_hysteresis_pa=0.0, creep_fraction=0.0, mocap_rate_hz=100.0,
                     mocap_latency_s=0.0, outlier_probability=0.0, dropout_every_s=0.0,
-                    dropout_duration_s=0.0)
+                    dropout_duration_s=0.0, dynamics=False)
         base.update(changes)
         return cls(**base)
 
@@ -138,6 +158,10 @@ class PlantEffects:
         """
         return (self.regulator_dead_time_s + self.regulator_time_constant_s
                 + 0.5 / float(target_rate_hz))
+
+    def min_physics_rate_hz(self, first_mode_hz: float) -> float:
+        """Slowest physics rate that resolves a first mode [Hz] (0 without dynamics)."""
+        return MIN_SAMPLES_PER_PERIOD * float(first_mode_hz) if self.dynamics else 0.0
 
     def replace(self, **changes: float) -> 'PlantEffects':
         """A copy with ``changes`` (checked like the constructor)."""

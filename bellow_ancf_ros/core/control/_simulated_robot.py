@@ -1,4 +1,4 @@
-"""A simulated robot that is not the model: regulators, creep, quasi-static physics, mocap.
+"""A simulated robot that is not the model: regulators, creep, dynamics, mocap.
 
 Plays the real robot for the closed loop and the main demo, without ROS.
 :class:`SimulatedRobot` chains
@@ -7,8 +7,13 @@ Plays the real robot for the closed loop and the main demo, without ROS.
   first-order lag, slew and hardware limits per actuator;
 * :class:`~._regulators.BellowCreep`: a part of each bellow's elongation
   follows a pressure change over seconds;
-* the quasi-static equilibrium (eq. 25, :func:`~bellow_ancf_ros.core.solve_forward`,
-  warm-started from the previous one) of the robot's *own* robot file
+* the robot's motion: with ``effects.dynamics`` (the realistic default) the
+  dynamic model of :mod:`bellow_ancf_ros.core.dynamics` (mass, Kelvin-Voigt
+  damping of the robot file's ``dynamics.damping_time_s``, generalized-alpha
+  steps of at most the default step inside each physics step, the
+  effective pressures interpolated linearly across it); without it the
+  quasi-static equilibrium (eq. 25, :func:`~bellow_ancf_ros.core.solve_forward`,
+  warm-started from the previous one); either of the robot's *own* robot file
   (shipped examples: ``config/one_segment_mismatched.yaml``,
   ``config/two_segment_mismatched.yaml``, whose pitch radius, ``D_a``,
   stiffness and masses differ from the default model by 6-10 %) at a finer
@@ -32,11 +37,12 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..dynamics import GeneralizedAlpha, default_step, natural_modes
 from ..geometry import rotation_from_vector
-from ..model import RobotConfig, RobotModel, load_robot, tip_load
+from ..model import RobotConfig, RobotModel, TipLoad, load_robot, tip_load
 from ..solve import ForwardResult, solve_forward
 from ._motion_capture import MocapSample, MotionCapture
-from ._plant_effects import PlantEffects
+from ._plant_effects import MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._history import bracket
 from ._regulators import BellowCreep, PressureRegulators
 
@@ -46,6 +52,15 @@ __all__ = ['SimulatedRobot']
 RESOLVE_THRESHOLD_PA = 1.0
 #: Past equilibria kept for delayed motion-capture samples [s].
 POSE_HISTORY_S = 1.0
+
+
+class _Pose:
+    """An end-effector pose of the history (what :meth:`SimulatedRobot.pose_at` reads)."""
+
+    __slots__ = ('position', 'rotation')
+
+    def __init__(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        self.position, self.rotation = position, rotation
 
 
 class SimulatedRobot:
@@ -75,7 +90,15 @@ class SimulatedRobot:
     A failed equilibrium solve (not converged, or unstable when checked)
     keeps the last good state and is counted in :attr:`failures` with its
     message in :attr:`last_failure`: the robot never reports a configuration
-    it could not compute.
+    it could not compute.  With dynamics, a step the integrator cannot take
+    is counted the same way, and the robot restarts at rest from the
+    equilibrium at the pressures of that moment (a jump it reports).
+
+    ``state``: the last equilibrium (quasi-static physics); with dynamics
+    the vent equilibrium it started from, and :attr:`dynamics` holds the
+    moving state (:class:`~bellow_ancf_ros.core.dynamics.GeneralizedAlpha`).
+    ``first_mode_hz``: the robot's first natural frequency at the vent
+    equilibrium with its payload (None without dynamics).
     """
 
     def __init__(self, config: Any = 'one_segment_mismatched', n_elements: int | None = None,
@@ -109,7 +132,32 @@ class SimulatedRobot:
         if not self.state.success:
             raise RuntimeError(f'robot {cfg.name!r}: no stable equilibrium at vent pressure: '
                                f'{self.state.message}')
-        self._history.append((0.0, self.state))
+        self._p_eff = np.asarray(p0, dtype=float).copy()
+        self.dynamics: GeneralizedAlpha | None = None
+        self.first_mode_hz: float | None = None
+        if e.dynamics:
+            self.first_mode_hz = natural_modes(self.state, 1).first.frequency_hz
+            # 1e-8 of the robot length: 1e-9 m, far below any motion capture
+            self.dynamics = GeneralizedAlpha(self.model, step_s=default_step(self.first_mode_hz),
+                                             tol=1e-8)
+            self.dynamics.start(self.state)
+        self._pose = _Pose(self.state.position.copy(), self.state.rotation.copy())
+        self._history.append((0.0, self._pose))
+
+    def check_physics_rate(self, rate_hz: float, name: str = 'physics_rate_hz') -> None:
+        """Refuse a physics rate that does not resolve the first mode (one line, ValueError).
+
+        The pose history the motion capture interpolates and the regulators'
+        and creep's updates need :data:`MIN_SAMPLES_PER_PERIOD` steps per
+        period of the robot's first mode (the integrator itself takes its
+        own, shorter steps inside).
+        """
+        need = self.effects.min_physics_rate_hz(self.first_mode_hz or 0.0)
+        if not float(rate_hz) >= need:
+            raise ValueError(
+                f'{name} = {float(rate_hz):g} is too coarse for this robot\'s first mode '
+                f'({self.first_mode_hz:.3g} Hz); allowed: at least {need:.0f} Hz '
+                f'({MIN_SAMPLES_PER_PERIOD} steps per period)')
 
     # ------------------------------------------------------------ physics
     def _solve(self, p: np.ndarray, warm: ForwardResult | None, check: bool) -> ForwardResult:
@@ -132,18 +180,47 @@ class SimulatedRobot:
         """Push the end effector with ``force_n`` [N, base frame]; the next :meth:`step` solves."""
         self.tip_force_n = tip_load(0.0, force_n).force_n
 
-    def step(self, dt: float) -> ForwardResult:
-        """Advance regulators and creep by ``dt``; the equilibrium at the effective pressures."""
+    def step(self, dt: float):
+        """Advance regulators, creep and the robot by ``dt``.
+
+        Returns the equilibrium at the effective pressures (quasi-static), or
+        the integrator's state (dynamics).
+        """
         p = self.regulators.step(dt)
         if self.creep is not None:
             p = self.creep.step(p, dt)
+        t0 = self.time_s
         self.time_s += float(dt)
-        st = self._equilibrium(p)
+        if self.dynamics is None:
+            st = self._equilibrium(p)
+            pose = _Pose(st.position.copy(), st.rotation.copy())
+        else:
+            st = self._move(t0, self._p_eff, p)
+            pos, rot = self.dynamics.end_effector()
+            pose = _Pose(pos, rot)
+        self._p_eff = np.asarray(p, dtype=float).copy()
+        self._pose = pose
         with self._lock:
-            self._history.append((self.time_s, st))
+            self._history.append((self.time_s, pose))
             while len(self._history) > 2 and self._history[1][0] < self.time_s - POSE_HISTORY_S:
                 self._history.popleft()
         return st
+
+    def _move(self, t0: float, p0: np.ndarray, p1: np.ndarray):
+        """Integrate the dynamics over ``[t0, self.time_s]``, pressures linear from p0 to p1."""
+        ig = self.dynamics
+        t1 = self.time_s
+        span = max(t1 - t0, 1e-12)
+        rep = ig.advance(t1, pressures_pa=lambda t: p0 + (min(t, t1) - t0) / span * (p1 - p0),
+                         load=TipLoad(self.payload_kg, tuple(self.tip_force_n)))
+        if not rep.success:
+            self.failures += 1
+            self.last_failure = rep.message
+            fw = self._solve(p1, self.state, True)
+            if fw.success:   # restart at rest at the equilibrium of these pressures
+                self.state = fw
+                ig.start(fw, t0=t1)
+        return ig.state
 
     def _equilibrium(self, p: np.ndarray) -> ForwardResult:
         st = self.state
@@ -168,13 +245,14 @@ class SimulatedRobot:
         return self.regulators.pressures_pa.copy()
 
     def true_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """Exact end-effector ``(position (3,), rotation (3, 3))`` of the current equilibrium."""
-        return self.state.position.copy(), self.state.rotation.copy()
+        """Exact end-effector ``(position (3,), rotation (3, 3))`` now."""
+        pose = self._pose
+        return pose.position.copy(), pose.rotation.copy()
 
     def pose_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Exact end-effector pose at robot time ``t``, interpolated between the steps around it.
 
-        The robot moves continuously; its equilibria are computed at the
+        The robot moves continuously; its poses are computed at the
         physics steps.  Position: linear; rotation: along the geodesic.
         Before the oldest kept step: that step; after the newest: the newest.
         """

@@ -286,7 +286,9 @@ class GeneralizedAlpha:
         st = DynamicState(st0.t + h, q, v, acc, aux, st0.mu.copy(),
                           np.asarray(lam_next, dtype=float), as_tip_load(load_next))
         M = self.inertia.mass_matrix_csr(st.load)
-        if self._lu is None or self._lu_key != (h, float(st.load.payload_kg)):
+        key = self._lu_key
+        if (self._lu is None or key[1] != float(st.load.payload_kg)
+                or abs(key[0] - h) > 1e-6 * h):   # a chord matrix of a nearly equal step is kept
             self._lu = None
         refreshed = False
         last = np.inf
@@ -360,15 +362,20 @@ class GeneralizedAlpha:
                 return self.state.load
             return as_tip_load(load(t) if callable(load) else load)
 
-        h0 = self.step_s
-        eps = 1e-9 * h0
-        while self.state.t < t_end - eps:
+        # equal steps of at most step_s: a span that repeats (a physics tick) repeats the
+        # step, and the factorisation made for it is reused
+        span = t_end - self.state.t
+        n = max(1, int(np.ceil(span / self.step_s - 1e-9)))
+        h = span / n
+        start = self.state.t
+        for k in range(n if span > 0 else 0):
             if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
                 rep.status = DynamicsStatus.TIME_BUDGET
                 break
-            h = min(h0, t_end - self.state.t)
-            if t_end - self.state.t - h < 1e-3 * h0:  # no sliver of a last step
-                h = t_end - self.state.t
+            if k == n - 1:
+                h = t_end - self.state.t   # land exactly on t_end
+            elif k:
+                h = (t_end - start) / n
             status = self._step_halving(h, stretch_at, load_at, rep)
             if status != DynamicsStatus.COMPLETED:
                 rep.status = status

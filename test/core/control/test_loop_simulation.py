@@ -44,11 +44,13 @@ def _held(model, pressures):
 @pytest.mark.parametrize('name, goal_mm, goal_deg',
                          [('one_segment', 0.3, None), ('two_segment', 0.5, 0.5)])
 def test_held_target_within_the_goal(name, goal_mm, goal_deg):
+    """The step from the vent to the target sets the robot swinging (the two-segment robot's
+    first mode rings at 2.6 Hz with a damping ratio of 0.05): held after 5 s."""
     sim = _loop(name)
     A = sim.model.A
     target = _held(sim.model, np.linspace(60e3, 0.0, A))
-    rec = sim.run(4.0, target)
-    s = rec.summary(start_s=3.0)
+    rec = sim.run(6.0, target)
+    s = rec.summary(start_s=5.0)
     assert s['max_mm'] <= goal_mm, s
     if goal_deg is not None:
         assert s['max_deg'] <= goal_deg, s

@@ -137,7 +137,7 @@ def test_realistic_robot_answers_later_and_creeps():
     z0 = real.true_pose()[0][2]
     real.command([100e3, 100e3, 100e3])
     real.step(0.01)
-    assert real.true_pose()[0][2] == z0                      # within the dead time
+    assert real.true_pose()[0][2] == pytest.approx(z0, abs=1e-12)   # within the dead time
     for _ in range(50):                                      # 0.5 s: regulators settled
         real.step(0.01)
     z_fast = real.true_pose()[0][2]
@@ -174,7 +174,41 @@ def test_capture_sees_the_pose_one_latency_ago():
 def test_every_effect_has_a_preset_row():
     assert set(EFFECTS) == {'regulator lag 60 ms', 'regulator dead time', 'regulator hysteresis',
                             'bellows creep', 'mocap 120 Hz, latency', 'mocap outliers',
-                            'mocap dropouts'}
+                            'mocap dropouts', 'robot dynamics'}
     for name in EFFECTS:
         PlantEffects().only(name)   # each switches on alone
     assert MotionCapture(PlantEffects.ideal(), 0).in_dropout(1.0) is False
+    assert PlantEffects().dynamics and not PlantEffects.ideal().dynamics
+    assert PlantEffects().only('robot dynamics').dynamics
+    with pytest.raises(ValueError, match='plant setting dynamics'):
+        PlantEffects(dynamics=1.0)
+
+
+def test_dynamic_robot_rings_at_its_first_mode_and_settles_on_its_equilibrium():
+    """A pressure step sets the robot swinging at its own first mode; it comes to rest at
+    its own static equilibrium.  A physics rate too coarse for the mode is refused."""
+    from bellow_ancf_ros.core.fit import fit_free_vibration
+
+    e = PlantEffects.ideal(dynamics=True, regulator_time_constant_s=0.005)
+    robot = SimulatedRobot('one_segment_mismatched', seed=0, effects=e)
+    assert 8.0 < robot.first_mode_hz < 9.5
+    with pytest.raises(ValueError, match=r'physics_rate_hz = 100 is too coarse .* at least 17'):
+        robot.check_physics_rate(100.0)
+    robot.check_physics_rate(200.0)
+    p = np.array([100e3, 0.0, 0.0])
+    robot.command(p)
+    t, x = [], []
+    for _ in range(200):
+        robot.step(0.004)
+        t.append(robot.time_s)
+        x.append(robot.true_pose()[0])
+    fit = fit_free_vibration(t, x, 0.1, 0.8)
+    mode = robot.first_mode_hz
+    own = solve_forward(robot.model, p)
+    assert fit.frequency_hz == pytest.approx(mode, rel=0.1)   # the bent robot's mode is near
+    for _ in range(500):
+        robot.step(0.004)
+    np.testing.assert_allclose(robot.true_pose()[0], own.position, atol=1e-6)
+    assert robot.failures == 0
+    quasi = SimulatedRobot('one_segment_mismatched', seed=0, effects=PlantEffects.ideal())
+    quasi.check_physics_rate(1.0)   # no mode to resolve without dynamics
