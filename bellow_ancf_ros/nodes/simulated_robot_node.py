@@ -37,9 +37,14 @@ publishes
     refused input, ERROR when an equilibrium could not be computed (the last
     state is kept and published).
 
-The physics runs in its own thread at ``physics_rate_hz`` (default 50 Hz),
-each step advancing the regulators by the measured wall-clock time since the
-last one, so a slow machine gives coarser steps, never a wrong time scale.
+The physics runs in its own thread at ``physics_rate_hz`` (default 250 Hz),
+each step advancing the regulators, the creep and the robot by the measured
+wall-clock time since the last one, so a slow machine gives coarser steps,
+never a wrong time scale.  With ``dynamics`` (default, realistic plant) the
+robot has inertia and damping (docs/dynamics.md): the integrator takes its
+own steps (at most 1/40 of the first mode's period) inside each physics
+step, and a physics rate below 20 steps per period of the robot's first mode
+is refused at start-up.
 """
 
 from __future__ import annotations
@@ -131,6 +136,8 @@ def plant_effects(get) -> PlantEffects:
     values = {field: scale * float(get(name).value)
               for name, field, scale, *_ in EFFECT_PARAMETERS
               if plant == 'realistic' or name in _IDEAL_KEEPS}
+    if plant == 'realistic':
+        values['dynamics'] = bool(get('dynamics').value)
     if plant == 'realistic':   # the pairs, in the node's own units
         lo, hi = get('mocap_outlier_min_mm').value, get('mocap_outlier_max_mm').value
         if hi < lo:
@@ -194,9 +201,14 @@ class SimulatedRobotNode(Node):
             'parameters are ignored).', S, constraints="one of: 'realistic', 'ideal'", **ro))
         for name, _field, _scale, default, text, lo, hi in EFFECT_PARAMETERS:
             self.declare_parameter(name, default, descriptor(text, D, lo=lo, hi=hi, **ro))
-        self.declare_parameter('physics_rate_hz', 100.0, descriptor(
-            'Regulator and equilibrium update rate [Hz]; also the measured_pressure rate.', D,
-            lo=1.0, hi=1000.0, **ro))
+        self.declare_parameter('dynamics', True, descriptor(
+            "The robot's inertia and damping (the robot file's dynamics.damping_time_s): it "
+            'swings and rings; false: it jumps from equilibrium to equilibrium.  Realistic '
+            'plant only (the ideal plant is quasi-static).', ParameterType.PARAMETER_BOOL, **ro))
+        self.declare_parameter('physics_rate_hz', 250.0, descriptor(
+            'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate.  With '
+            'dynamics it must resolve the first mode: at least 20 steps per period (checked at '
+            'start).', D, lo=1.0, hi=1000.0, **ro))
         self.declare_parameter('command_timeout_s', 0.0, descriptor(
             'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
             'as a regulator driver does (the inverse node republishes at command_rate_hz); '
@@ -220,6 +232,15 @@ class SimulatedRobotNode(Node):
             raise StartupParameterError('tip_force_n', list(g('tip_force_n').value),
                                         'three finite numbers [N], at most 1000 N',
                                         str(exc)) from None
+        rate = float(g('physics_rate_hz').value)
+        try:
+            self.robot.check_physics_rate(rate)
+        except ValueError as exc:
+            need = self.robot.effects.min_physics_rate_hz(self.robot.first_mode_hz or 0.0)
+            raise StartupParameterError(
+                'physics_rate_hz', rate, f'at least {need:.0f} Hz',
+                f'too coarse for the robot\'s first mode ({self.robot.first_mode_hz:.3g} Hz; '
+                f'20 steps per period)') from None
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
         self._mocap_frame = None   # MocapFrame: the base's pose in the mocap frame
         if g('mocap_frame_id').value:
@@ -264,7 +285,11 @@ class SimulatedRobotNode(Node):
             f'{e.mocap_rate_hz:g} Hz, latency {e.mocap_latency_s:g} s, '
             f'{e.position_noise_m * 1e3:g} mm noise, outliers {e.outlier_probability:g}, '
             f'dropouts {e.dropout_duration_s:g} s every {e.dropout_every_s:g} s; '
-            f'commands in {unit}')
+            + (f'dynamics: first mode {self.robot.first_mode_hz:.3g} Hz, damping time '
+               f'{self.robot.dynamics.inertia.damping_time * 1e3:g} ms, step '
+               f'{self.robot.dynamics.step_s * 1e3:.3g} ms; ' if self.robot.dynamics else
+               'quasi-static; ')
+            + f'physics {rate:g} Hz; commands in {unit}')
 
     # ------------------------------------------------------------ params
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -326,7 +351,9 @@ class SimulatedRobotNode(Node):
             last = now
             if failed:
                 self.stats['failed_solves'] += 1
-                msg = f'equilibrium not computed ({self.robot.last_failure}); last state kept'
+                msg = (f'robot state not computed ({self.robot.last_failure}); last state kept'
+                       if self.robot.dynamics is None else
+                       f'dynamics step failed ({self.robot.last_failure}); restarted at rest')
                 self.get_logger().error(msg, throttle_duration_sec=2.0)
                 self._publish_diag(DiagnosticStatus.ERROR, msg, {})
             try:
@@ -359,6 +386,8 @@ class SimulatedRobotNode(Node):
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK
         p, solves, payload = self.robot.pressures_pa, self.robot.solves, self.robot.payload_kg
         values = dict(self.stats, solves=solves, payload_kg=payload,
+                      dynamics=self.robot.dynamics is not None,
+                      first_mode_hz=self.robot.first_mode_hz or 0.0,
                       tip_force_n=' '.join(f'{v:g}' for v in self.robot.tip_force_n),
                       pressures=' '.join(f'{v:.6g}' for v in contract.to_unit(p, self._unit)))
         self._publish_diag(level, 'simulating', values)

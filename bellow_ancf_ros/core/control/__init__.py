@@ -3,7 +3,8 @@
 * :class:`IntegralFeedback`, :class:`FeedbackSettings`: the measured-pose
   correction of the target (integral action, anti-windup, outlier gate,
   hold through dropouts, capture-time matching); :func:`loop_margins`: its
-  stability margins with the loop's lag and delay;
+  stability margins with the loop's lag and delay and the robot's modes,
+  :func:`safe_gain`: the largest gain that keeps the documented margins;
 * :class:`SimulatedRobot`: a robot that is not the model (its own robot
   file), with the hardware's effects of :class:`PlantEffects` (regulators
   :class:`PressureRegulators` with dead time, hysteresis and lag; bellows
@@ -16,17 +17,20 @@
 The ROS nodes only feed these.
 """
 
-from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, loop_margins
+from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
+from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, loop_delay_s,
+                            loop_margins, safe_gain)
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
 from ._motion_capture import MocapSample, MotionCapture
-from ._plant_effects import EFFECTS, PlantEffects
+from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
 from ._simulated_robot import SimulatedRobot
 
 __all__ = [
     "EFFECTS", "ESTIMATOR_MODES", "FEEDBACK_MODES", "BellowCreep", "FeedbackSettings",
-    "ForceEstimate", "IntegralFeedback", "LoopRecord", "LoopSimulation", "MocapSample",
+    "ForceEstimate", "IntegralFeedback", "LoopMargins", "LoopRecord", "LoopSimulation",
+    "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
     "MotionCapture", "PlantEffects", "PressureRegulators", "SimulatedRobot",
-    "TipForceEstimator", "loop_margins",
+    "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
 ]

@@ -84,7 +84,7 @@ Safeguards
 Times are plain floats in seconds from one monotonic clock, supplied by the
 caller (the ROS node uses ``time.monotonic()``; tests use simulated time).
 
-Stability with the loop's lag and delay (:func:`loop_margins`): seen from the
+Stability with the loop's lag and delay (:func:`~._loop_margins.loop_margins`): seen from the
 correction, the robot answers like the regulators, a first-order lag ``tau``
 after a delay ``T`` (regulator dead time, mocap latency, half a control
 period, half a physics step), so the open loop is
@@ -100,16 +100,15 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, fields
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq
 
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ._history import bracket
 from ._median_gate import WINDOW, MedianGate
 
-__all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback', 'LoopMargins', 'loop_margins']
+__all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
 
 #: Targets older than this are forgotten [s] (measurements are compared with the target then).
 HISTORY_S = 2.0
@@ -416,41 +415,3 @@ class IntegralFeedback:
             'measured_poses_outliers': self.rejected,
             'feedback_resets': self.resets,
         }
-
-
-class LoopMargins(NamedTuple):
-    """Stability margins of the integral loop (see :func:`loop_margins`)."""
-
-    phase_margin_deg: float       #: 180 deg + the open loop's phase at the gain crossover
-    gain_margin: float            #: factor on the gain that puts the loop at its limit (inf: none)
-    crossover_rad_s: float        #: gain crossover frequency
-    max_gain_per_s: float         #: the gain at the stability limit (``gain * gain_margin``)
-    delay_margin_s: float         #: extra delay the loop tolerates (``phase margin / crossover``)
-
-
-def loop_margins(gain_per_s: float, lag_s: float, delay_s: float) -> LoopMargins:
-    """Margins of ``L(s) = k exp(-s T) / (s (tau s + 1))`` (integral gain ``k``, lag, delay).
-
-    The gain crossover solves ``k = w sqrt(1 + (w tau)^2)``; the phase
-    crossover solves ``atan(w tau) + w T = pi/2`` (none without a delay: the
-    phase only tends to -180 deg).  The loop is stable for gains below
-    :attr:`LoopMargins.max_gain_per_s`.  ``delay_s`` should include half the
-    control period and half the measurement period (sampling), besides the
-    actuators' dead time and the measurement latency.
-    """
-    k, tau, T = float(gain_per_s), float(lag_s), float(delay_s)
-    if not (math.isfinite(k) and k > 0):
-        raise ValueError(f'gain_per_s must be > 0, got {gain_per_s}')
-    for name, v in (('lag_s', tau), ('delay_s', T)):
-        if not (math.isfinite(v) and v >= 0):
-            raise ValueError(f'{name} must be >= 0, got {v}')
-    w_c = brentq(lambda w: w * math.hypot(1.0, w * tau) - k, 0.0, k) if tau > 0 else k
-    pm = math.pi / 2 - math.atan(w_c * tau) - w_c * T
-    if T > 0:
-        w_180 = brentq(lambda w: math.atan(w * tau) + w * T - math.pi / 2, 0.0,
-                       math.pi / (2 * T))
-        gm = w_180 * math.hypot(1.0, w_180 * tau) / k
-    else:
-        gm = math.inf
-    return LoopMargins(math.degrees(pm), gm, w_c, k * gm,
-                       pm / w_c if pm > 0 else 0.0)

@@ -288,7 +288,7 @@ class GeneralizedAlpha:
         M = self.inertia.mass_matrix_csr(st.load)
         key = self._lu_key
         if (self._lu is None or key[1] != float(st.load.payload_kg)
-                or abs(key[0] - h) > 1e-6 * h):   # a chord matrix of a nearly equal step is kept
+                or abs(key[0] - h) > 0.25 * h):   # the chord matrix of a near step is kept
             self._lu = None
         refreshed = False
         last = np.inf

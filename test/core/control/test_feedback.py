@@ -22,8 +22,8 @@ from bellow_ancf_ros.core.control._feedback import (
     TRACKING,
     FeedbackSettings,
     IntegralFeedback,
-    loop_margins,
 )
+from bellow_ancf_ros.core.control import loop_margins
 from bellow_ancf_ros.core.control._simulated_robot import SimulatedRobot
 
 CTRL_S, PHYS_S, MOCAP_S = 0.05, 0.02, 0.01

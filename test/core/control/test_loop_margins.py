@@ -1,0 +1,98 @@
+"""Margins of the integral loop with the robot's modes (core/control/_loop_margins.py)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core import solve_forward
+from bellow_ancf_ros.core.control import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, loop_delay_s,
+                                          loop_margins, safe_gain)
+from bellow_ancf_ros.core.dynamics import natural_modes
+
+TAU, T = 0.06, 0.05
+
+
+def _simulate(k, mode_hz, zeta, seconds=16.0, dt=2e-4):
+    """Integrator -> delay -> lag -> second-order mode, explicit in time: the error after 4 s."""
+    wn = 2 * math.pi * mode_hz
+    n_delay = int(round(T / dt))
+    c = np.zeros(int(seconds / dt) + n_delay + 1)
+    x = y = yd = 0.0
+    late = []
+    for i in range(n_delay, len(c) - 1):
+        x += dt * (c[i - n_delay] - x) / TAU
+        ydd = wn * wn * (x - y) - 2 * zeta * wn * yd
+        yd += dt * ydd
+        y += dt * yd
+        c[i + 1] = c[i] + dt * k * (1.0 - y)
+        if i * dt > 4.0:
+            late.append(1.0 - y)
+    return np.asarray(late)
+
+
+def test_a_far_mode_changes_nothing_and_closed_forms_hold():
+    plain = loop_margins(2.5, TAU, T)
+    far = loop_margins(2.5, TAU, T, [(1e5, 0.3)])
+    assert far.gain_margin == pytest.approx(plain.gain_margin, rel=1e-4)
+    assert far.phase_margin_deg == pytest.approx(plain.phase_margin_deg, abs=0.01)
+    assert far.limit_hz == pytest.approx(plain.limit_hz, rel=1e-4)
+    assert loop_delay_s(0.015, 0.008, 50.0, 120.0) == pytest.approx(0.015 + 0.008 + 0.01
+                                                                    + 0.5 / 120)
+
+
+@pytest.mark.parametrize('mode_hz, zeta', [(1.7, 0.04), (2.4, 0.05), (10.6, 0.17)])
+@pytest.mark.parametrize('factor, grows', [(0.85, False), (1.15, True)])
+def test_the_predicted_limit_holds_in_time(mode_hz, zeta, factor, grows):
+    """Below the predicted largest gain the loop settles, above it the error grows, at the
+    predicted frequency."""
+    m1 = loop_margins(1.0, TAU, T, [(mode_hz, zeta)])
+    err = _simulate(factor * m1.max_gain_per_s, mode_hz, zeta)
+    third = len(err) // 3
+    early, late = np.abs(err[:third]).max(), np.abs(err[-third:]).max()
+    assert (late > early) == grows, (early, late)
+    late = err[-third:]
+    if grows:   # the oscillation is at the limit's frequency
+        spec = np.abs(np.fft.rfft(late - late.mean()))
+        f = np.fft.rfftfreq(len(late), 2e-4)[np.argmax(spec)]
+        assert f == pytest.approx(m1.limit_hz, rel=0.15)
+
+
+def test_a_light_mode_near_the_crossover_takes_the_margin():
+    """The issue's measurement: two segments carrying 50 g (1.7 Hz, zeta 0.04) ring up at the
+    default 2.5 /s, in a limit cycle near 1.6 Hz."""
+    m = loop_margins(2.5, TAU, T, [(1.7, 0.04)])
+    assert m.gain_margin < 1.0 and 1.3 < m.limit_hz < 1.7
+    assert loop_margins(2.5, TAU, T).gain_margin > 8
+
+
+@pytest.mark.parametrize('modes', [[], [(10.6, 0.17)], [(2.4, 0.05)], [(1.45, 0.04), (12.5, 0.2)]])
+def test_safe_gain_keeps_both_margins(modes):
+    k = safe_gain(TAU, T, modes)
+    m = loop_margins(k, TAU, T, modes)
+    assert m.gain_margin >= MIN_GAIN_MARGIN * (1 - 1e-6)
+    assert m.phase_margin_deg >= MIN_PHASE_MARGIN_DEG - 1e-6
+    above = loop_margins(1.02 * k, TAU, T, modes)
+    assert (above.gain_margin < MIN_GAIN_MARGIN
+            or above.phase_margin_deg < MIN_PHASE_MARGIN_DEG)
+
+
+def test_the_default_robots_safe_gains(one, two):
+    """With their own first modes (vented): one segment keeps 2.5 /s, two segments do not."""
+    delay = loop_delay_s(0.015, 0.008, 50.0, 120.0)
+    out = {}
+    for name, model in (('one', one), ('two', two)):
+        for payload in (0.0, 0.05):
+            mode = natural_modes(solve_forward(model, np.zeros(model.A), payload_kg=payload),
+                                 1).first
+            out[name, payload] = safe_gain(TAU, delay, [(mode.frequency_hz,
+                                                        mode.damping_ratio)])
+    assert out['one', 0.0] > 2.5 and out['one', 0.05] > 2.5
+    assert out['two', 0.0] < 2.5 and out['two', 0.05] < out['two', 0.0]
+
+
+def test_bad_inputs_named():
+    with pytest.raises(ValueError, match='gain_per_s must be > 0'):
+        loop_margins(0.0, TAU, T, [(1.0, 0.1)])
+    with pytest.raises(ValueError, match='a mode needs a frequency > 0'):
+        loop_margins(1.0, TAU, T, [(0.0, 0.1)])
