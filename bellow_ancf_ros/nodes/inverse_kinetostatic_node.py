@@ -329,6 +329,9 @@ class InverseKinetostaticNode(LifecycleNode):
     def _feedback_heartbeat(self):
         """Feedback state for the heartbeat; WARN while no fresh measured pose arrives."""
         values = self._feedback.status()
+        margin = self._feedback.margin_warning
+        if margin is not None and self._active:
+            return DiagnosticStatus.WARN, f'loop margins: {margin}', values
         if self._feedback.fallback and self._active:
             return (DiagnosticStatus.WARN,
                     f'feedback without measured poses: {values.get("feedback_state", "")}',

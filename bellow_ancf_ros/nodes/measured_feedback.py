@@ -18,6 +18,14 @@ taken: its age decides whether the integrator holds its correction (a
 dropout), and it is compared with the target wanted at that time (a zero
 stamp, or one in the future, counts as taken on arrival; a target's stamp is
 the time it is wanted at).
+
+The loop's margins with the robot's own first mode at the held equilibrium
+(:class:`~bellow_ancf_ros.core.control.ModeCheck`: the controller's model,
+its payload and tip force) are computed off the control path, in a thread
+of their own, when the payload or the force changes and every two seconds
+while the robot moves; a gain that leaves less than the documented margins
+(gain margin 3, phase margin 45 deg) is logged once per change as a warning
+with the safe gain, and reported on ``/diagnostics`` (WARN) while it lasts.
 """
 
 from __future__ import annotations
@@ -32,7 +40,7 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
+from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, ModeCheck
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
@@ -44,7 +52,10 @@ __all__ = ['FEEDBACK_PARAMETERS', 'FeedbackLink', 'measured_pose_qos']
 FEEDBACK_PARAMETERS = ('feedback', 'feedback_gain_per_s', 'feedback_max_correction_mm',
                        'feedback_max_correction_deg', 'measured_pose_timeout_s',
                        'measured_pose_outlier_mm', 'feedback_reset_jump_mm', 'feedback_rate_hz',
-                       'feedback_correction_frame')
+                       'feedback_correction_frame', 'feedback_loop_lag_s',
+                       'feedback_loop_delay_s')
+#: How often the margin thread looks for a new equilibrium [s].
+_MODE_POLL_S = 0.2
 
 
 def measured_pose_qos() -> QoSProfile:
@@ -85,7 +96,12 @@ class FeedbackLink:
                  'A target jump this large resets the correction [mm].', 0.1, 1000.0),
                 ('feedback_rate_hz', 20.0,
                  'Rate at which the newest target is re-solved with a fresh correction [Hz].',
-                 0.1, 1000.0)):
+                 0.1, 1000.0),
+                ('feedback_loop_lag_s', 0.06,
+                 "The regulators' time constant, for the loop's margins [s].", 0.0, 10.0),
+                ('feedback_loop_delay_s', 0.05,
+                 "The loop's delay for its margins: regulator dead time, mocap latency, half a "
+                 'control and half a measurement period [s].', 0.0, 10.0)):
             node.declare_parameter(name, float(default), descriptor(
                 text + ' Read on configure.', D, lo=lo, hi=hi))
         node.declare_parameter('feedback_correction_frame', d.correction_frame, descriptor(
@@ -107,6 +123,12 @@ class FeedbackLink:
         self._was_fallback = True   # the loop starts waiting for measured poses
         self.refused = 0
         self.received = 0
+        self._mode_check: ModeCheck | None = None
+        self._mode_fw = None
+        self._mode_result = None
+        self._mode_wake = threading.Event()
+        self._mode_stop = threading.Event()
+        self._mode_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------ lifecycle
     def configure(self, cfg, resubmit: Callable[[Any], None]) -> None:
@@ -140,12 +162,24 @@ class FeedbackLink:
             if item is not None and time.monotonic() - item[3] >= period:
                 resubmit(item)
         self._timer = self.node.create_timer(period, tick)
+        self._mode_check = ModeCheck(s.gain_per_s, g('feedback_loop_lag_s').value,
+                                     g('feedback_loop_delay_s').value)
+        self._mode_stop.clear()
+        self._mode_thread = threading.Thread(target=self._mode_loop, name='loop-margins',
+                                             daemon=True)
+        self._mode_thread.start()
         self.node.get_logger().info(
             f'feedback: integral on measured_pose (gain {s.gain_per_s:g} /s, clamp '
             f'{s.max_correction_m * 1e3:g} mm, timeout {s.measured_pose_timeout_s:g} s)')
 
     def release(self) -> None:
-        """Drop the subscription, the timer and the integrator."""
+        """Drop the subscription, the timer, the margin thread and the integrator."""
+        self._mode_stop.set()
+        self._mode_wake.set()
+        if self._mode_thread is not None:
+            self._mode_thread.join(5.0)
+        self._mode_thread = self._mode_check = self._mode_fw = self._mode_result = None
+        self._mode_wake.clear()
         if self._timer is not None:
             self.node.destroy_timer(self._timer)
         if self._sub is not None:
@@ -234,6 +268,38 @@ class FeedbackLink:
             if self._law is not None and fw is not None:
                 self._law.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
                                  fw.position, fw.z_axis)
+        if fw is not None and fw.success and self._mode_check is not None:
+            self._mode_fw = fw   # the margin thread takes the newest
+            self._mode_wake.set()
+
+    # ------------------------------------------------------------ margins
+    def _mode_loop(self) -> None:
+        """Margins with the first mode of the newest equilibrium, off the control path."""
+        log = self.node.get_logger()
+        while not self._mode_stop.is_set():
+            self._mode_wake.wait(_MODE_POLL_S)
+            self._mode_wake.clear()
+            check, fw = self._mode_check, self._mode_fw
+            if check is None or fw is None or not check.due(fw, time.monotonic()):
+                continue
+            before = self._mode_result
+            try:
+                res = check.update(fw, time.monotonic())
+            except Exception as exc:  # noqa: BLE001 - a margin check never stops the loop
+                log.error(f'loop margins not computed: {type(exc).__name__}: {exc}',
+                          throttle_duration_sec=10.0)
+                continue
+            if res is None:
+                continue
+            self._mode_result = res
+            if before is None or before.ok != res.ok or (res.moved and not res.ok):
+                (log.info if res.ok else log.warning)(f'loop margins: {res.message}')
+
+    @property
+    def margin_warning(self) -> str | None:
+        """The margin line while the gain leaves less than the documented margins, else None."""
+        res = self._mode_result
+        return None if res is None or res.ok else res.message
 
     def no_command(self) -> None:
         """No command went out for the corrected target: the integrator freezes until one does."""
@@ -253,6 +319,9 @@ class FeedbackLink:
             if self._law is None:
                 return {'feedback': 'none'}
             values = self._law.status(time.monotonic())
+            res = self._mode_result
+            if res is not None:
+                values.update(res.values())
             # one count of the measured poses that did not reach the integrator: bad input
             # (frame, NaN, quaternion) and outliers; the latter also on their own
             return dict(values, feedback='integral', measured_poses_refused=(

@@ -466,3 +466,31 @@ def test_closed_loop_through_the_mocap_frame_bellow_ancf_calibrate_wrote(h, one,
     np.testing.assert_allclose(mf.position, MOCAP_T, atol=1e-3)
 
     _held_target_through_the_mocap_frame(h, one, str(robot_file))
+
+
+def test_loop_margins_with_the_robots_mode_on_diagnostics(h, two):
+    """Two segments carrying 50 g at the default gain: WARN with the safe gain; a safe gain: OK."""
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, robot_config='two_segment', feedback='integral',
+                 payload_kg=0.05, name='margins_default', allow_other_publishers=True)
+    safe = h.add(InverseKinetostaticNode, robot_config='two_segment', feedback='integral',
+                 payload_kg=0.05, feedback_gain_per_s=0.3, name='margins_safe',
+                 allow_other_publishers=True)
+    fw = solve_forward(two, [0.0] * 6, payload_kg=0.05)
+    tgt = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: tgt.get_subscription_count() >= 2, what='both nodes subscribed')
+    tgt.publish(target_msg(fw.position))   # vertical z-axis: the vented pose
+
+    def warned():
+        return any(s.level == DiagnosticStatus.WARN and 'loop margins' in s.message
+                   and 'safe gain' in s.message for s in diag_statuses(h, 'margins_default'))
+    wait_for(warned, timeout=30.0, what='a WARN naming the safe gain')
+    st = [s for s in diag_statuses(h, 'margins_default') if 'loop margins' in s.message][-1]
+    values = kv(st)
+    assert float(values['loop_gain_margin']) < 1.0
+    assert abs(float(values['loop_first_mode_hz']) - 1.454) < 0.002
+    assert 0.3 < float(values['loop_safe_gain_per_s']) < 0.5
+    assert 'unstable' in node._feedback.margin_warning
+    wait_for(lambda: safe._feedback.status().get('loop_margins_ok') == 'true', timeout=30.0,
+             what='the safe gain checked')
+    assert safe._feedback.margin_warning is None

@@ -5,6 +5,8 @@
   hold through dropouts, capture-time matching); :func:`loop_margins`: its
   stability margins with the loop's lag and delay and the robot's modes,
   :func:`safe_gain`: the largest gain that keeps the documented margins;
+  :class:`ModeCheck`: those margins with the model's first mode at the held
+  equilibrium, recomputed as it moves;
 * :class:`SimulatedRobot`: a robot that is not the model (its own robot
   file), with the hardware's effects of :class:`PlantEffects` (regulators
   :class:`PressureRegulators` with dead time, hysteresis and lag; bellows
@@ -22,6 +24,7 @@ from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, 
                             loop_margins, safe_gain)
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
+from ._mode_check import RETUNE_FRACTION, ModeCheck, ModeCheckResult
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
@@ -31,6 +34,7 @@ __all__ = [
     "EFFECTS", "ESTIMATOR_MODES", "FEEDBACK_MODES", "BellowCreep", "FeedbackSettings",
     "ForceEstimate", "IntegralFeedback", "LoopMargins", "LoopRecord", "LoopSimulation",
     "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
+    "ModeCheck", "ModeCheckResult", "RETUNE_FRACTION",
     "MotionCapture", "PlantEffects", "PressureRegulators", "SimulatedRobot",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
 ]

@@ -48,7 +48,7 @@ MIN_PHASE_MARGIN_DEG = 45.0
 class LoopMargins(NamedTuple):
     """Stability margins of the integral loop (see :func:`loop_margins`)."""
 
-    phase_margin_deg: float       #: 180 deg + the open loop's phase at the gain crossover
+    phase_margin_deg: float       #: phase lag that puts a gain crossover on -1 (< 0: unstable)
     gain_margin: float            #: factor on the gain that puts the loop at its limit (inf: none)
     crossover_rad_s: float        #: gain crossover frequency (the lowest, if several)
     max_gain_per_s: float         #: the gain at the stability limit (``gain * gain_margin``)
@@ -149,11 +149,14 @@ def loop_margins(gain_per_s: float, lag_s: float, delay_s: float,
     idx = np.flatnonzero(np.sign(lg[:-1]) != np.sign(lg[1:]))
     crossings = [brentq(lambda w: _log_gain(w, tau, T, ms) + math.log(k), grid[i], grid[i + 1],
                         xtol=1e-12, rtol=1e-12) for i in idx]
+    # phase margin of each crossover: the extra phase lag that would put it on -1, i.e. down
+    # to the next odd multiple of -180 deg (a crossover past -180 near a mode's peak, at
+    # -300 deg say, is 240 deg from -540); an unstable loop gets its most negative wrapped one
+    stable = k < k_max
     pms = []
     for wc in crossings:
-        ph = float(_phase(wc, tau, T, ms))
-        pm = math.pi + ph
-        pm = (pm + math.pi) % (2 * math.pi) - math.pi   # wrapped to (-180, 180] deg
+        ph = float(_phase(wc, tau, T, ms)) + math.pi
+        pm = ph % (2 * math.pi) if stable else (ph + math.pi) % (2 * math.pi) - math.pi
         pms.append((pm, wc))
     pm, w_c = min(pms) if pms else (math.pi, math.nan)
     dm = min((p / w for p, w in pms if p > 0), default=0.0) if pm > 0 else 0.0

@@ -44,8 +44,10 @@ def test_a_far_mode_changes_nothing_and_closed_forms_hold():
 @pytest.mark.parametrize('mode_hz, zeta', [(1.7, 0.04), (2.4, 0.05), (10.6, 0.17)])
 @pytest.mark.parametrize('factor, grows', [(0.85, False), (1.15, True)])
 def test_the_predicted_limit_holds_in_time(mode_hz, zeta, factor, grows):
-    """Below the predicted largest gain the loop settles, above it the error grows, at the
-    predicted frequency."""
+    """Below the predicted largest gain the loop settles; above it the error grows.
+
+    It grows at the predicted frequency.
+    """
     m1 = loop_margins(1.0, TAU, T, [(mode_hz, zeta)])
     err = _simulate(factor * m1.max_gain_per_s, mode_hz, zeta)
     third = len(err) // 3
@@ -59,8 +61,10 @@ def test_the_predicted_limit_holds_in_time(mode_hz, zeta, factor, grows):
 
 
 def test_a_light_mode_near_the_crossover_takes_the_margin():
-    """The issue's measurement: two segments carrying 50 g (1.7 Hz, zeta 0.04) ring up at the
-    default 2.5 /s, in a limit cycle near 1.6 Hz."""
+    """Two segments carrying 50 g (1.7 Hz, zeta 0.04) ring up at the default 2.5 /s.
+
+    As measured: a limit cycle near 1.6 Hz.
+    """
     m = loop_margins(2.5, TAU, T, [(1.7, 0.04)])
     assert m.gain_margin < 1.0 and 1.3 < m.limit_hz < 1.7
     assert loop_margins(2.5, TAU, T).gain_margin > 8
@@ -96,3 +100,22 @@ def test_bad_inputs_named():
         loop_margins(0.0, TAU, T, [(1.0, 0.1)])
     with pytest.raises(ValueError, match='a mode needs a frequency > 0'):
         loop_margins(1.0, TAU, T, [(0.0, 0.1)])
+
+
+def test_mode_check_follows_the_payload(two):
+    from bellow_ancf_ros.core.control import ModeCheck
+    chk = ModeCheck(2.5, TAU, T, period_s=1.0)
+    fw0 = solve_forward(two, np.zeros(two.A))
+    assert chk.due(fw0, 0.0)
+    r0 = chk.update(fw0, 0.0)
+    assert round(r0.frequency_hz, 3) == 2.399 and r0.moved
+    assert not r0.ok and 'safe gain 1.6' in r0.message and r0.margins.gain_margin < 3
+    assert not chk.due(fw0, 0.5)
+    fw1 = solve_forward(two, np.zeros(two.A), payload_kg=0.05)
+    assert chk.due(fw1, 0.6)   # a new payload: at once
+    r1 = chk.update(fw1, 0.6)
+    assert round(r1.frequency_hz, 3) == 1.454 and r1.moved
+    assert r1.margins.gain_margin < 1 and 'unstable' in r1.message
+    assert set(r1.values()) >= {'loop_first_mode_hz', 'loop_gain_margin', 'loop_safe_gain_per_s'}
+    fine = ModeCheck(r1.safe_gain_per_s, TAU, T).update(fw1, 0.0)
+    assert fine.ok and 'safe gain' not in fine.message

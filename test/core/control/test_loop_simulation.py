@@ -44,8 +44,10 @@ def _held(model, pressures):
 @pytest.mark.parametrize('name, goal_mm, goal_deg',
                          [('one_segment', 0.3, None), ('two_segment', 0.5, 0.5)])
 def test_held_target_within_the_goal(name, goal_mm, goal_deg):
-    """The step from the vent to the target sets the robot swinging (the two-segment robot's
-    first mode rings at 2.6 Hz with a damping ratio of 0.05): held after 5 s."""
+    """The held target, after the swing the step to it started has died out (5 s).
+
+    The two-segment robot's first mode rings at 2.6 Hz with a damping ratio of 0.05.
+    """
     sim = _loop(name)
     A = sim.model.A
     target = _held(sim.model, np.linspace(60e3, 0.0, A))

@@ -185,8 +185,11 @@ def test_every_effect_has_a_preset_row():
 
 
 def test_dynamic_robot_rings_at_its_first_mode_and_settles_on_its_equilibrium():
-    """A pressure step sets the robot swinging at its own first mode; it comes to rest at
-    its own static equilibrium.  A physics rate too coarse for the mode is refused."""
+    """A pressure step sets the robot swinging at its own first mode.
+
+    It comes to rest at its own static equilibrium.  A physics rate too
+    coarse for the mode is refused.
+    """
     from bellow_ancf_ros.core.fit import fit_free_vibration
 
     e = PlantEffects.ideal(dynamics=True, regulator_time_constant_s=0.005)
