@@ -235,7 +235,7 @@ class SimulatedRobotNode(Node):
         rate = float(g('physics_rate_hz').value)
         try:
             self.robot.check_physics_rate(rate)
-        except ValueError as exc:
+        except ValueError:
             need = self.robot.effects.min_physics_rate_hz(self.robot.first_mode_hz or 0.0)
             raise StartupParameterError(
                 'physics_rate_hz', rate, f'at least {need:.0f} Hz',
