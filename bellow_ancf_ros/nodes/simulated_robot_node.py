@@ -37,12 +37,14 @@ publishes
     refused input, ERROR when an equilibrium could not be computed (the last
     state is kept and published).
 
-The physics runs in its own thread at ``physics_rate_hz`` (default 250 Hz),
+The physics runs in its own thread at ``physics_rate_hz`` (default automatic:
+one integrator step per physics step with dynamics, 343 Hz for the
+mismatched one-segment robot and 103 Hz for the two-segment one; else 100 Hz),
 each step advancing the regulators, the creep and the robot by the measured
 wall-clock time since the last one, so a slow machine gives coarser steps,
 never a wrong time scale.  With ``dynamics`` (default, realistic plant) the
 robot has inertia and damping (docs/dynamics.md): the integrator takes its
-own steps (at most 1/40 of the first mode's period) inside each physics
+own steps (at most 1/40 of the first mode's period) inside a longer physics
 step, and a physics rate below 20 steps per period of the robot's first mode
 is refused at start-up.
 """
@@ -205,10 +207,12 @@ class SimulatedRobotNode(Node):
             "The robot's inertia and damping (the robot file's dynamics.damping_time_s): it "
             'swings and rings; false: it jumps from equilibrium to equilibrium.  Realistic '
             'plant only (the ideal plant is quasi-static).', ParameterType.PARAMETER_BOOL, **ro))
-        self.declare_parameter('physics_rate_hz', 250.0, descriptor(
-            'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate.  With '
-            'dynamics it must resolve the first mode: at least 20 steps per period (checked at '
-            'start).', D, lo=1.0, hi=1000.0, **ro))
+        self.declare_parameter('physics_rate_hz', 0.0, descriptor(
+            'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate.  '
+            '0 = automatic: with dynamics one integrator step per physics step (40 per period '
+            'of the first mode, at least 100 Hz), else 100 Hz.  With dynamics a rate must '
+            'resolve the first mode: at least 20 steps per period (checked at start).', D,
+            lo=0.0, hi=1000.0, **ro))
         self.declare_parameter('command_timeout_s', 0.0, descriptor(
             'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
             'as a regulator driver does (the inverse node republishes at command_rate_hz); '
@@ -232,7 +236,7 @@ class SimulatedRobotNode(Node):
             raise StartupParameterError('tip_force_n', list(g('tip_force_n').value),
                                         'three finite numbers [N], at most 1000 N',
                                         str(exc)) from None
-        rate = float(g('physics_rate_hz').value)
+        rate = float(g('physics_rate_hz').value) or self.robot.auto_physics_rate_hz
         try:
             self.robot.check_physics_rate(rate)
         except ValueError:
@@ -272,7 +276,7 @@ class SimulatedRobotNode(Node):
         self._diag_timer = self.create_timer(1.0, self._status)
         self._stop = threading.Event()
         self._state_stamp = self.get_clock().now()   # when the robot reached its state
-        self._physics_period = 1.0 / float(g('physics_rate_hz').value)
+        self._physics_period = 1.0 / rate
         self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
         self._thread.start()
         e = self.robot.effects

@@ -144,6 +144,17 @@ class SimulatedRobot:
         self._pose = _Pose(self.state.position.copy(), self.state.rotation.copy())
         self._history.append((0.0, self._pose))
 
+    @property
+    def auto_physics_rate_hz(self) -> float:
+        """The physics rate to use when none is given [Hz].
+
+        With dynamics: one integrator step per physics step (40 per period of
+        the first mode, at least 100 Hz); quasi-static: 100 Hz.
+        """
+        if self.dynamics is None:
+            return 100.0
+        return max(100.0, 1.0 / self.dynamics.step_s)
+
     def check_physics_rate(self, rate_hz: float, name: str = 'physics_rate_hz') -> None:
         """Refuse a physics rate that does not resolve the first mode (one line, ValueError).
 

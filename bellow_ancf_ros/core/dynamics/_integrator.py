@@ -1,6 +1,6 @@
 """Time integration of the constrained dynamics: generalized-alpha for index 3 (docs/dynamics.md).
 
-The equations (model_spec, docs/dynamics.md section 2), in material coordinates::
+The equations (docs/dynamics.md section 2), in material coordinates::
 
     M q'' + beta K_m(q) q' + alpha M q' + Q(q, lam(t), load(t)) + C_q^T mu = 0,   C(q) = 0,
 
