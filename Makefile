@@ -18,7 +18,9 @@ $(STAMP): requirements.txt setup.py
 	$(VENV)/bin/python -m pip install -e .
 	# compile the numba kernels once into their disk cache (set-up, not the first node start)
 	$(VENV)/bin/python -c "from bellow_ancf_ros.core import RobotModel, load_robot, warm_up; \
-	  [warm_up(RobotModel(load_robot(n))) for n in ('one_segment', 'two_segment')]"
+	  from bellow_ancf_ros.core.dynamics import warm_up_dynamics; \
+	  [(warm_up(m), warm_up_dynamics(m)) for m in \
+	   (RobotModel(load_robot(n)) for n in ('one_segment', 'two_segment'))]"
 	touch $@
 
 # main job: model vs a mismatched simulated robot, feedforward then closed loop, then the loads

@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 
 from ..core import ConfigError, RobotModel, load_robot, numba_cache, warm_up
+from ..core.dynamics import warm_up_dynamics
 from .common import EXIT_OK, UsageError
 
 __all__ = ['register']
@@ -30,6 +31,7 @@ def _cmd_warm_up(args) -> int:
         except ConfigError as exc:
             raise UsageError(f'--config: {exc}') from None
         warm_up(model)
+        warm_up_dynamics(model)   # the simulated robot's integrator
     state = 'were compiled already (loaded)' if before else 'compiled'
     print(f'numerical kernels {state} in {time.perf_counter() - t0:.1f} s; cache: '
           f'{numba_cache.CACHE_DIR}', flush=True)

@@ -12,6 +12,8 @@
   :class:`PressureRegulators` with dead time, hysteresis and lag; bellows
   creep :class:`BellowCreep`; :class:`MotionCapture` with noise, latency,
   outliers and dropouts);
+* :class:`TargetShaper`, :func:`shaped`: ZV/ZVD input shaping of the target
+  stream at the first mode (a step leaves no residual swing);
 * :class:`LoopSimulation`: controller and simulated robot in simulated time
   (tests, benchmark);
 * :class:`TipForceEstimator`, :class:`ForceEstimate`: the tip force (or an
@@ -28,6 +30,7 @@ from ._mode_check import RETUNE_FRACTION, ModeCheck, ModeCheckResult
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
+from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._simulated_robot import SimulatedRobot
 
 __all__ = [
@@ -35,6 +38,7 @@ __all__ = [
     "ForceEstimate", "IntegralFeedback", "LoopMargins", "LoopRecord", "LoopSimulation",
     "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
     "ModeCheck", "ModeCheckResult", "RETUNE_FRACTION",
-    "MotionCapture", "PlantEffects", "PressureRegulators", "SimulatedRobot",
+    "MotionCapture", "PlantEffects", "PressureRegulators", "SHAPERS", "SimulatedRobot",
+    "TargetShaper", "shaped", "shaper_impulses",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
 ]

@@ -13,11 +13,12 @@ docs/dynamics.md states the model and its sources.
 
 from ._inertia import Inertia
 from ._integrator import (MAX_DEFAULT_STEP_S, MIN_STEPS_PER_PERIOD, STEPS_PER_PERIOD,
-                          DynamicsError, DynamicState, GeneralizedAlpha, StepReport, default_step)
+                          DynamicsError, DynamicState, GeneralizedAlpha, StepReport, default_step,
+                          warm_up_dynamics)
 from ._modes import (ModalAnalysis, ModalError, Mode, ReducedSystem, natural_modes,
                      reduced_system)
 
 __all__ = ["DynamicState", "DynamicsError", "GeneralizedAlpha", "Inertia",
            "MAX_DEFAULT_STEP_S", "MIN_STEPS_PER_PERIOD", "ModalAnalysis", "ModalError", "Mode",
            "ReducedSystem", "STEPS_PER_PERIOD", "StepReport", "default_step", "natural_modes",
-           "reduced_system"]
+           "reduced_system", "warm_up_dynamics"]

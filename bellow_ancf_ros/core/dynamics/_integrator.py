@@ -45,7 +45,8 @@ from ._inertia import Inertia
 from ._kernels import dynamic_rhs
 
 __all__ = ["DynamicState", "GeneralizedAlpha", "StepReport", "DynamicsError",
-           "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step"]
+           "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step",
+           "warm_up_dynamics"]
 
 #: Default steps per period of the first mode: period error of the scheme about
 #: ``(2 pi / 40)^2 / 12 = 0.2 %`` (Chung & Hulbert 1993).
@@ -434,3 +435,13 @@ class GeneralizedAlpha:
         kin = self.inertia.kinetic_energy(st.v, st.load)
         pot = float(self.model.potential(self.static_coordinates(st), st.stretch, 1.0, st.load))
         return {"kinetic_j": kin, "potential_j": pot, "total_j": kin + pot}
+
+
+def warm_up_dynamics(model: RobotModel) -> None:
+    """Compile (or load) the integrator's kernel: two short steps from the vent equilibrium."""
+    from ..solve import solve_forward  # noqa: PLC0415 (the vent equilibrium, once)
+    fw = solve_forward(model, np.zeros(model.A), check_stability=False)
+    if fw.converged:
+        ig = GeneralizedAlpha(model, step_s=1e-3)
+        ig.start(fw)
+        ig.advance(2e-3)
