@@ -11,13 +11,14 @@ processes on an isolated random ``ROS_DOMAIN_ID`` (localhost discovery)::
         --measured_pressure--> forward_kinetostatic_node --predicted_pose-->
 
 with ``feedback: none`` (the paper's feedforward controller) and
-``feedback: integral`` side by side (two domains at once).  The simulated
-robot is realistic by default (``--ideal``: the clean robot): it has mass and
-rings (the dynamic model: first modes 8.6 Hz and 2.6 Hz, damping ratios 0.14
-and 0.05), regulators with 60 ms lag, 15 ms dead time and 1 kPa
-hysteresis, bellows creeping 15 % of their elongation over 2 s, a motion
-capture at 120 Hz with 8 ms latency, 0.15 mm noise, 0.5 % outliers of 10-30 mm and 0.5 s dropouts every 15 s.  The
-trajectory publisher streams at 50 Hz and previews the regulators' lag
+``feedback: integral`` side by side (two domains at once). The simulated robot
+is realistic by default (``--ideal``: the clean robot): it has mass and rings
+(the dynamic model: first modes 8.6 Hz and 2.6 Hz, damping ratios 0.14 and
+0.05), regulators with 60 ms lag, 15 ms dead time and 1 kPa hysteresis,
+bellows creeping 15 % of their elongation over 2 s, a motion capture at 120 Hz
+with 8 ms latency, 0.15 mm noise, 0.5 % outliers of 10-30 mm and 0.5 s
+dropouts every 15 s. The trajectory publisher streams at 50 Hz and previews
+the regulators' lag
 (``preview_s`` = dead time + time constant + half a target period).
 
 Each run: the nodes come up; this process holds the path's first point
