@@ -29,7 +29,7 @@ def test_every_module_with_compiled_functions_is_hashed(tmp_path):
                 if re.search(rb"^[ \t]*@njit", p.read_bytes(), re.M)]
     names = {p.relative_to(core).as_posix() for p in compiled}
     assert names == {"model/_kernels.py", "linalg/_ldlt.py", "solve/_chord.py",
-                     "solve/_inverse_warm.py"}
+                     "solve/_inverse_warm.py", "dynamics/_kernels.py"}
     assert {p.relative_to(numba_cache._CORE).as_posix()
             for p in numba_cache.compiled_modules()} == names
     for path in compiled:

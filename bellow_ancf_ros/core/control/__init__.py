@@ -14,6 +14,9 @@
   outliers and dropouts);
 * :class:`TargetShaper`, :func:`shaped`: ZV/ZVD input shaping of the target
   stream at the first mode (a step leaves no residual swing);
+* :class:`OscillationWatchdog`: a sustained or growing swing of the measured
+  error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
+  its gain and holds its correction);
 * :class:`LoopSimulation`: controller and simulated robot in simulated time
   (tests, benchmark);
 * :class:`TipForceEstimator`, :class:`ForceEstimate`: the tip force (or an
@@ -32,6 +35,7 @@ from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._simulated_robot import SimulatedRobot
+from ._watchdog import OscillationWatchdog, WatchdogTrip
 
 __all__ = [
     "EFFECTS", "ESTIMATOR_MODES", "FEEDBACK_MODES", "BellowCreep", "FeedbackSettings",
@@ -39,6 +43,6 @@ __all__ = [
     "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
     "ModeCheck", "ModeCheckResult", "RETUNE_FRACTION",
     "MotionCapture", "PlantEffects", "PressureRegulators", "SHAPERS", "SimulatedRobot",
-    "TargetShaper", "shaped", "shaper_impulses",
+    "TargetShaper", "shaped", "shaper_impulses", "OscillationWatchdog", "WatchdogTrip",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
 ]

@@ -107,6 +107,7 @@ import numpy as np
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ._history import bracket
 from ._median_gate import WINDOW, MedianGate
+from ._watchdog import OscillationWatchdog
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
 
@@ -129,6 +130,7 @@ SATURATED = 'holding (pressure limit or unreachable target)'
 STALE = 'holding the correction: measured_pose too old (dropout)'
 OUTLIER = 'holding the correction: newest measured_pose is an outlier'
 HELD = 'frozen: no command went out for the corrected target'
+OSCILLATING = 'holding the correction: oscillation seen, gain cut'
 
 
 @dataclass(frozen=True)
@@ -193,6 +195,9 @@ class IntegralFeedback:
         self._outlier = False       # the newest received sample was an outlier
         self.rejected = 0
         self.resets = 0
+        self.watchdog: OscillationWatchdog | None = None
+        self.gain_scale = 1.0       # cut by the watchdog on every trip
+        self._hold_until = -math.inf
 
     # ------------------------------------------------------------ state
     def reset(self) -> None:
@@ -250,6 +255,25 @@ class IntegralFeedback:
         return self.state in (STALE, OUTLIER, HELD)
 
     # ------------------------------------------------------------ inputs
+    def watch(self, frequency_hz: float) -> None:
+        """Watch the measured error for an oscillation near this mode (the robot's first).
+
+        On a trip (:class:`~._watchdog.OscillationWatchdog`) the gain is
+        halved (:attr:`gain_scale`) and the correction is held for one
+        window (state ``OSCILLATING``); :attr:`watchdog` ``.last_trip`` says
+        what was seen.  A new frequency (a payload moved the mode) keeps the
+        cut gain.
+        """
+        if self.watchdog is None:
+            self.watchdog = OscillationWatchdog(frequency_hz)
+        elif abs(self.watchdog.frequency_hz - frequency_hz) > 1e-9:
+            self.watchdog.set_mode(frequency_hz)
+
+    @property
+    def gain_per_s(self) -> float:
+        """The integral gain in use: the setting times the watchdog's cuts."""
+        return self.settings.gain_per_s * self.gain_scale
+
     def measurement(self, t: float, position: Any, z_axis: Any = None) -> bool:
         """Record a pose captured at time ``t``; False if refused as an outlier.
 
@@ -313,6 +337,9 @@ class IntegralFeedback:
         elif self._held:
             self.state = HELD
             self._last_t, self._used_meas_t = float(t), self._meas_t   # nothing to catch up
+        elif self._meas_t != self._used_meas_t and self._meas_t < self._hold_until:
+            self.state = OSCILLATING   # the watchdog tripped: hold, then integrate slower
+            self._last_t, self._used_meas_t = float(t), self._meas_t
         elif self._meas_t != self._used_meas_t:
             # each measurement is integrated once, over the time since the last integration
             dt = 0.0 if self._last_t is None else min(max(float(t) - self._last_t, 0.0),
@@ -351,7 +378,14 @@ class IntegralFeedback:
             self.state = TRACKING
             return
         p_t, z_t = then
-        k = s.gain_per_s * dt
+        if self.watchdog is not None:
+            trip = self.watchdog.feed(self._meas_t, p_t - self._meas_p)
+            if trip is not None:
+                self.gain_scale *= 0.5
+                self._hold_until = self._meas_t + self.watchdog.window_s
+                self.state = OSCILLATING
+                return
+        k = self.gain_per_s * dt
         # the error measured at the target then, turned to the current target's azimuth
         turn = rotation_z(self._phi - self._azimuth(p_t))
         c_new = _clamp(self.correction_m + k * (turn @ (p_t - self._meas_p)), s.max_correction_m)
@@ -414,4 +448,8 @@ class IntegralFeedback:
             'measured_pose_age_s': 'none' if age is None else f'{age:.3f}',
             'measured_poses_outliers': self.rejected,
             'feedback_resets': self.resets,
+            'feedback_gain_per_s': f'{self.gain_per_s:.4g}',
+            'oscillation_trips': 0 if self.watchdog is None else self.watchdog.trips,
+            'oscillation_seen': ('none' if self.watchdog is None or self.watchdog.last_trip is None
+                                 else self.watchdog.last_trip.message),
         }

@@ -1,0 +1,134 @@
+"""An oscillation watchdog for the closed loop: a sustained or growing swing near the first mode.
+
+An integral loop whose gain is too high for the robot's lightly damped first
+mode (module ``_loop_margins``) rings itself up into a limit cycle near that
+mode: the measured error swings with a growing, then a constant amplitude.
+:class:`OscillationWatchdog` looks at the measured error one window of two
+periods of the watched mode at a time: it fits, for each frequency of a band
+around the mode (0.75 to 1.5 times it: a limit cycle sits near the mode), a
+sinusoid per axis together with a quadratic trend (the slow error of a
+tracked trajectory) to the error of the window, and keeps the largest
+amplitude and its frequency.  It
+trips when that amplitude
+
+* stays above ``sustained_m`` (1 mm: seven times the motion capture's noise
+  of 0.15 mm, above what a loop that tracks leaves) for ``sustained_windows``
+  windows in a row (3: six periods), or
+* grows by ``growth`` (1.4) from window to window ``growing_windows`` times
+  in a row (3) and is above ``floor_m`` (0.3 mm).
+
+A tracked trajectory's own error is slow (a circle of 2 s and more is below
+the band of every shipped robot's first mode), so it does not count.  The
+caller decides what to do on a trip (the loop cuts its gain and holds its
+correction: module ``_feedback``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+__all__ = ['OscillationWatchdog', 'WatchdogTrip']
+
+#: The band searched around the watched mode, as factors of its frequency.
+BAND = np.linspace(0.75, 1.5, 16)
+
+
+class WatchdogTrip:
+    """What the watchdog saw when it tripped."""
+
+    __slots__ = ('time_s', 'frequency_hz', 'amplitude_m', 'reason')
+
+    def __init__(self, time_s, frequency_hz, amplitude_m, reason):
+        self.time_s, self.frequency_hz = float(time_s), float(frequency_hz)
+        self.amplitude_m, self.reason = float(amplitude_m), reason
+
+    @property
+    def message(self) -> str:
+        """One line: what it saw."""
+        return (f'oscillation at {self.frequency_hz:.2f} Hz, {self.amplitude_m * 1e3:.2f} mm '
+                f'({self.reason})')
+
+
+class OscillationWatchdog:
+    """Watches a measured error signal for a sustained or growing swing (module docstring).
+
+    Parameters
+    ----------
+    frequency_hz : the watched mode (the robot's first mode at the held
+        equilibrium); :meth:`set_mode` changes it.
+    """
+
+    def __init__(self, frequency_hz: float, sustained_m: float = 1e-3,
+                 sustained_windows: int = 3, growth: float = 1.4, growing_windows: int = 3,
+                 floor_m: float = 0.3e-3) -> None:
+        self.sustained_m, self.sustained_windows = float(sustained_m), int(sustained_windows)
+        self.growth, self.growing_windows = float(growth), int(growing_windows)
+        self.floor_m = float(floor_m)
+        self.amplitudes: deque = deque(maxlen=8)   # (frequency, amplitude) per window
+        self._samples: list = []
+        self._start: float | None = None
+        self.trips = 0
+        self.last_trip: WatchdogTrip | None = None
+        self.set_mode(frequency_hz)
+
+    def set_mode(self, frequency_hz: float) -> None:
+        """Watch another mode (a payload moved it); the windows start again."""
+        f = float(frequency_hz)
+        if not (math.isfinite(f) and f > 0):
+            raise ValueError(f'watched frequency must be > 0, got {frequency_hz!r}')
+        self.frequency_hz = f
+        self.window_s = 2.0 / f
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the samples and the windows (after a trip, or a new target)."""
+        self._samples = []
+        self._start = None
+        self.amplitudes.clear()
+
+    def _fit(self, t: np.ndarray, e: np.ndarray):
+        """Largest sinusoid amplitude over the band, and its frequency, of one window."""
+        t = t - t[0]
+        base = np.column_stack([np.ones_like(t), t, t * t])
+        best = (0.0, self.frequency_hz)
+        for factor in BAND:
+            w = 2 * math.pi * factor * self.frequency_hz
+            X = np.column_stack([base, np.cos(w * t), np.sin(w * t)])
+            coef, *_ = np.linalg.lstsq(X, e, rcond=None)
+            amp = float(np.sqrt((coef[3:] ** 2).sum()))   # all axes together
+            if amp > best[0]:
+                best = (amp, factor * self.frequency_hz)
+        return best
+
+    def feed(self, t: float, error) -> WatchdogTrip | None:
+        """One measured error (3-vector [m]) at time ``t``; a :class:`WatchdogTrip` on a trip."""
+        if self._start is None:
+            self._start = float(t)
+        self._samples.append((float(t), np.asarray(error, dtype=float).reshape(-1)))
+        if t - self._start < self.window_s:
+            return None
+        ts = np.array([s[0] for s in self._samples])
+        es = np.array([s[1] for s in self._samples])
+        self._samples, self._start = [], float(t)
+        if len(ts) < 8:
+            return None
+        amp, freq = self._fit(ts, es)
+        self.amplitudes.append((freq, amp))
+        a = [x[1] for x in self.amplitudes]
+        reason = None
+        n = self.sustained_windows
+        if len(a) >= n and min(a[-n:]) > self.sustained_m:
+            reason = f'above {self.sustained_m * 1e3:g} mm for {2 * n} periods'
+        g = self.growing_windows
+        if len(a) > g and a[-1] > self.floor_m and all(
+                a[-i] > self.growth * a[-i - 1] for i in range(1, g + 1)):
+            reason = f'growing {g} times in a row'
+        if reason is None:
+            return None
+        self.trips += 1
+        self.last_trip = WatchdogTrip(t, freq, amp, reason)
+        self.amplitudes.clear()
+        return self.last_trip

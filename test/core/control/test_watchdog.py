@@ -1,0 +1,82 @@
+"""The oscillation watchdog (core/control/_watchdog.py) and the loop's reaction to a trip."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core.control import FeedbackSettings, IntegralFeedback
+from bellow_ancf_ros.core.control._feedback import OSCILLATING
+from bellow_ancf_ros.core.control._watchdog import OscillationWatchdog
+
+F = 1.45   # the two-segment robot's first mode with 50 g [Hz]
+RATE = 120.0
+
+
+def _run(wd, signal, seconds, seed=0):
+    rng = np.random.default_rng(seed)
+    for i in range(int(seconds * RATE)):
+        t = i / RATE
+        e = signal(t) + 0.15e-3 * rng.standard_normal(3)
+        trip = wd.feed(t, e)
+        if trip is not None:
+            return trip
+    return None
+
+
+def test_a_growing_swing_trips_within_a_few_periods():
+    wd = OscillationWatchdog(F)
+    f_cycle = 1.6   # where the loop rings, near the mode
+
+    def grow(t):
+        x = math.sin(2 * math.pi * f_cycle * t)
+        return 0.2e-3 * math.exp(0.5 * t) * np.array([x, 0.0, 0.0])
+    trip = _run(wd, grow, 30.0)
+    assert trip is not None and trip.time_s < 6 / F * 2   # within six windows
+    assert trip.frequency_hz == pytest.approx(f_cycle, rel=0.06)
+    assert 'Hz' in trip.message and wd.trips == 1
+
+
+def test_a_sustained_limit_cycle_trips():
+    wd = OscillationWatchdog(F)
+    trip = _run(wd, lambda t: np.array([0.0, 2e-3 * math.sin(2 * math.pi * 1.6 * t), 0.0]),
+                20.0)
+    assert trip is not None and 'above 1 mm' in trip.reason
+    assert trip.time_s < 4 * wd.window_s + 0.1
+
+
+@pytest.mark.parametrize('period', [2.0, 5.0, 20.0])
+def test_tracking_errors_and_noise_do_not_trip(period):
+    """A 2 mm error at a circle's own frequency (10x, 4x and 1x the paper's speed)."""
+    wd = OscillationWatchdog(F)
+
+    def circle(t):
+        w = 2 * math.pi / period
+        return 2e-3 * np.array([math.cos(w * t), math.sin(w * t), 0.0])
+    assert _run(wd, circle, 40.0) is None
+    assert _run(OscillationWatchdog(F), lambda t: np.zeros(3), 40.0, seed=3) is None
+
+
+def test_the_loop_cuts_its_gain_and_holds_on_a_trip():
+    fb = IntegralFeedback(FeedbackSettings(gain_per_s=2.5, correction_frame='base'))
+    fb.watch(F)
+    target = np.array([0.0, 0.0, 0.1])
+    for i in range(int(20 * RATE)):
+        t = i / RATE
+        swing = 2e-3 * math.sin(2 * math.pi * 1.6 * t)
+        fb.measurement(t, target + np.array([swing, 0.0, 0.0]))
+        fb.corrected_target(t, target)
+        if fb.watchdog.trips:
+            break
+    assert fb.watchdog.trips == 1 and fb.gain_per_s == pytest.approx(1.25)
+    assert fb.state == OSCILLATING
+    c = fb.correction_m.copy()
+    t0 = t
+    while t < t0 + 0.5 * fb.watchdog.window_s:   # held for a window
+        t += 1 / RATE
+        fb.measurement(t, target + np.array([1e-3, 0.0, 0.0]))
+        fb.corrected_target(t, target)
+    np.testing.assert_array_equal(fb.correction_m, c)
+    status = fb.status(t)
+    assert status['oscillation_trips'] == 1 and 'Hz' in status['oscillation_seen']
+    assert status['feedback_gain_per_s'] == '1.25'
