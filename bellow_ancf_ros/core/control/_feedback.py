@@ -196,6 +196,7 @@ class IntegralFeedback:
         self.rejected = 0
         self.resets = 0
         self.watchdog: OscillationWatchdog | None = None
+        self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
         self.gain_scale = 1.0       # cut by the watchdog on every trip
         self._hold_until = -math.inf
 
@@ -269,10 +270,20 @@ class IntegralFeedback:
         elif abs(self.watchdog.frequency_hz - frequency_hz) > 1e-9:
             self.watchdog.set_mode(frequency_hz)
 
+    def set_gain(self, gain_per_s: float) -> None:
+        """Integrate with this gain from now on (an automatic gain that follows the mode).
+
+        The watchdog's cuts still apply on top of it.
+        """
+        k = float(gain_per_s)
+        if not (math.isfinite(k) and k > 0):
+            raise ValueError(f'gain_per_s must be > 0, got {gain_per_s!r}')
+        self.base_gain_per_s = k
+
     @property
     def gain_per_s(self) -> float:
-        """The integral gain in use: the setting times the watchdog's cuts."""
-        return self.settings.gain_per_s * self.gain_scale
+        """The integral gain in use: the set gain times the watchdog's cuts."""
+        return self.base_gain_per_s * self.gain_scale
 
     def measurement(self, t: float, position: Any, z_axis: Any = None) -> bool:
         """Record a pose captured at time ``t``; False if refused as an outlier.

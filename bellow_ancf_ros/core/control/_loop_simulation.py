@@ -111,12 +111,19 @@ class LoopSimulation:
         (compensation of the regulators' known lag); measurements are
         compared with the target wanted at their capture time.
     payload_kg : the payload the controller is told (default: the model's).
+    mode_check : a :class:`~._mode_check.ModeCheck` run on the inverse's
+        equilibria in simulated time (every ``period_s`` and on a new load):
+        the feedback's watchdog watches the first mode it finds, and with
+        ``auto_gain`` the feedback's gain is its safe gain.
+    auto_gain : set the feedback's gain from ``mode_check`` (the gain of the
+        feedback settings is then only the start value).
     """
 
     def __init__(self, model: RobotModel, robot: SimulatedRobot,
                  feedback: FeedbackSettings | None = None, control_rate_hz: float = 50.0,
                  physics_rate_hz: float = 200.0, preview_s: float = 0.0,
-                 payload_kg: float | None = None) -> None:
+                 payload_kg: float | None = None, mode_check=None,
+                 auto_gain: bool = False) -> None:
         """Set up the loop at the robot's current time; nothing is commanded yet."""
         for name, v in (('control_rate_hz', control_rate_hz),
                         ('physics_rate_hz', physics_rate_hz)):
@@ -137,6 +144,8 @@ class LoopSimulation:
         self.command = None
         self.corrupt: Callable | None = None  # corrupt(sample) -> sample, for tests
         self._outlier_since = False
+        self.mode_check, self.auto_gain = mode_check, bool(auto_gain)
+        self.gains: list = []                 # (time, gain) whenever the automatic gain changed
         t = robot.time_s
         self._next = {'physics': t + self.physics_dt, 'mocap': t, 'control': t}
 
@@ -162,6 +171,7 @@ class LoopSimulation:
         if usable:
             self.inverse, self.command = inv, cmd
             self.robot.command(cmd)
+            self._check_modes(t, fw)
             if fb is not None:
                 fb.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
                           fw.position, fw.z_axis)
@@ -181,6 +191,19 @@ class LoopSimulation:
         rec.state.append('' if fb is None else fb.state)
         rec.correction_m.append(np.zeros(3) if fb is None else fb.correction_m.copy())
         self._outlier_since = False
+
+    def _check_modes(self, t: float, fw) -> None:
+        """The first mode at the newest equilibrium: the watchdog's band, the automatic gain."""
+        chk, fb = self.mode_check, self.feedback
+        if chk is None or fb is None or not chk.due(fw, t):
+            return
+        res = chk.update(fw, t)
+        if res is None:
+            return
+        fb.watch(res.frequency_hz)
+        if self.auto_gain and (res.moved or not self.gains):
+            fb.set_gain(res.safe_gain_per_s)
+            self.gains.append((t, res.safe_gain_per_s))
 
     def _mocap(self, t: float) -> None:
         sample = self.robot.capture(t)
