@@ -9,6 +9,7 @@ node executable.  Diagnostics (statuses, the 1 Hz heartbeat) live in
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -274,24 +275,41 @@ _STOP = threading.Event()
 _SPINNING = threading.Event()
 #: Set once the spin loop has ended and ``before_destroy`` (the vent) has returned.
 _VENTED = threading.Event()
-#: After the first SIGINT/SIGTERM the process exits within this time [s], whatever hangs: the
-#: vent and its acknowledgement wait (VENT_ACK_TIMEOUT_S) have their time, then the teardown of
-#: the node and the middleware gets as long again (a hang of it was seen once, on a loaded
-#: machine, in a node with a 100 Hz timer; it would otherwise keep the process alive).
+#: After the first SIGINT/SIGTERM (or the end of the spin loop) the process exits within this
+#: time [s], whatever hangs: the vent and its acknowledgement wait (VENT_ACK_TIMEOUT_S) have
+#: their time, then the teardown of the node and the middleware.  Two guards: a Python timer
+#: at CLEAN_EXIT_S (a line on stderr, status 0 after the vent, else 1), and faulthandler's
+#: watchdog at WATCHDOG_EXIT_S, a C thread that needs no GIL: it ends a process whose main
+#: thread holds the interpreter inside a C call (Fast DDS ``destroy_participant`` spinning in
+#: ``rcl_node_fini`` was seen), printing every thread's stack, status 1.
 STOP_DEADLINE_S = 2.0 * VENT_ACK_TIMEOUT_S
+#: The C watchdog's exit: before the deadline, leaving time for the stacks and the exit itself.
+WATCHDOG_EXIT_S = STOP_DEADLINE_S - 0.5
+#: The Python guard's exit: before the watchdog, so that a free interpreter ends with its line.
+CLEAN_EXIT_S = STOP_DEADLINE_S - 1.0
 _NODE_LABEL = ['node']
+_DEADLINE_ARMED = threading.Event()
 
 
 def _exit_if_still_running() -> None:  # pragma: no cover - only when a teardown hangs
     code = 0 if _VENTED.is_set() else 1
-    print(f'[{_NODE_LABEL[0]}] shutdown did not finish within {STOP_DEADLINE_S:g} s of the '
+    print(f'[{_NODE_LABEL[0]}] shutdown did not finish within {CLEAN_EXIT_S:g} s of the '
           f'signal ({"after" if code == 0 else "before"} the vent step): exiting now',
           file=sys.stderr, flush=True)
     os._exit(code)
 
 
 def _arm_stop_deadline() -> None:
-    timer = threading.Timer(STOP_DEADLINE_S, _exit_if_still_running)
+    """Start both exit guards once (see :data:`STOP_DEADLINE_S`)."""
+    if _DEADLINE_ARMED.is_set():
+        return
+    _DEADLINE_ARMED.set()
+    stream = sys.__stderr__
+    try:   # the C watchdog: runs and exits while a C call holds the GIL
+        faulthandler.dump_traceback_later(WATCHDOG_EXIT_S, exit=True, file=stream)
+    except (AttributeError, OSError, ValueError, RuntimeError):  # no usable stderr descriptor
+        pass
+    timer = threading.Timer(CLEAN_EXIT_S, _exit_if_still_running)
     timer.daemon = True
     timer.start()
 
@@ -307,9 +325,9 @@ def _first_signal(signum, frame):  # pragma: no cover - signal path
     (in a constructor), it raises KeyboardInterrupt.
     """
     _ignore_further_signals()
+    _arm_stop_deadline()
     if _SPINNING.is_set():
         _STOP.set()
-        _arm_stop_deadline()
     else:
         raise KeyboardInterrupt
 
@@ -361,9 +379,11 @@ def run_node(node, before_destroy=None) -> None:
     From the first signal on, further SIGINT/SIGTERM are counted, not raised:
     ``ros2 launch`` and a terminal may both deliver SIGINT, and a second one
     must not interrupt the vent or its acknowledgement wait (which is bounded).
-    The first signal also starts a deadline (``STOP_DEADLINE_S``): should
-    anything hang after it, the process still exits then, with a line on
-    stderr (status 0 once the vent step returned, else 1).
+    The first signal (or the end of the loop) also starts the exit deadline
+    (:data:`STOP_DEADLINE_S`): should anything hang after it, the process
+    still exits, with a line on stderr (status 0 once the vent step returned,
+    else 1) or, when a C call holds the interpreter, with every thread's
+    stack printed by faulthandler's watchdog (status 1).
     """
     _SPINNING.set()
     executor = make_executor()
@@ -375,6 +395,7 @@ def run_node(node, before_destroy=None) -> None:
         pass
     finally:
         _ignore_further_signals()
+        _arm_stop_deadline()   # also when the node ended itself (request_stop)
         try:
             if before_destroy is not None and rclpy.ok():
                 before_destroy(node)
