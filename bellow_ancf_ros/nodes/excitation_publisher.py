@@ -37,8 +37,11 @@ from ..core.fit import excitation_sequence
 from . import contract
 from .diagnostics import publish_diagnostic
 from .ros_util import (
+    Param,
     StartupParameterError,
+    Topic,
     command_qos,
+    declare_all,
     descriptor,
     diagnostics_qos,
     guard_parameters,
@@ -53,43 +56,56 @@ __all__ = ['ExcitationPublisher', 'main']
 VENT_ACK_TIMEOUT_S = 1.0
 
 
+D, S, INT, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_BOOL)
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot description (shipped name or YAML path): actuator count and pressure limits.',
+        S, read_only=True)),
+    Param('dwell_s', 3.0, descriptor(
+        'Time each step is held [s].', D, lo=0.01, hi=3600.0, read_only=True)),
+    Param('rate_hz', 10.0, descriptor(
+        'Republishing rate of the current step [Hz].', D, lo=0.1, hi=1000.0, read_only=True)),
+    Param('points_per_scheme', 4, descriptor(
+        'Points per workspace scheme, p_min to p_max (>= 2).', INT, read_only=True)),
+    Param('n_random', 40, descriptor(
+        'Random in-limit pressure vectors after the schemes (>= 0).', INT, read_only=True)),
+    Param('seed', 0, descriptor('Seed of the random vectors.', INT, read_only=True)),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of pressure_command: Pa or kPa (gauge; the layout label says the unit).', S,
+        constraints="one of: 'Pa', 'kPa'")),
+    Param('start_delay_s', 1.0, descriptor(
+        'Wait this long before the first step [s] (for recorders to connect).', D,
+        lo=0.0, hi=3600.0, read_only=True)),
+    Param('wait_for_subscribers', 0, descriptor(
+        'Start (then wait start_delay_s) only once pressure_command has this many '
+        'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True)),
+    Param('allow_other_publishers', False, descriptor(
+        'Publish pressure_command even while another node publishes it (default false: '
+        'vent once and stop, ERROR diagnostics; see ownership in docs/ros.md).', B)),
+    Param('exit_when_done', True, descriptor(
+        'End the process once the sequence and the vent are done (the vent acknowledged, '
+        'at most 1 s).', B, read_only=True)),
+)
+TOPICS = (
+    Topic('publishes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'the excitation steps, then the vent (0 Pa gauge)'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'step count'),
+)
+
+
 class ExcitationPublisher(Node):
     """Steps the actuator pressures through the excitation sequence, then vents."""
 
-    def __init__(self, node_name: str = 'excitation_publisher', **kwargs: Any) -> None:
+    NODE_NAME = 'excitation_publisher'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """Declare the parameters, build the sequence and start the step timer."""
         super().__init__(node_name, **kwargs)
-        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                     ParameterType.PARAMETER_INTEGER)
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
-            'Robot description (shipped name or YAML path): actuator count and pressure limits.',
-            S, read_only=True))
-        self.declare_parameter('dwell_s', 3.0, descriptor(
-            'Time each step is held [s].', D, lo=0.01, hi=3600.0, read_only=True))
-        self.declare_parameter('rate_hz', 10.0, descriptor(
-            'Republishing rate of the current step [Hz].', D, lo=0.1, hi=1000.0, read_only=True))
-        self.declare_parameter('points_per_scheme', 4, descriptor(
-            'Points per workspace scheme, p_min to p_max (>= 2).', INT, read_only=True))
-        self.declare_parameter('n_random', 40, descriptor(
-            'Random in-limit pressure vectors after the schemes (>= 0).', INT, read_only=True))
-        self.declare_parameter('seed', 0, descriptor('Seed of the random vectors.', INT,
-                                                     read_only=True))
-        self.declare_parameter('pressure_unit', 'Pa', descriptor(
-            'Unit of pressure_command: Pa or kPa (gauge; the layout label says the unit).', S,
-            constraints="one of: 'Pa', 'kPa'"))
-        self.declare_parameter('start_delay_s', 1.0, descriptor(
-            'Wait this long before the first step [s] (for recorders to connect).', D,
-            lo=0.0, hi=3600.0, read_only=True))
-        self.declare_parameter('wait_for_subscribers', 0, descriptor(
-            'Start (then wait start_delay_s) only once pressure_command has this many '
-            'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True))
-        B = ParameterType.PARAMETER_BOOL
-        self.declare_parameter('allow_other_publishers', False, descriptor(
-            'Publish pressure_command even while another node publishes it (default false: '
-            'refuse, ERROR diagnostics, until this node is the only publisher).', B))
-        self.declare_parameter('exit_when_done', True, descriptor(
-            'End the process once the sequence and the vent are done (the vent acknowledged, '
-            'at most 1 s).', B, read_only=True))
+        declare_all(self, PARAMETERS)
         guard_parameters(self, ('pressure_unit', 'robot_config'))
 
         self.cfg = load_robot(self.get_parameter('robot_config').value)

@@ -131,14 +131,16 @@ from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_
 from ..core import geometry
 from . import contract, worker
 from .external_force import ExternalForce
-from .measured_feedback import FEEDBACK_PARAMETERS, FeedbackLink
+from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
+    Param,
+    Topic,
     command_qos,
-    declare,
+    declare_all,
     descriptor,
     diagnostics_qos,
     guard_parameters,
@@ -160,51 +162,79 @@ MAX_CONTINUATIONS = 40  # budget slices one target may take before the node give
 
 
 # ------------------------------------------------------------------- the node
+D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+           ParameterType.PARAMETER_BOOL)
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
+        '...: the files in '
+        'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
+        'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
+        constraints='a shipped robot name or a robot YAML path')),
+    Param('payload_kg', 0.0, descriptor(
+        'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
+        'on the next solve. Negative or larger values than the range are refused.', D,
+        lo=0.0, hi=contract.PAYLOAD_MAX_KG)),
+    Param('base_frame', 'base', descriptor(
+        'Frame of targets and outputs (robot base). Targets in any other frame are refused '
+        '(no tf2 transform).', S, constraints='a non-empty frame name')),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
+        '(relative to atmosphere); the layout label says the unit.', S,
+        constraints="one of: 'Pa', 'kPa'")),
+    Param('max_rate_hz', 100.0, descriptor(
+        'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
+        lo=0.1, hi=1000.0)),
+    Param('command_rate_hz', 20.0, descriptor(
+        'Rate at which the current command is republished while active and no new one went '
+        'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
+        'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True)),
+    Param('allow_other_publishers', False, descriptor(
+        'Publish pressure_command even while another node publishes it (default false: '
+        'refuse, ERROR diagnostics, until this node is the only publisher).', B)),
+    Param('use_estimated_force', False, descriptor(
+        'Compensate the force of estimated_wrench (wrench_estimator_node) in the '
+        'feedforward, as external_force is; read at start-up.', B, read_only=True)),
+    Param('external_force_timeout_s', 1.0, descriptor(
+        'A force (external_force, estimated_wrench) older than this is no longer '
+        'compensated [s].', D, lo=0.01, hi=3600.0, read_only=True)),
+    Param('autostart', True, descriptor(
+        'Configure and activate at start-up (so that a plain ros2 run works).', B,
+        read_only=True)),
+)
+
+
+TOPICS = (
+    Topic('subscribes', 'target_pose', 'geometry_msgs/PoseStamped', 'in base_frame'),
+    Topic('subscribes', 'measured_pose', 'geometry_msgs/PoseStamped',
+          "with feedback 'integral' (best effort)"),
+    Topic('subscribes', 'external_force', 'geometry_msgs/WrenchStamped',
+          'a force at the end effector, compensated'),
+    Topic('subscribes', 'estimated_wrench', 'geometry_msgs/WrenchStamped',
+          'with use_estimated_force'),
+    Topic('publishes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'gauge pressures in pressure_unit, only while active; the vent on deactivate, '
+          'shutdown, or when it yields to another publisher'),
+    Topic('publishes', 'commanded_pose', 'geometry_msgs/PoseStamped',
+          "the model's pose for the command"),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
+          'per-solve status and 1 Hz heartbeat'),
+    Topic('services', '~/change_state, ~/get_state, ...', 'lifecycle_msgs',
+          'the standard lifecycle services (autostart: configure + activate at start-up)'),
+)
+
+
 class InverseKinetostaticNode(LifecycleNode):
     """Managed feedforward controller: target poses -> actuator pressures."""
 
     NODE_NAME = 'inverse_kinetostatic_node'
+    PARAMETERS = PARAMETERS + FEEDBACK_PARAMETER_TABLE   # (the feedback ones: FeedbackLink)
+    TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_BOOL)
-        declare(self, 'robot_config', 'one_segment', descriptor(
-            'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
-            '...: the files in '
-            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
-            'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
-            constraints='a shipped robot name or a robot YAML path'))
-        declare(self, 'payload_kg', 0.0, descriptor(
-            'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
-            'on the next solve. Negative or larger values than the range are refused.', D,
-            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
-        declare(self, 'base_frame', 'base', descriptor(
-            'Frame of targets and outputs (robot base). Targets in any other frame are refused '
-            '(no tf2 transform).', S, constraints='a non-empty frame name'))
-        declare(self, 'pressure_unit', 'Pa', descriptor(
-            'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
-            '(relative to atmosphere); the layout label says the unit.', S,
-            constraints="one of: 'Pa', 'kPa'"))
-        declare(self, 'max_rate_hz', 100.0, descriptor(
-            'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
-            lo=0.1, hi=1000.0))
-        declare(self, 'command_rate_hz', 20.0, descriptor(
-            'Rate at which the current command is republished while active and no new one went '
-            'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
-            'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True))
-        declare(self, 'allow_other_publishers', False, descriptor(
-            'Publish pressure_command even while another node publishes it (default false: '
-            'refuse, ERROR diagnostics, until this node is the only publisher).', B))
-        declare(self, 'use_estimated_force', False, descriptor(
-            'Compensate the force of estimated_wrench (wrench_estimator_node) in the '
-            'feedforward, as external_force is; read at start-up.', B, read_only=True))
-        declare(self, 'external_force_timeout_s', 1.0, descriptor(
-            'A force (external_force, estimated_wrench) older than this is no longer '
-            'compensated [s].', D, lo=0.01, hi=3600.0, read_only=True))
-        declare(self, 'autostart', True, descriptor(
-            'Configure and activate at start-up (so that a plain ros2 run works).', B,
-            read_only=True))
+        declare_all(self, PARAMETERS)
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
                          extra_check=self._configure_time_check)
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback

@@ -36,15 +36,46 @@ from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
-from .ros_util import QOS_DEPTH, descriptor
+from .ros_util import QOS_DEPTH, Param, StartupParameterError, declare_all, descriptor
 
-__all__ = ['FEEDBACK_PARAMETERS', 'FeedbackLink', 'measured_pose_qos']
+__all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'measured_pose_qos']
 
-#: The parameters FeedbackLink declares; all are read on configure.
-FEEDBACK_PARAMETERS = ('feedback', 'feedback_gain_per_s', 'feedback_max_correction_mm',
-                       'feedback_max_correction_deg', 'measured_pose_timeout_s',
-                       'measured_pose_outlier_mm', 'feedback_reset_jump_mm', 'feedback_rate_hz',
-                       'feedback_correction_frame')
+_D, _S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
+_DEF = FeedbackSettings()
+#: The parameters FeedbackLink declares (what the inverse node's ``--help`` prints); all are
+#: read on configure.
+FEEDBACK_PARAMETER_TABLE = (
+    Param('feedback', 'none', descriptor(
+        "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
+        "or 'integral' (integral action on the task-space error). Read on configure.", _S,
+        constraints="one of: 'none', 'integral'")),
+) + tuple(Param(name, float(default), descriptor(text + ' Read on configure.', _D, lo=lo, hi=hi))
+          for name, default, text, lo, hi in (
+    ('feedback_gain_per_s', _DEF.gain_per_s,
+     'Integral gain [1/s]: an error decays with time constant 1/gain.', 0.01, 50.0),
+    ('feedback_max_correction_mm', _DEF.max_correction_m * 1e3,
+     'Clamp on the position correction [mm].', 0.01, 100.0),
+    ('feedback_max_correction_deg', math.degrees(_DEF.max_correction_rad),
+     'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
+    ('measured_pose_timeout_s', _DEF.measured_pose_timeout_s,
+     'Older measurements (a dropout): the integrator is frozen, its correction '
+     'stays applied [s].', 0.01, 10.0),
+    ('measured_pose_outlier_mm', _DEF.outlier_gate_m * 1e3,
+     'A measured pose this far from the median of the last five is an outlier, '
+     'never integrated [mm].', 0.1, 1000.0),
+    ('feedback_reset_jump_mm', _DEF.reset_jump_m * 1e3,
+     'A target jump this large resets the correction [mm].', 0.1, 1000.0),
+    ('feedback_rate_hz', 20.0,
+     'Rate at which the newest target is re-solved with a fresh correction [Hz].',
+     0.1, 1000.0))) + (
+    Param('feedback_correction_frame', _DEF.correction_frame, descriptor(
+        "Frame the correction is integrated in: 'azimuthal' (turns with the target about "
+        "the base z-axis: a symmetric robot's mismatch is constant in it) or 'base' (an "
+        "error fixed in the base frame, e.g. one stiffer actuator). Read on configure.", _S,
+        constraints="one of: 'azimuthal', 'base'")),
+)
+#: Their names.
+FEEDBACK_PARAMETERS = tuple(p.name for p in FEEDBACK_PARAMETER_TABLE)
 
 
 def measured_pose_qos() -> QoSProfile:
@@ -62,40 +93,10 @@ class FeedbackLink:
 
     def __init__(self, node, publish_diag: Callable) -> None:
         """Declare the feedback parameters on ``node`` (refuses a bad ``feedback`` value)."""
-        D, S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
-        node.declare_parameter('feedback', 'none', descriptor(
-            "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
-            "or 'integral' (integral action on the task-space error). Read on configure.", S,
-            constraints="one of: 'none', 'integral'"))
-        d = FeedbackSettings()
-        for name, default, text, lo, hi in (
-                ('feedback_gain_per_s', d.gain_per_s,
-                 'Integral gain [1/s]: an error decays with time constant 1/gain.', 0.01, 50.0),
-                ('feedback_max_correction_mm', d.max_correction_m * 1e3,
-                 'Clamp on the position correction [mm].', 0.01, 100.0),
-                ('feedback_max_correction_deg', math.degrees(d.max_correction_rad),
-                 'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
-                ('measured_pose_timeout_s', d.measured_pose_timeout_s,
-                 'Older measurements (a dropout): the integrator is frozen, its correction '
-                 'stays applied [s].', 0.01, 10.0),
-                ('measured_pose_outlier_mm', d.outlier_gate_m * 1e3,
-                 'A measured pose this far from the median of the last five is an outlier, '
-                 'never integrated [mm].', 0.1, 1000.0),
-                ('feedback_reset_jump_mm', d.reset_jump_m * 1e3,
-                 'A target jump this large resets the correction [mm].', 0.1, 1000.0),
-                ('feedback_rate_hz', 20.0,
-                 'Rate at which the newest target is re-solved with a fresh correction [Hz].',
-                 0.1, 1000.0)):
-            node.declare_parameter(name, float(default), descriptor(
-                text + ' Read on configure.', D, lo=lo, hi=hi))
-        node.declare_parameter('feedback_correction_frame', d.correction_frame, descriptor(
-            "Frame the correction is integrated in: 'azimuthal' (turns with the target about "
-            "the base z-axis: a symmetric robot's mismatch is constant in it) or 'base' (an "
-            "error fixed in the base frame, e.g. one stiffer actuator). Read on configure.", S,
-            constraints="one of: 'azimuthal', 'base'"))
+        declare_all(node, FEEDBACK_PARAMETER_TABLE)
         mode = node.get_parameter('feedback').value
         if mode not in FEEDBACK_MODES:
-            raise ValueError(f"parameter feedback: {mode!r} is not one of {list(FEEDBACK_MODES)}")
+            raise StartupParameterError('feedback', mode, "one of: 'none', 'integral'")
         self.node = node
         self._lock = threading.Lock()
         self._refusals = Refusals(node, 'measured poses', publish_diag)

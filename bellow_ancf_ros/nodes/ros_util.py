@@ -13,10 +13,11 @@ import faulthandler
 import os
 import signal
 import sys
+import textwrap
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import rclpy
@@ -43,10 +44,11 @@ from . import contract
 
 __all__ = [
     'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT', 'VENT_ACK_TIMEOUT_S',
-    'WARN_THROTTLE_S', 'StartupEnvironmentError', 'StartupParameterError', 'allowed_values',
-    'command_qos', 'declare', 'descriptor', 'diagnostics_qos', 'executor_choice',
-    'guard_parameters', 'init_rclpy', 'main_for', 'make_executor', 'pose_message',
-    'pressure_message', 'publish_and_wait_acked', 'request_stop', 'run_node',
+    'WARN_THROTTLE_S', 'Param', 'StartupEnvironmentError', 'StartupParameterError', 'Topic',
+    'allowed_values', 'asks_for_help', 'command_qos', 'declare', 'declare_all', 'descriptor',
+    'diagnostics_qos', 'executor_choice', 'guard_parameters', 'init_rclpy', 'main_for',
+    'make_executor', 'node_help', 'pose_message', 'pressure_message', 'publish_and_wait_acked',
+    'request_stop', 'run_node',
 ]
 
 QOS_DEPTH = 5
@@ -64,6 +66,9 @@ _TYPE_NAMES = {
     ParameterType.PARAMETER_INTEGER: 'an integer',
     ParameterType.PARAMETER_DOUBLE: 'a floating-point number (write 1.0, not 1)',
     ParameterType.PARAMETER_STRING: 'a string',
+    ParameterType.PARAMETER_DOUBLE_ARRAY: 'a list of floating-point numbers',
+    ParameterType.PARAMETER_INTEGER_ARRAY: 'a list of integers',
+    ParameterType.PARAMETER_STRING_ARRAY: 'a list of strings',
 }
 
 
@@ -156,6 +161,81 @@ def declare(node, name: str, default: Any, d: ParameterDescriptor) -> Any:
         value = _override_value(node, name)
         reason = 'wrong type' if isinstance(exc, InvalidParameterTypeException) else ''
         raise StartupParameterError(name, value, allowed_values(d), reason) from None
+
+
+class Param(NamedTuple):
+    """One parameter of a node: the table entry both its declaration and its ``--help`` use."""
+
+    name: str
+    default: Any
+    descriptor: ParameterDescriptor
+
+
+class Topic(NamedTuple):
+    """One topic or service of a node, for its ``--help`` (``direction``: publishes, ...)."""
+
+    direction: str
+    name: str
+    type: str
+    note: str = ''
+
+
+def declare_all(node, params: Sequence[Param]) -> dict:
+    """Declare every :class:`Param` of ``params`` with :func:`declare`; name -> value."""
+    return {p.name: declare(node, p.name, p.default, p.descriptor) for p in params}
+
+
+def _help_value(value: Any) -> str:
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (list, tuple)):
+        return '[' + ', '.join(_help_value(v) for v in value) + ']'
+    return f'{value!r}'
+
+
+def node_help(executable: str, doc: str, topics: Sequence[Topic],
+              params: Sequence[Param]) -> str:
+    """The ``--help`` text of a node executable: what it does, its topics, its parameters.
+
+    ``doc``: the node module's docstring (its first paragraph is used);
+    ``params``: the table the node declares from, so that the defaults and
+    ranges printed are the ones declared.
+    """
+    first = ' '.join((doc or '').strip().split('\n\n')[0].split()).replace('``', '')
+    lines = [f'usage: ros2 run bellow_ancf_ros {executable} [--ros-args -p name:=value ...]',
+             '', *textwrap.wrap(first, 99), '']
+    for direction in dict.fromkeys(t.direction for t in topics):
+        lines.append(f'{direction}:')
+        for t in topics:
+            if t.direction == direction:
+                note = f': {t.note}' if t.note else ''
+                lines += textwrap.wrap(f'{t.name} ({t.type}){note}', 99, initial_indent='  ',
+                                       subsequent_indent=' ' * 6)
+    lines += ['', 'parameters (name: default; allowed; description):']
+    for p in params:
+        d = p.descriptor
+        when = '; read-only (start-up only)' if d.read_only else ''
+        lines.append(f'  {p.name}: {_help_value(p.default)}; {allowed_values(d)}{when}')
+        lines += textwrap.wrap(d.description, 99, initial_indent=' ' * 6,
+                               subsequent_indent=' ' * 6)
+    lines += ['', 'Start-up values: --ros-args -p name:=value or --params-file FILE. '
+              'This help starts no ROS node and publishes nothing.']
+    return '\n'.join(lines)
+
+
+def asks_for_help(args: Sequence[str]) -> bool:
+    """True when ``-h``/``--help`` is among the non-ROS arguments (``args`` without argv[0])."""
+    in_ros = False
+    for a in args:
+        if a == '--ros-args':
+            in_ros = True
+        elif a == '--' and in_ros:
+            in_ros = False
+        elif not in_ros and a in ('-h', '--help'):
+            return True
+    return False
 
 
 def _descriptor_of(node, name: str) -> ParameterDescriptor | None:
@@ -425,16 +505,30 @@ def init_rclpy(args=None) -> None:
     signal.signal(signal.SIGTERM, _first_signal)
 
 
-def main_for(node_class, before_destroy=None, node_name: str | None = None):
+def main_for(node_class, before_destroy=None, node_name: str | None = None, factory=None):
     """Build ``main(args=None)`` of a node executable: init, construct, spin, clean up.
 
-    A start-up parameter the node cannot run with (:class:`StartupParameterError`,
-    or a robot file that does not load) ends the process with one line on
-    stderr and exit status :data:`STARTUP_ERROR_EXIT`, no traceback.
+    ``node_class`` has ``NODE_NAME``, ``TOPICS`` (:class:`Topic`) and
+    ``PARAMETERS`` (:class:`Param`, the table it declares from);
+    ``factory()`` builds the node (default ``node_class()``).  ``-h`` /
+    ``--help`` prints what the node does, its topics and its parameters
+    (:func:`node_help`) and exits 0 before rclpy is initialised: no node, no
+    message.  A start-up parameter the node cannot run with
+    (:class:`StartupParameterError`, a robot file that does not load) ends the
+    process with one line on stderr,
+    prefixed with the node's name, and exit status :data:`STARTUP_ERROR_EXIT`,
+    no traceback.
     """
     name = node_name or getattr(node_class, 'NODE_NAME', node_class.__name__)
+    make = factory or node_class
 
     def main(args=None) -> None:
+        argv = sys.argv if args is None else list(args)
+        if asks_for_help(argv[1:]):
+            doc = sys.modules[node_class.__module__].__doc__
+            print(node_help(name, doc, getattr(node_class, 'TOPICS', ()),
+                            getattr(node_class, 'PARAMETERS', ())), flush=True)
+            sys.exit(0)
         _NODE_LABEL[0] = name
         init_rclpy(args)
         try:
@@ -443,7 +537,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None):
                 print(f'[{name}] compiling the numerical kernels once after installation '
                       '(about 20 s; `ros2 run bellow_ancf_ros bellow-ancf warm-up` does it '
                       'ahead of time)', file=sys.stderr, flush=True)
-            node = node_class()
+            node = make()
             _SPINNING.set()  # from here a signal stops the node cleanly (run_node)
         except (StartupParameterError, ConfigError) as exc:
             rclpy.try_shutdown()

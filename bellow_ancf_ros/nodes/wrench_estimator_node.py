@@ -46,58 +46,87 @@ from . import contract
 from .diagnostics import Heartbeat, Refusals, publish_diagnostic
 from .frames import PoseFrames
 from .measured_feedback import measured_pose_qos
-from .ros_util import (StartupParameterError, command_qos, declare, descriptor, diagnostics_qos,
-                       main_for)
+from .ros_util import (Param, StartupParameterError, Topic, command_qos, declare_all, descriptor,
+                       diagnostics_qos, main_for)
 
 __all__ = ['WrenchEstimatorNode', 'main']
 
 NODE_NAME = 'wrench_estimator_node'
+D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+           ParameterType.PARAMETER_BOOL)
+ro = dict(read_only=True)
+
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'The calibrated robot file (shipped name or YAML path): its model error reads as '
+        'a force.', S, constraints='a shipped robot name or a robot YAML path', **ro)),
+    Param('mode', 'force', descriptor(
+        "'force': the tip force (3 components); 'mass': an unknown payload along gravity.",
+        S, constraints="one of: 'force', 'mass'", **ro)),
+    Param('payload_kg', 0.0, descriptor(
+        "The known payload [kg] (mode 'force'), or the first guess (mode 'mass').", D,
+        lo=0.0, hi=contract.PAYLOAD_MAX_KG, **ro)),
+    Param('position_noise_m', 0.15e-3, descriptor(
+        'Motion-capture position noise, standard deviation per axis [m].', D,
+        lo=1e-7, hi=0.1, **ro)),
+    Param('angle_noise_rad', 0.0017453292519943296, descriptor(
+        'Motion-capture orientation noise, standard deviation per axis [rad].', D,
+        lo=1e-7, hi=1.0, **ro)),
+    Param('force_rate', 0.01, descriptor(
+        'How fast the force may change: random-walk spectral density [N^2/s] '
+        '(0.01: about 0.1 N in a second).', D, lo=0.0, hi=100.0, **ro)),
+    Param('use_z_axis', True, descriptor(
+        'Use the measured z-axis as well as the position.', B, **ro)),
+    Param('rate_hz', 20.0, descriptor(
+        'estimated_wrench publication rate [Hz].', D, lo=0.1, hi=1000.0, **ro)),
+    Param('marker_scale_m_per_n', 0.1, descriptor(
+        'Length of the estimated_wrench_marker arrow per newton [m/N].', D,
+        lo=1e-4, hi=100.0, **ro)),
+    Param('pressure_timeout_s', 0.5, descriptor(
+        'Measured pressures older than this give way to pressure_command [s].', D,
+        lo=0.01, hi=60.0, **ro)),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of measured_pressure and pressure_command: Pa or kPa (gauge).', S,
+        constraints="one of: 'Pa', 'kPa'", **ro)),
+    Param('base_frame', 'base', descriptor(
+        'Frame of estimated_wrench (the robot base).', S, **ro)),
+)
+
+
+TOPICS = (
+    Topic('subscribes', 'measured_pose', 'geometry_msgs/PoseStamped',
+          'base_frame, the robot file\'s mocap frame or any frame tf2 knows (best effort)'),
+    Topic('subscribes', 'measured_pressure', 'std_msgs/Float64MultiArray',
+          'the regulators\' measured pressures, in pressure_unit'),
+    Topic('subscribes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'used while no fresh measured_pressure arrives'),
+    Topic('publishes', 'estimated_wrench', 'geometry_msgs/WrenchStamped',
+          'the tip force in base_frame [N], at rate_hz'),
+    Topic('publishes', 'estimated_wrench_marker', 'visualization_msgs/Marker',
+          'the force as an arrow, for RViz'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz heartbeat'),
+    Topic('services', '~/tare', 'std_srvs/Trigger', 'zero the reading'),
+)
 
 
 class WrenchEstimatorNode(Node):
     """Tip force from poses and pressures (module docstring)."""
 
     NODE_NAME = NODE_NAME
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """Declare the parameters (read at start-up), build the estimator, wire the topics."""
         super().__init__(node_name, **kwargs)
-        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_BOOL)
-        ro = dict(read_only=True)
-        robot = declare(self, 'robot_config', 'one_segment', descriptor(
-            'The calibrated robot file (shipped name or YAML path): its model error reads as '
-            'a force.', S, constraints='a shipped robot name or a robot YAML path', **ro))
-        mode = declare(self, 'mode', 'force', descriptor(
-            "'force': the tip force (3 components); 'mass': an unknown payload along gravity.",
-            S, constraints="one of: 'force', 'mass'", **ro))
-        payload = declare(self, 'payload_kg', 0.0, descriptor(
-            "The known payload [kg] (mode 'force'), or the first guess (mode 'mass').", D,
-            lo=0.0, hi=contract.PAYLOAD_MAX_KG, **ro))
-        sigma_p = declare(self, 'position_noise_m', 0.15e-3, descriptor(
-            'Motion-capture position noise, standard deviation per axis [m].', D,
-            lo=1e-7, hi=0.1, **ro))
-        sigma_a = declare(self, 'angle_noise_rad', 0.0017453292519943296, descriptor(
-            'Motion-capture orientation noise, standard deviation per axis [rad].', D,
-            lo=1e-7, hi=1.0, **ro))
-        rate = declare(self, 'force_rate', 0.01, descriptor(
-            'How fast the force may change: random-walk spectral density [N^2/s] '
-            '(0.01: about 0.1 N in a second).', D, lo=0.0, hi=100.0, **ro))
-        declare(self, 'use_z_axis', True, descriptor(
-            'Use the measured z-axis as well as the position.', B, **ro))
-        declare(self, 'rate_hz', 20.0, descriptor(
-            'estimated_wrench publication rate [Hz].', D, lo=0.1, hi=1000.0, **ro))
-        declare(self, 'marker_scale_m_per_n', 0.1, descriptor(
-            'Length of the estimated_wrench_marker arrow per newton [m/N].', D,
-            lo=1e-4, hi=100.0, **ro))
-        declare(self, 'pressure_timeout_s', 0.5, descriptor(
-            'Measured pressures older than this give way to pressure_command [s].', D,
-            lo=0.01, hi=60.0, **ro))
-        declare(self, 'pressure_unit', 'Pa', descriptor(
-            'Unit of measured_pressure and pressure_command: Pa or kPa (gauge).', S,
-            constraints="one of: 'Pa', 'kPa'", **ro))
-        declare(self, 'base_frame', 'base', descriptor(
-            'Frame of estimated_wrench (the robot base).', S, **ro))
+        declare_all(self, PARAMETERS)
+        robot = self.get_parameter('robot_config').value
+        mode = self.get_parameter('mode').value
+        payload = self.get_parameter('payload_kg').value
+        sigma_p = self.get_parameter('position_noise_m').value
+        sigma_a = self.get_parameter('angle_noise_rad').value
+        rate = self.get_parameter('force_rate').value
         if mode not in ESTIMATOR_MODES:
             raise StartupParameterError('mode', mode, "one of: 'force', 'mass'")
         try:

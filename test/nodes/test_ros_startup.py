@@ -189,6 +189,9 @@ BAD_STARTUP = [
     ('trajectory_publisher', 'trajectory:=figure_eight', 'trajectory', "'figure_eight'",
      'planar_circle'),
     ('wrench_estimator_node', 'mode:=torque', 'mode', "'torque'", "one of: 'force', 'mass'"),
+    ('simulated_robot_node', 'plant:=perfect', 'plant', "'perfect'", "'realistic' or 'ideal'"),
+    ('excitation_publisher', 'dwell_s:=0.0', 'dwell_s', '0.0', 'from 0.01 to 3600'),
+    ('mocap_relay', 'robot_config:=7', 'robot_config', '7', 'a string'),
 ]
 
 
@@ -203,6 +206,7 @@ def test_bad_startup_parameter_one_line_and_exit_2(env, tmp_path):
         assert 'Traceback' not in out, out
         assert len(lines) == 1, (arg, out)
         line = lines[0]
+        assert line.startswith(f'[{mod}] cannot start: '), line   # the node's name
         assert f'parameter {name} = {value}' in line, line
         assert 'allowed' in line and allowed in line, line
 
