@@ -13,6 +13,7 @@ import faulthandler
 import os
 import signal
 import sys
+import tempfile
 import textwrap
 import threading
 import time
@@ -21,6 +22,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import rclpy
+import yaml
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -492,17 +494,93 @@ def run_node(node, before_destroy=None) -> None:
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
+class _ParamsFileError(Exception):
+    """A ``--params-file`` rclpy cannot read (one line: the file and what is wrong)."""
+
+
+def _params_files(args: Sequence[str]) -> list[str]:
+    """The files given with ``--params-file`` among the ROS arguments."""
+    return [b for a, b in zip(args, args[1:]) if a == '--params-file']
+
+
+def _params_file_problem(args: Sequence[str]) -> str:
+    """What is wrong with a ``--params-file`` of ``args`` that rcl would refuse, or ''.
+
+    Checked before rcl sees them (a missing file, YAML that does not parse, a
+    file that is not a mapping); what rcl refuses beyond that comes from
+    :func:`init_rclpy`.
+    """
+    for f in _params_files(args):
+        if not os.path.isfile(f):
+            return f'--params-file {f}: no such file'
+        try:
+            with open(f) as fh:
+                data = yaml.safe_load(fh)
+        except (OSError, UnicodeDecodeError) as err:
+            return f'--params-file {f}: cannot be read ({err})'
+        except yaml.YAMLError as err:
+            where = getattr(err, 'problem_mark', None)
+            line = f', line {where.line + 1}' if where is not None else ''
+            return (f'--params-file {f}: not valid YAML{line} '
+                    f'({getattr(err, "problem", None) or type(err).__name__})')
+        if not isinstance(data, dict):
+            return (f'--params-file {f}: not a ROS 2 parameters file (allowed: a mapping '
+                    '"<node name or /**>: {ros__parameters: {name: value}}")')
+    return ''
+
+
 def init_rclpy(args=None) -> None:
     """Initialise rclpy without its signal handlers; SIGINT/SIGTERM stop the node.
 
     The first signal ends the spin loop (see :func:`_first_signal`) and makes
     every later one a no-op, so that a second Ctrl-C (terminal and ``ros2 launch`` both send
-    one) cannot interrupt the vent on the way out.
+    one) cannot interrupt the vent on the way out.  ROS arguments rcl would
+    refuse (a ``--params-file`` that does not exist, is not YAML or not a
+    parameters file) raise :class:`_ParamsFileError` with one line naming the
+    file and what is wrong, and rcl's own log lines about it are held back.
     """
+    argv = sys.argv if args is None else list(args)
+    problem = _params_file_problem(argv)
+    if problem:
+        raise _ParamsFileError(problem)
     limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        with _StderrHeld() as held:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # noqa: BLE001 - rclpy's RCLError (no public class in Jazzy)
+        if type(exc).__name__ != 'RCLError':
+            raise
+        text = ' '.join(str(exc).split()).split(', at /')[0]
+        files = ' '.join(_params_files(argv)) or 'the ROS arguments'
+        raise _ParamsFileError(f'{files}: refused by rcl ({text})') from None
+    if held.text:   # rcl's output of a successful init goes out as it came
+        sys.stderr.write(held.text)
     signal.signal(signal.SIGINT, _first_signal)
     signal.signal(signal.SIGTERM, _first_signal)
+
+
+class _StderrHeld:
+    """Hold what C code writes on file descriptor 2 meanwhile (``.text`` afterwards)."""
+
+    def __enter__(self):
+        self.text = ''
+        self._file = tempfile.TemporaryFile(mode='w+b')
+        try:
+            sys.stderr.flush()
+            self._saved = os.dup(2)
+            os.dup2(self._file.fileno(), 2)
+        except OSError:   # no descriptor 2: nothing to hold
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+            self._file.seek(0)
+            self.text = self._file.read().decode(errors='replace')
+        self._file.close()
+        return False
 
 
 def main_for(node_class, before_destroy=None, node_name: str | None = None, factory=None):
@@ -514,8 +592,8 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
     ``--help`` prints what the node does, its topics and its parameters
     (:func:`node_help`) and exits 0 before rclpy is initialised: no node, no
     message.  A start-up parameter the node cannot run with
-    (:class:`StartupParameterError`, a robot file that does not load) ends the
-    process with one line on stderr,
+    (:class:`StartupParameterError`, a robot file that does not load, a
+    ``--params-file`` rcl refuses) ends the process with one line on stderr,
     prefixed with the node's name, and exit status :data:`STARTUP_ERROR_EXIT`,
     no traceback.
     """
@@ -530,7 +608,11 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
                             getattr(node_class, 'PARAMETERS', ())), flush=True)
             sys.exit(0)
         _NODE_LABEL[0] = name
-        init_rclpy(args)
+        try:
+            init_rclpy(argv)
+        except _ParamsFileError as exc:
+            print(f'[{name}] cannot start: {exc}', file=sys.stderr, flush=True)
+            sys.exit(STARTUP_ERROR_EXIT)
         try:
             executor_choice()
             if not numba_cache.is_compiled():   # say at once what the blank terminal is

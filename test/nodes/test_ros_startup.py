@@ -211,6 +211,34 @@ def test_bad_startup_parameter_one_line_and_exit_2(env, tmp_path):
         assert 'allowed' in line and allowed in line, line
 
 
+BAD_PARAMS_FILES = [   # node, file content (None: no file), what the line says
+    ('inverse_kinetostatic_node', None, 'no such file'),
+    ('trajectory_publisher', 'a: [1, 2\n', 'not valid YAML, line 2'),
+    ('mocap_relay', '- 1\n- 2\n', 'not a ROS 2 parameters file'),
+    ('forward_kinetostatic_node', '/**:\n  ros__parameters:\n    x: [1, "s"]\n',
+     'refused by rcl'),
+]
+
+
+def test_bad_params_file_one_line_and_exit_2(env, tmp_path):
+    """A --params-file that is missing, not YAML or refused by rcl: one line, exit 2."""
+    procs = []
+    for i, (mod, content, _) in enumerate(BAD_PARAMS_FILES):
+        path = tmp_path / f'params{i}.yaml'
+        if content is not None:
+            path.write_text(content)
+        procs.append((Proc(mod, ['--params-file', str(path)], env, tmp_path / f'{i}.log'),
+                      path))
+    for (p, path), (mod, _, says) in zip(procs, BAD_PARAMS_FILES):
+        code = p.wait(STARTUP_TIMEOUT)
+        out = p.log()
+        lines = [line for line in out.splitlines() if line.strip()]
+        assert code == ros_util.STARTUP_ERROR_EXIT, out
+        assert 'Traceback' not in out and len(lines) == 1, out
+        assert lines[0].startswith(f'[{mod}] cannot start: '), lines[0]
+        assert str(path) in lines[0] and says in lines[0], lines[0]
+
+
 def test_bad_executor_name_one_line_and_exit_2(env, tmp_path):
     p = Proc('inverse_kinetostatic_node', [], {**env, ros_util.EXECUTOR_ENV: 'fast'},
              tmp_path / 'bad.log')

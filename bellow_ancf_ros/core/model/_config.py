@@ -81,7 +81,7 @@ class ConfigError(ValueError):
         if len(lines) == 1:
             message = f'{source}: {lines[0]}'
         else:
-            message = f'{source}: {len(lines)} problems:\n  ' + '\n  '.join(lines)
+            message = f'{source}: {len(lines)} problems: ' + '; '.join(lines)   # one line
         super().__init__(message)
 
 

@@ -386,6 +386,11 @@ def test_all_problems_reported_together(two):
     err = refused(two, 'actuator.l0_m', 'segments[1].n_actuators', 'model.n_elements', 'extra')
     assert len(err.issues) == 4
     assert isinstance(err, ValueError)
+    # one line, as every error of the package ("<dict>: 4 problems: a; b; ...")
+    message = str(err)
+    assert '\n' not in message and ':;' not in message, message
+    assert message.startswith('<dict>: 4 problems: '), message
+    assert all(f'{key}: {reason}' in message for key, reason in err.issues), message
 
 
 # ------------------------------------------------------------------ file level
