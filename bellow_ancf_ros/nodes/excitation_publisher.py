@@ -8,9 +8,10 @@ workspace schemes (section VI.B) at ``points_per_scheme`` points each, then
 ``dwell_s`` seconds and republished at ``rate_hz`` (a repeated command is not a
 new step for ``bellow-ancf calibrate``).  After the last step, and on shutdown
 (Ctrl-C/SIGTERM), it publishes the vent command (0 Pa gauge on every actuator)
-once and stops; the process then ends (``exit_when_done``).  While another
-node publishes ``pressure_command`` it publishes nothing but the vent
-(``bellow_ancf_ros.nodes.ownership``).  With ``wait_for_subscribers`` it
+once and stops; the process then ends (``exit_when_done``).  When another
+node publishes ``pressure_command`` it yields (:mod:`bellow_ancf_ros.nodes.ownership`):
+the vent once (if it had commanded), the sequence aborted, never resumed;
+with ``exit_when_done`` the process ends with status 1.  With ``wait_for_subscribers`` it
 starts only once that many subscribers listen on ``pressure_command``.  Record meanwhile, e.g.
 ``ros2 bag record /pressure_command /measured_pose``; choose ``dwell_s`` well above
 calibrate's ``--settle-s``.
@@ -123,11 +124,12 @@ class ExcitationPublisher(Node):
         self.step = -1
         self.published = 0
         self.refused = 0
-        self._refusal_diag_t = -float('inf')
         self.finished = False
+        self.aborted = False   # yielded pressure_command to another node (ownership.py)
         self.vented = False
         self._pub = self.create_publisher(Float64MultiArray, 'pressure_command', command_qos())
-        self._owner = TopicOwner(self, 'pressure_command')
+        self._owner = TopicOwner(self, 'pressure_command',
+                                 'start the excitation again once the other node has stopped')
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._t0 = None
         rate = float(self.get_parameter('rate_hz').value)
@@ -141,17 +143,36 @@ class ExcitationPublisher(Node):
                                     self.cfg.n_actuators_total)
         if not vent and not self._owner.may_publish():   # the vent always goes out
             self.refused += 1
-            reason = self._owner.refusal()
-            self.get_logger().error(reason, throttle_duration_sec=2.0)
-            now = time.monotonic()
-            if now - self._refusal_diag_t >= 1.0:   # at most 1 Hz on /diagnostics
-                self._refusal_diag_t = now
-                self._diag(DiagnosticStatus.ERROR, reason)
+            self._yield()
             return
         self._pub.publish(pressure_message(p, self.get_parameter('pressure_unit').value))
         self.published += 1
 
+    def _yield(self) -> None:
+        """Another node publishes pressure_command: vent once, abort, never resume by itself."""
+        self._owner.start_yield(vented=self.published > 0)
+        self.aborted = self.finished = True
+        if self.published:   # it commanded the regulators: they go to the vent
+            self.vent(f'yielding pressure_command at step {self.step + 1} of '
+                      f'{len(self.sequence)}')
+        else:                # it never did: a vent now would only disturb the other node
+            self.vented = True
+
+    def _report_yield(self) -> None:
+        """After a yield: the ERROR naming the other node, reminders; then exit (status 1)."""
+        error = self._owner.report()
+        if error:
+            self._diag(DiagnosticStatus.ERROR, f'aborted: {error}')
+            if self.get_parameter('exit_when_done').value:
+                self._timer.cancel()
+                self._wait_acked()
+                self.get_logger().info('excitation aborted: exiting (status 1)')
+                request_stop(exit_status=1)
+
     def _tick(self) -> None:
+        if self.aborted:
+            self._report_yield()
+            return
         if self.finished:
             return
         if self._t0 is None:
@@ -185,7 +206,8 @@ class ExcitationPublisher(Node):
                                               self.cfg.p_max), vent=True)
         self.vented = True
         self._diag(DiagnosticStatus.OK, f'{why}: vented')
-        self.get_logger().info(f'{why}: vent command (0 Pa gauge) published')
+        unit = self.get_parameter('pressure_unit').value
+        self.get_logger().info(f'{why}: vent command (0 {unit} gauge) published')
 
     def vent_and_wait(self) -> None:
         """Vent on shutdown and wait (bounded) until subscribers have it."""

@@ -449,8 +449,17 @@ def make_executor():
     return SingleThreadedExecutor()
 
 
-def request_stop() -> None:
-    """End :func:`run_node`'s spin loop as a first SIGINT would (a node that is done)."""
+#: Exit status of the process once :func:`run_node` has returned (:func:`request_stop`).
+_EXIT_STATUS = [0]
+
+
+def request_stop(exit_status: int = 0) -> None:
+    """End :func:`run_node`'s spin loop as a first SIGINT would (a node that is done).
+
+    ``exit_status``: the status the executable then exits with (e.g. 1 for a
+    node that gave up).
+    """
+    _EXIT_STATUS[0] = exit_status
     _STOP.set()
 
 
@@ -632,4 +641,6 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
             rclpy.try_shutdown()
             raise
         run_node(node, before_destroy=before_destroy)
+        if _EXIT_STATUS[0]:
+            sys.exit(_EXIT_STATUS[0])
     return main

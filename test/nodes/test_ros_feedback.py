@@ -154,7 +154,7 @@ def test_feedback_none_is_feedforward_without_measured_pose_subscription(h, one)
 
 
 def test_bad_feedback_parameter_refused(h):
-    with pytest.raises(ValueError, match="parameter feedback: 'pid'"):
+    with pytest.raises(ValueError, match="parameter feedback = 'pid' is not allowed"):
         h.add(InverseKinetostaticNode, feedback='pid')
 
 

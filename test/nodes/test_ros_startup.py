@@ -487,3 +487,75 @@ def test_a_first_start_says_at_once_that_it_compiles(tmp_path):
     finally:
         os.killpg(proc.pid, _signal.SIGKILL)
         proc.wait(10)
+
+
+def _errors(log):
+    return [line for line in log.splitlines() if line.startswith('[ERROR]')]
+
+
+def _lifecycle_state(client):
+    from lifecycle_msgs.srv import GetState
+    return client.call(GetState, INVERSE + '/get_state', GetState.Request()).current_state.label
+
+
+def test_one_owner_yields_with_a_vent_and_resumes_only_on_activate(env, tmp_path, client):
+    """The ownership rule (docs/ros.md): an excitation started beside the active controller.
+
+    Both nodes see another publisher of pressure_command: the controller
+    vents once and deactivates itself, the excitation aborts; each logs one
+    ERROR naming the other node (not the graph's placeholder).  When the
+    excitation has gone, the controller does not come back by itself; an
+    explicit ``activate`` resumes it (the vent held until a new target).
+    """
+    node = _active_inverse(env, tmp_path / 'inverse.log', client)
+    exc = None
+    try:
+        assert client.last_cmd() != [0.0, 0.0, 0.0]
+        exc = Proc('excitation_publisher', ['-p', 'start_delay_s:=0.2', '-p', 'dwell_s:=0.5',
+                                            '-p', 'exit_when_done:=false'],
+                   env, tmp_path / 'excitation.log')
+        wait_for(lambda: 'yielding pressure_command: vent command (0 Pa gauge) published'
+                 in node.log(), STARTUP_TIMEOUT, 'the controller vents on its yield')
+        wait_for(lambda: _errors(node.log()) and _errors(exc.log()), STARTUP_TIMEOUT,
+                 'both ERRORs')
+        wait_for(lambda: client.last_cmd() == [0.0, 0.0, 0.0], TIMEOUT, 'the vent last')
+        assert _lifecycle_state(client) == 'inactive'
+        time.sleep(2.5)   # reminders come every 10 s, not every 2 s
+        for log, other in ((node.log(), '/excitation_publisher'),
+                           (exc.log(), '/inverse_kinetostatic_node')):
+            errors = _errors(log)
+            assert len(errors) == 1, errors   # one ERROR, not three variants every 2 s
+            assert other in errors[0] and 'UNKNOWN' not in errors[0], errors[0]
+            assert 'no automatic resume' in errors[0], errors[0]
+        assert f'ros2 lifecycle set {INVERSE} activate' in _errors(node.log())[0]
+        assert 'excitation aborted' not in exc.log()   # exit_when_done false: it stays
+        n_vented = client.n_cmds()
+
+        # the excitation leaves: one INFO, no resume by itself
+        exc.signal(signal.SIGINT)
+        assert exc.wait() == 0, exc.log()
+        wait_for(lambda: 'no longer publishes' in node.log(), TIMEOUT, 'the INFO line')
+        time.sleep(2.0)   # the controller used to resume (and jump) about 1 s after
+        assert client.n_cmds() == n_vented, 'a command after the yield, without an action'
+        assert _lifecycle_state(client) == 'inactive'
+
+        # the explicit action: activate; the vent holds until a new target
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        wait_for(lambda: client.n_cmds() > n_vented, TIMEOUT, 'commands again')
+        assert client.last_cmd() == [0.0, 0.0, 0.0]   # the vent, republished: no jump
+        deadline = time.monotonic() + TIMEOUT
+        while client.last_cmd() == [0.0, 0.0, 0.0] and time.monotonic() < deadline:
+            client.targets.publish(target(x=0.003))
+            time.sleep(0.2)
+        assert client.last_cmd() != [0.0, 0.0, 0.0], node.log()
+
+        # an excitation that finds the controller commanding aborts at once, status 1
+        exc = Proc('excitation_publisher', ['-p', 'start_delay_s:=0.2'], env,
+                   tmp_path / 'excitation2.log')
+        assert exc.wait(STARTUP_TIMEOUT) == 1, exc.log()
+        assert 'excitation aborted: exiting (status 1)' in exc.log()
+        assert '/inverse_kinetostatic_node' in _errors(exc.log())[0]
+    finally:
+        if exc is not None:
+            exc.kill()
+        node.kill()
