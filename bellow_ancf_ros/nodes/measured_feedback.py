@@ -76,6 +76,10 @@ FEEDBACK_PARAMETER_TABLE = (
 )
 #: Their names.
 FEEDBACK_PARAMETERS = tuple(p.name for p in FEEDBACK_PARAMETER_TABLE)
+#: A dropout of the measured poses (a marker occluded: about 0.5 s, every 15 s on the
+#: realistic simulated robot) is logged at INFO and counted on /diagnostics; one that lasts
+#: longer than this [s] is a WARN: the motion capture needs a look.
+DROPOUT_WARN_S = 2.0
 
 
 def measured_pose_qos() -> QoSProfile:
@@ -106,6 +110,10 @@ class FeedbackLink:
         self._use_orientation = False
         self._last_item = None
         self._was_fallback = True   # the loop starts waiting for measured poses
+        self._blind_since: float | None = None   # start of the current dropout
+        self._warned = False
+        self.dropouts = 0
+        self.longest_dropout_s = 0.0
         self.refused = 0
         self.received = 0
 
@@ -219,14 +227,31 @@ class FeedbackLink:
             out = self._law.corrected_target(time.monotonic(), position, z_axis,
                                              wanted_at=self._monotonic(stamp, future=True))
             degraded, state = self._law.blind, self._law.state
+        self._log_dropout(degraded, state)
+        return out
+
+    def _log_dropout(self, degraded: bool, state: str) -> None:
+        """A dropout: INFO at its start and end (counted); a WARN once if it lasts too long."""
+        now, log = time.monotonic(), self.node.get_logger()
         if degraded != self._was_fallback:
             self._was_fallback = degraded
-            log = self.node.get_logger()
             if degraded:
-                log.warning(f'feedback: {state}; integrator frozen')
-            else:
-                log.info(f'feedback: measured poses back, integrating again ({state})')
-        return out
+                self._blind_since, self._warned = now, False
+                self.dropouts += 1
+                log.info(f'feedback: {state}; integrator frozen, correction held '
+                         f'(dropout {self.dropouts})')
+                return
+            took = '' if self._blind_since is None else f' after {now - self._blind_since:.2f} s'
+            if self._blind_since is not None:
+                self.longest_dropout_s = max(self.longest_dropout_s, now - self._blind_since)
+            self._blind_since = None
+            log.info(f'feedback: measured poses back{took}, integrating again ({state})')
+        elif (degraded and self._blind_since is not None and not self._warned
+              and now - self._blind_since > DROPOUT_WARN_S):
+            self._warned = True
+            log.warning(f'feedback: no fresh measured pose for {now - self._blind_since:.1f} s '
+                        f'(longer than the {DROPOUT_WARN_S:g} s a marker occlusion may take): '
+                        'integrator frozen, correction held; check the motion capture')
 
     def after_solve(self, inv) -> None:
         """Anti-windup input: the inverse's outcome for the corrected target."""
@@ -257,4 +282,6 @@ class FeedbackLink:
             # one count of the measured poses that did not reach the integrator: bad input
             # (frame, NaN, quaternion) and outliers; the latter also on their own
             return dict(values, feedback='integral', measured_poses_refused=(
-                self.refused + values['measured_poses_outliers']))
+                self.refused + values['measured_poses_outliers']),
+                feedback_dropouts=self.dropouts,
+                feedback_longest_dropout_s=round(self.longest_dropout_s, 3))

@@ -143,17 +143,25 @@ class RegulatorDriver(Node):
                 return
             self._last_cmd_t = None   # vent once; wait for the controller again
             self.stats['timeouts'] += 1
-        self.vent(f'no pressure_command for {self.timeout_s:g} s (controller dead or stopped)')
+        self.vent(f'no pressure_command for {self.timeout_s:g} s (controller dead or stopped)',
+                  timeout=True)
 
-    def vent(self, why: str) -> None:
-        """Send 0 Pa gauge to every regulator, log and report why."""
+    def vent(self, why: str, timeout: bool = False) -> None:
+        """Send 0 Pa gauge to every regulator, log and report why (``timeout``: a WARN)."""
         with self._lock:
             self._send(contract.vent_pressures(self.n, self.cfg.p_min, self.cfg.p_max))
             self.stats['vents'] += 1
             self.state = f'vented: {why}'
-        self.get_logger().warning(f'vented: {why}')
-        self._diag(DiagnosticStatus.ERROR if 'no pressure_command' in why
-                   else DiagnosticStatus.OK, f'vented: {why}', {})
+        self._log_vent(why, timeout)
+        self._diag(DiagnosticStatus.ERROR if timeout else DiagnosticStatus.OK,
+                   f'vented: {why}', {})
+
+    def _log_vent(self, why: str, timeout: bool) -> None:
+        """A vent on the command timeout is a WARN; on the driver's own shutdown, INFO."""
+        if timeout:
+            self.get_logger().warning(f'vented: {why}')
+        else:
+            self.get_logger().info(f'vented: {why}')
 
     # ------------------------------------------------------------ diagnostics
     def _status(self) -> None:

@@ -26,6 +26,7 @@ Use the calibrated robot file: the estimator reads any model error as a force.
 
 from __future__ import annotations
 
+import collections
 import time
 from typing import Any
 
@@ -46,12 +47,18 @@ from . import contract
 from .diagnostics import Heartbeat, Refusals, publish_diagnostic
 from .frames import PoseFrames
 from .measured_feedback import measured_pose_qos
-from .ros_util import (Param, StartupParameterError, Topic, command_qos, declare_all, descriptor,
-                       diagnostics_qos, main_for)
+from .ros_util import (WARN_THROTTLE_S, Param, StartupParameterError, Topic, command_qos,
+                       declare_all, descriptor, diagnostics_qos, main_for)
 
 __all__ = ['WrenchEstimatorNode', 'main']
 
 NODE_NAME = 'wrench_estimator_node'
+#: An outlier (a swapped marker: about 0.5 % of a motion capture's samples) is counted on
+#: /diagnostics and logged at INFO (at most every OUTLIER_INFO_S); above this share of the
+#: last OUTLIER_WINDOW pose samples it is a WARN (log and heartbeat): the markers need a look.
+OUTLIER_WARN_FRACTION = 0.05
+OUTLIER_WINDOW = 240
+OUTLIER_INFO_S = 30.0
 D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
            ParameterType.PARAMETER_BOOL)
 ro = dict(read_only=True)
@@ -149,7 +156,8 @@ class WrenchEstimatorNode(Node):
         self.frames = PoseFrames(self, self.get_parameter('base_frame').value,
                                  self.cfg.mocap_frame)
         self._pressures = {'measured': (None, -np.inf), 'command': (None, -np.inf)}
-        self.stats = {'poses': 0, 'refused': 0, 'published': 0}
+        self.stats = {'poses': 0, 'refused': 0, 'outliers': 0, 'published': 0}
+        self._recent = collections.deque(maxlen=OUTLIER_WINDOW)   # outlier or not, per pose
         self._pub = self.create_publisher(WrenchStamped, 'estimated_wrench', command_qos())
         self._pub_marker = self.create_publisher(Marker, 'estimated_wrench_marker', command_qos())
         self._marker_scale = float(self.get_parameter('marker_scale_m_per_n').value)
@@ -199,8 +207,34 @@ class WrenchEstimatorNode(Node):
             self._refuse(str(exc))
             return
         self._tip = xyz
-        if not self.estimator.update(p, xyz, z, time_s=time.monotonic()):
+        outliers = self.estimator.outliers
+        ok = self.estimator.update(p, xyz, z, time_s=time.monotonic())
+        outlier = self.estimator.outliers > outliers
+        self._recent.append(outlier)
+        if outlier:
+            self._outlier()
+        elif not ok:
             self._refuse(self.estimator.last_reason)
+
+    def outlier_share(self) -> float:
+        """Share of outliers among the last OUTLIER_WINDOW pose samples (0 with few samples)."""
+        n = len(self._recent)
+        return sum(self._recent) / n if n >= OUTLIER_WINDOW // 4 else 0.0
+
+    def _outlier(self) -> None:
+        """Count an outlier; INFO now and then, a WARN only at an abnormal share."""
+        self.stats['outliers'] += 1
+        share, n = self.outlier_share(), len(self._recent)
+        if share > OUTLIER_WARN_FRACTION:
+            self.get_logger().warning(
+                f'samples refused as outliers: {share:.0%} of the last {n} poses (a motion '
+                f'capture gives about 0.5 %): check the markers',
+                throttle_duration_sec=WARN_THROTTLE_S)
+        else:
+            self.get_logger().info(
+                f'{self.stats["outliers"]} sample(s) refused as outliers so far '
+                f'({share:.1%} of the last {n} poses; counted on /diagnostics)',
+                throttle_duration_sec=OUTLIER_INFO_S)
 
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
@@ -248,8 +282,12 @@ class WrenchEstimatorNode(Node):
         if e.payload_kg is not None:
             values.update(payload_kg=round(e.payload_kg, 5),
                           payload_std_kg=round(e.payload_std_kg, 5))
+        values['outlier_share'] = round(self.outlier_share(), 4)
         if e.samples == 0:
             return DiagnosticStatus.WARN, 'no sample yet', values
+        if self.outlier_share() > OUTLIER_WARN_FRACTION:
+            return (DiagnosticStatus.WARN, f'{self.outlier_share():.0%} of the recent poses '
+                    'are outliers: check the markers', values)
         if e.blind:
             return (DiagnosticStatus.WARN, f'{len(e.blind)} direction(s) not seen yet '
                     f'(std above {self.estimator.blind_std_n:g} N)', values)

@@ -217,3 +217,7 @@ def test_driver_process_vents_on_ctrl_c(h):
     assert proc.returncode == 0, out[-2000:]
     assert 'regulators <- 70.00 10.00 -30.00 kPa gauge' in out
     assert 'regulators <- 0.00 0.00 0.00 kPa gauge' in out and 'vented: driver shutdown' in out
+    # its normal shutdown vent is news, not a warning (the timeout vent is the WARN)
+    vent_line = next(line for line in out.splitlines() if 'vented: driver shutdown' in line)
+    assert vent_line.startswith('[INFO]'), vent_line
+    assert '[WARN]' not in out and '[ERROR]' not in out, out[-2000:]
