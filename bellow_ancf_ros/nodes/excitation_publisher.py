@@ -8,9 +8,10 @@ workspace schemes (section VI.B) at ``points_per_scheme`` points each, then
 ``dwell_s`` seconds and republished at ``rate_hz`` (a repeated command is not a
 new step for ``bellow-ancf calibrate``).  After the last step, and on shutdown
 (Ctrl-C/SIGTERM), it publishes the vent command (0 Pa gauge on every actuator)
-once and stops; the process then ends (``exit_when_done``).  While another
-node publishes ``pressure_command`` it publishes nothing but the vent
-(``bellow_ancf_ros.nodes.ownership``).  With ``wait_for_subscribers`` it
+once and stops; the process then ends (``exit_when_done``).  When another
+node publishes ``pressure_command`` it yields (:mod:`bellow_ancf_ros.nodes.ownership`):
+the vent once (if it had commanded), the sequence aborted, never resumed;
+with ``exit_when_done`` the process ends with status 1.  With ``wait_for_subscribers`` it
 starts only once that many subscribers listen on ``pressure_command``.  Record meanwhile, e.g.
 ``ros2 bag record /pressure_command /measured_pose``; choose ``dwell_s`` well above
 calibrate's ``--settle-s``.
@@ -37,8 +38,11 @@ from ..core.fit import excitation_sequence
 from . import contract
 from .diagnostics import publish_diagnostic
 from .ros_util import (
+    Param,
     StartupParameterError,
+    Topic,
     command_qos,
+    declare_all,
     descriptor,
     diagnostics_qos,
     guard_parameters,
@@ -53,43 +57,56 @@ __all__ = ['ExcitationPublisher', 'main']
 VENT_ACK_TIMEOUT_S = 1.0
 
 
+D, S, INT, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_BOOL)
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot description (shipped name or YAML path): actuator count and pressure limits.',
+        S, read_only=True)),
+    Param('dwell_s', 3.0, descriptor(
+        'Time each step is held [s].', D, lo=0.01, hi=3600.0, read_only=True)),
+    Param('rate_hz', 10.0, descriptor(
+        'Republishing rate of the current step [Hz].', D, lo=0.1, hi=1000.0, read_only=True)),
+    Param('points_per_scheme', 4, descriptor(
+        'Points per workspace scheme, p_min to p_max (>= 2).', INT, read_only=True)),
+    Param('n_random', 40, descriptor(
+        'Random in-limit pressure vectors after the schemes (>= 0).', INT, read_only=True)),
+    Param('seed', 0, descriptor('Seed of the random vectors.', INT, read_only=True)),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of pressure_command: Pa or kPa (gauge; the layout label says the unit).', S,
+        constraints="one of: 'Pa', 'kPa'")),
+    Param('start_delay_s', 1.0, descriptor(
+        'Wait this long before the first step [s] (for recorders to connect).', D,
+        lo=0.0, hi=3600.0, read_only=True)),
+    Param('wait_for_subscribers', 0, descriptor(
+        'Start (then wait start_delay_s) only once pressure_command has this many '
+        'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True)),
+    Param('allow_other_publishers', False, descriptor(
+        'Publish pressure_command even while another node publishes it (default false: '
+        'vent once and stop, ERROR diagnostics; see ownership in docs/ros.md).', B)),
+    Param('exit_when_done', True, descriptor(
+        'End the process once the sequence and the vent are done (the vent acknowledged, '
+        'at most 1 s).', B, read_only=True)),
+)
+TOPICS = (
+    Topic('publishes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'the excitation steps, then the vent (0 Pa gauge)'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'step count'),
+)
+
+
 class ExcitationPublisher(Node):
     """Steps the actuator pressures through the excitation sequence, then vents."""
 
-    def __init__(self, node_name: str = 'excitation_publisher', **kwargs: Any) -> None:
+    NODE_NAME = 'excitation_publisher'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """Declare the parameters, build the sequence and start the step timer."""
         super().__init__(node_name, **kwargs)
-        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                     ParameterType.PARAMETER_INTEGER)
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
-            'Robot description (shipped name or YAML path): actuator count and pressure limits.',
-            S, read_only=True))
-        self.declare_parameter('dwell_s', 3.0, descriptor(
-            'Time each step is held [s].', D, lo=0.01, hi=3600.0, read_only=True))
-        self.declare_parameter('rate_hz', 10.0, descriptor(
-            'Republishing rate of the current step [Hz].', D, lo=0.1, hi=1000.0, read_only=True))
-        self.declare_parameter('points_per_scheme', 4, descriptor(
-            'Points per workspace scheme, p_min to p_max (>= 2).', INT, read_only=True))
-        self.declare_parameter('n_random', 40, descriptor(
-            'Random in-limit pressure vectors after the schemes (>= 0).', INT, read_only=True))
-        self.declare_parameter('seed', 0, descriptor('Seed of the random vectors.', INT,
-                                                     read_only=True))
-        self.declare_parameter('pressure_unit', 'Pa', descriptor(
-            'Unit of pressure_command: Pa or kPa (gauge; the layout label says the unit).', S,
-            constraints="one of: 'Pa', 'kPa'"))
-        self.declare_parameter('start_delay_s', 1.0, descriptor(
-            'Wait this long before the first step [s] (for recorders to connect).', D,
-            lo=0.0, hi=3600.0, read_only=True))
-        self.declare_parameter('wait_for_subscribers', 0, descriptor(
-            'Start (then wait start_delay_s) only once pressure_command has this many '
-            'subscribers, e.g. 2 for the robot and a recorder.', INT, read_only=True))
-        B = ParameterType.PARAMETER_BOOL
-        self.declare_parameter('allow_other_publishers', False, descriptor(
-            'Publish pressure_command even while another node publishes it (default false: '
-            'refuse, ERROR diagnostics, until this node is the only publisher).', B))
-        self.declare_parameter('exit_when_done', True, descriptor(
-            'End the process once the sequence and the vent are done (the vent acknowledged, '
-            'at most 1 s).', B, read_only=True))
+        declare_all(self, PARAMETERS)
         guard_parameters(self, ('pressure_unit', 'robot_config'))
 
         self.cfg = load_robot(self.get_parameter('robot_config').value)
@@ -107,11 +124,12 @@ class ExcitationPublisher(Node):
         self.step = -1
         self.published = 0
         self.refused = 0
-        self._refusal_diag_t = -float('inf')
         self.finished = False
+        self.aborted = False   # yielded pressure_command to another node (ownership.py)
         self.vented = False
         self._pub = self.create_publisher(Float64MultiArray, 'pressure_command', command_qos())
-        self._owner = TopicOwner(self, 'pressure_command')
+        self._owner = TopicOwner(self, 'pressure_command',
+                                 'start the excitation again once the other node has stopped')
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._t0 = None
         rate = float(self.get_parameter('rate_hz').value)
@@ -125,17 +143,36 @@ class ExcitationPublisher(Node):
                                     self.cfg.n_actuators_total)
         if not vent and not self._owner.may_publish():   # the vent always goes out
             self.refused += 1
-            reason = self._owner.refusal()
-            self.get_logger().error(reason, throttle_duration_sec=2.0)
-            now = time.monotonic()
-            if now - self._refusal_diag_t >= 1.0:   # at most 1 Hz on /diagnostics
-                self._refusal_diag_t = now
-                self._diag(DiagnosticStatus.ERROR, reason)
+            self._yield()
             return
         self._pub.publish(pressure_message(p, self.get_parameter('pressure_unit').value))
         self.published += 1
 
+    def _yield(self) -> None:
+        """Another node publishes pressure_command: vent once, abort, never resume by itself."""
+        self._owner.start_yield(vented=self.published > 0)
+        self.aborted = self.finished = True
+        if self.published:   # it commanded the regulators: they go to the vent
+            self.vent(f'yielding pressure_command at step {self.step + 1} of '
+                      f'{len(self.sequence)}')
+        else:                # it never did: a vent now would only disturb the other node
+            self.vented = True
+
+    def _report_yield(self) -> None:
+        """After a yield: the ERROR naming the other node, reminders; then exit (status 1)."""
+        error = self._owner.report()
+        if error:
+            self._diag(DiagnosticStatus.ERROR, f'aborted: {error}')
+            if self.get_parameter('exit_when_done').value:
+                self._timer.cancel()
+                self._wait_acked()
+                self.get_logger().info('excitation aborted: exiting (status 1)')
+                request_stop(exit_status=1)
+
     def _tick(self) -> None:
+        if self.aborted:
+            self._report_yield()
+            return
         if self.finished:
             return
         if self._t0 is None:
@@ -169,7 +206,8 @@ class ExcitationPublisher(Node):
                                               self.cfg.p_max), vent=True)
         self.vented = True
         self._diag(DiagnosticStatus.OK, f'{why}: vented')
-        self.get_logger().info(f'{why}: vent command (0 Pa gauge) published')
+        unit = self.get_parameter('pressure_unit').value
+        self.get_logger().info(f'{why}: vent command (0 {unit} gauge) published')
 
     def vent_and_wait(self) -> None:
         """Vent on shutdown and wait (bounded) until subscribers have it."""

@@ -59,9 +59,11 @@ from . import contract, worker
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, solve_values
 from .ros_util import (
     WARN_THROTTLE_S,
+    Param,
     StartupParameterError,
+    Topic,
     command_qos,
-    declare,
+    declare_all,
     descriptor,
     diagnostics_qos,
     guard_parameters,
@@ -113,34 +115,55 @@ def shape_markers(fw, frame_id: str, stamp, n_points: int = 20) -> MarkerArray:
     return arr
 
 
+D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+             ParameterType.PARAMETER_INTEGER)
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
+        '...: the files in '
+        'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read at start-up.', S,
+        read_only=True, constraints='a shipped robot name or a robot YAML path')),
+    Param('payload_kg', 0.0, descriptor(
+        'Payload mass at the end effector [kg]; may be changed at run time.', D,
+        lo=0.0, hi=contract.PAYLOAD_MAX_KG)),
+    Param('base_frame', 'base', descriptor(
+        'Frame of predicted_pose and predicted_shape (robot base).', S,
+        constraints='a non-empty frame name')),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of the incoming gauge pressures: Pa (default, REP-103) or kPa.', S,
+        constraints="one of: 'Pa', 'kPa'")),
+    Param('max_rate_hz', 100.0, descriptor(
+        'Maximum prediction rate [Hz]; only the newest pressure array is solved.', D,
+        lo=0.1, hi=1000.0)),
+    Param('backbone_points', 20, descriptor(
+        'Points per actuator backbone in predicted_shape.', INT, lo=2, hi=200)),
+)
+
+
+TOPICS = (
+    Topic('subscribes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'gauge pressures in pressure_unit (remap to measured_pressure to predict from '
+          'measurements)'),
+    Topic('publishes', 'predicted_pose', 'geometry_msgs/PoseStamped', 'in base_frame'),
+    Topic('publishes', 'predicted_shape', 'visualization_msgs/MarkerArray',
+          'backbones and plates, for RViz'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
+          'per-solve status and 1 Hz heartbeat'),
+)
+
+
 class ForwardKinetostaticNode(Node):
     """Predicts the robot's pose and shape from pressures."""
 
     NODE_NAME = 'forward_kinetostatic_node'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                     ParameterType.PARAMETER_INTEGER)
-        robot = declare(self, 'robot_config', 'one_segment', descriptor(
-            'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
-            '...: the files in '
-            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read at start-up.', S,
-            read_only=True, constraints='a shipped robot name or a robot YAML path'))
-        declare(self, 'payload_kg', 0.0, descriptor(
-            'Payload mass at the end effector [kg]; may be changed at run time.', D,
-            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
-        declare(self, 'base_frame', 'base', descriptor(
-            'Frame of predicted_pose and predicted_shape (robot base).', S,
-            constraints='a non-empty frame name'))
-        declare(self, 'pressure_unit', 'Pa', descriptor(
-            'Unit of the incoming gauge pressures: Pa (default, REP-103) or kPa.', S,
-            constraints="one of: 'Pa', 'kPa'"))
-        declare(self, 'max_rate_hz', 100.0, descriptor(
-            'Maximum prediction rate [Hz]; only the newest pressure array is solved.', D,
-            lo=0.1, hi=1000.0))
-        declare(self, 'backbone_points', 20, descriptor(
-            'Points per actuator backbone in predicted_shape.', INT, lo=2, hi=200))
+        declare_all(self, PARAMETERS)
+        robot = self.get_parameter('robot_config').value
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'))
 
         try:

@@ -87,6 +87,9 @@ Lifecycle and safety
   heartbeat, every 3 s by default: Ctrl-C takes up to about 3 s.)
   ``autostart`` (default true) configures and activates the node at
   start-up, so a plain ``ros2 run`` works.
+* One owner of ``pressure_command`` (:mod:`bellow_ancf_ros.nodes.ownership`):
+  when another node publishes it, the node vents once and deactivates
+  itself; only ``activate`` resumes (refused while the other node is there).
 * ``robot_config`` is read on configure: a change is refused while the node
   is configured (inactive or active), with the way out in the reason
   (deactivate, cleanup, set, configure, activate).  A configure that fails
@@ -131,14 +134,16 @@ from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_
 from ..core import geometry
 from . import contract, worker
 from .external_force import ExternalForce
-from .measured_feedback import FEEDBACK_PARAMETERS, FeedbackLink
+from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
+    Param,
+    Topic,
     command_qos,
-    declare,
+    declare_all,
     descriptor,
     diagnostics_qos,
     guard_parameters,
@@ -157,54 +162,83 @@ BUDGET_PERIODS = 5.0   # wall-clock budget of one solve, in periods of max_rate_
 PAYLOAD_CHECK_BUDGET_S = 1.0  # wall-clock budget of the buckling check of a new payload_kg
 BUDGET_STATUSES = (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET)
 MAX_CONTINUATIONS = 40  # budget slices one target may take before the node gives up on it
+OWNER_CHECK_PERIOD_S = 0.1  # the ownership check while configured (ownership.py)
 
 
 # ------------------------------------------------------------------- the node
+D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+           ParameterType.PARAMETER_BOOL)
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
+        '...: the files in '
+        'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
+        'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
+        constraints='a shipped robot name or a robot YAML path')),
+    Param('payload_kg', 0.0, descriptor(
+        'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
+        'on the next solve. Negative or larger values than the range are refused.', D,
+        lo=0.0, hi=contract.PAYLOAD_MAX_KG)),
+    Param('base_frame', 'base', descriptor(
+        'Frame of targets and outputs (robot base). Targets in any other frame are refused '
+        '(no tf2 transform).', S, constraints='a non-empty frame name')),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
+        '(relative to atmosphere); the layout label says the unit.', S,
+        constraints="one of: 'Pa', 'kPa'")),
+    Param('max_rate_hz', 100.0, descriptor(
+        'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
+        lo=0.1, hi=1000.0)),
+    Param('command_rate_hz', 20.0, descriptor(
+        'Rate at which the current command is republished while active and no new one went '
+        'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
+        'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True)),
+    Param('allow_other_publishers', False, descriptor(
+        'Publish pressure_command even while another node publishes it (default false: '
+        'vent once, deactivate and wait for activate; see ownership in docs/ros.md).', B)),
+    Param('use_estimated_force', False, descriptor(
+        'Compensate the force of estimated_wrench (wrench_estimator_node) in the '
+        'feedforward, as external_force is; read at start-up.', B, read_only=True)),
+    Param('external_force_timeout_s', 1.0, descriptor(
+        'A force (external_force, estimated_wrench) older than this is no longer '
+        'compensated [s].', D, lo=0.01, hi=3600.0, read_only=True)),
+    Param('autostart', True, descriptor(
+        'Configure and activate at start-up (so that a plain ros2 run works).', B,
+        read_only=True)),
+)
+
+
+TOPICS = (
+    Topic('subscribes', 'target_pose', 'geometry_msgs/PoseStamped', 'in base_frame'),
+    Topic('subscribes', 'measured_pose', 'geometry_msgs/PoseStamped',
+          "with feedback 'integral' (best effort)"),
+    Topic('subscribes', 'external_force', 'geometry_msgs/WrenchStamped',
+          'a force at the end effector, compensated'),
+    Topic('subscribes', 'estimated_wrench', 'geometry_msgs/WrenchStamped',
+          'with use_estimated_force'),
+    Topic('publishes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'gauge pressures in pressure_unit, only while active; the vent on deactivate, '
+          'shutdown, or when it yields to another publisher'),
+    Topic('publishes', 'commanded_pose', 'geometry_msgs/PoseStamped',
+          "the model's pose for the command"),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
+          'per-solve status and 1 Hz heartbeat'),
+    Topic('services', '~/change_state, ~/get_state, ...', 'lifecycle_msgs',
+          'the standard lifecycle services (autostart: configure + activate at start-up)'),
+)
+
+
 class InverseKinetostaticNode(LifecycleNode):
     """Managed feedforward controller: target poses -> actuator pressures."""
 
     NODE_NAME = 'inverse_kinetostatic_node'
+    PARAMETERS = PARAMETERS + FEEDBACK_PARAMETER_TABLE   # (the feedback ones: FeedbackLink)
+    TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_BOOL)
-        declare(self, 'robot_config', 'one_segment', descriptor(
-            'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
-            '...: the files in '
-            'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
-            'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
-            constraints='a shipped robot name or a robot YAML path'))
-        declare(self, 'payload_kg', 0.0, descriptor(
-            'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
-            'on the next solve. Negative or larger values than the range are refused.', D,
-            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
-        declare(self, 'base_frame', 'base', descriptor(
-            'Frame of targets and outputs (robot base). Targets in any other frame are refused '
-            '(no tf2 transform).', S, constraints='a non-empty frame name'))
-        declare(self, 'pressure_unit', 'Pa', descriptor(
-            'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
-            '(relative to atmosphere); the layout label says the unit.', S,
-            constraints="one of: 'Pa', 'kPa'"))
-        declare(self, 'max_rate_hz', 100.0, descriptor(
-            'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
-            lo=0.1, hi=1000.0))
-        declare(self, 'command_rate_hz', 20.0, descriptor(
-            'Rate at which the current command is republished while active and no new one went '
-            'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
-            'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True))
-        declare(self, 'allow_other_publishers', False, descriptor(
-            'Publish pressure_command even while another node publishes it (default false: '
-            'refuse, ERROR diagnostics, until this node is the only publisher).', B))
-        declare(self, 'use_estimated_force', False, descriptor(
-            'Compensate the force of estimated_wrench (wrench_estimator_node) in the '
-            'feedforward, as external_force is; read at start-up.', B, read_only=True))
-        declare(self, 'external_force_timeout_s', 1.0, descriptor(
-            'A force (external_force, estimated_wrench) older than this is no longer '
-            'compensated [s].', D, lo=0.01, hi=3600.0, read_only=True))
-        declare(self, 'autostart', True, descriptor(
-            'Configure and activate at start-up (so that a plain ros2 run works).', B,
-            read_only=True))
+        declare_all(self, PARAMETERS)
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
                          extra_check=self._configure_time_check)
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
@@ -224,6 +258,9 @@ class InverseKinetostaticNode(LifecycleNode):
         self._pub_cmd = self._pub_pose = None
         self._sub = None
         self._force: ExternalForce | None = None   # external_force input (configured)
+        self._owner: TopicOwner | None = None   # one owner of pressure_command (configured)
+        self._owner_timer = None
+        self._yield_requested = False
         self._said_orientation_ignored = False
         self._refusals = Refusals(self, 'targets', self._publish_diag)
         self.last_command_pa: np.ndarray | None = None
@@ -361,7 +398,10 @@ class InverseKinetostaticNode(LifecycleNode):
             self._warm = fw0 if fw0.success else None
         qos = command_qos()
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
-        self._owner = TopicOwner(self, 'pressure_command')
+        self._owner = TopicOwner(self, 'pressure_command',
+                                 f'ros2 lifecycle set {self._node_path()} activate')
+        self._yield_requested = False
+        self._owner_timer = self.create_timer(OWNER_CHECK_PERIOD_S, self._watch_owner)
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
         self._force = ExternalForce(
@@ -383,6 +423,14 @@ class InverseKinetostaticNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: State) -> TransitionCallbackReturn:
+        owner = self._owner
+        if owner is not None and not owner.may_publish():   # one owner (ownership.py)
+            self.get_logger().error(
+                f'activate refused: {", ".join(owner.others)} publishes {owner.topic}; stop it '
+                f'first (or set {owner.allow_param}:=true)')
+            return TransitionCallbackReturn.FAILURE
+        if owner is not None:
+            owner.clear()
         with self._lock:
             self._active = True
         self._feedback.reset()
@@ -390,7 +438,8 @@ class InverseKinetostaticNode(LifecycleNode):
         return super().on_activate(state)
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
-        self._go_inactive_and_vent('deactivate', wait_acked=False)   # the node lives on
+        why = 'yielding pressure_command' if self._owner and self._owner.yielded else 'deactivate'
+        self._go_inactive_and_vent(why, wait_acked=False)   # the node lives on
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: State) -> TransitionCallbackReturn:
@@ -426,7 +475,7 @@ class InverseKinetostaticNode(LifecycleNode):
             self._last_pose = None   # (the vented robot's pose is not a solve's)
             self.stats['vents'] += 1
             # under the lock: no solve result can be published after the vent
-            what = f'{why}: vent command (0 Pa gauge)'
+            what = f'{why}: vent command (0 {self._unit()} gauge)'
             if wait_acked:
                 self.last_vent_acked = publish_and_wait_acked(self, self._pub_cmd, msg, what,
                                                               VENT_ACK_TIMEOUT_S)
@@ -440,9 +489,11 @@ class InverseKinetostaticNode(LifecycleNode):
             self._active = False
             self._configured = False
         self._feedback.release()
-        if getattr(self, '_republish_timer', None) is not None:
-            self.destroy_timer(self._republish_timer)
-            self._republish_timer = None
+        for attr in ('_republish_timer', '_owner_timer'):
+            if getattr(self, attr, None) is not None:
+                self.destroy_timer(getattr(self, attr))
+                setattr(self, attr, None)
+        self._owner = None
         if self._worker is not None:
             self._worker.stop()
             self._worker = None
@@ -490,9 +541,8 @@ class InverseKinetostaticNode(LifecycleNode):
         if self.last_vent_acked is not None:
             values['last_vent_acked'] = str(self.last_vent_acked).lower()
         owner = getattr(self, '_owner', None)
-        if state == 'active' and owner is not None and not owner.may_publish():
-            level, message = DiagnosticStatus.ERROR, f'active, but {owner.refusal()}'
-            self.get_logger().error(owner.refusal(), throttle_duration_sec=WARN_THROTTLE_S)
+        if state == 'inactive' and owner is not None and owner.yielded:
+            level, message = DiagnosticStatus.ERROR, f'inactive: {owner.status()}'
         elif state == 'active':
             level, message = DiagnosticStatus.OK, 'active: pressure commands enabled'
             last_ok = self.solve_stats.summary()['last_ok']
@@ -565,8 +615,8 @@ class InverseKinetostaticNode(LifecycleNode):
             p = self.last_command_pa
             if not self._active or p is None or self._pub_cmd is None:
                 return
-            if not self._owner.may_publish():
-                self._report_other_publishers()
+            if self._owner is None or not self._owner.may_publish():
+                self._yield_requested = True   # _watch_owner vents and deactivates
                 return
             period = 1.0 / float(self.get_parameter('command_rate_hz').value)
             if time.monotonic() - self._last_publish_t < 0.5 * period:
@@ -577,11 +627,28 @@ class InverseKinetostaticNode(LifecycleNode):
             self._last_publish_t = time.monotonic()
             self.stats['republished'] += 1
 
-    def _report_other_publishers(self) -> None:
-        """Log (throttled) and report why no command goes out while another node publishes."""
-        reason = self._owner.refusal()
-        self.get_logger().error(reason, throttle_duration_sec=WARN_THROTTLE_S)
-        self._publish_diag(DiagnosticStatus.ERROR, reason, {})
+    def _watch_owner(self) -> None:
+        """One owner of pressure_command (:mod:`.ownership`): yield once, never resume alone.
+
+        While active, another publisher of the topic makes the node vent once
+        and deactivate itself; only ``activate`` resumes.  Then the yield's
+        ERROR (once the graph names the other node), the reminder and the
+        INFO when it has left (``TopicOwner.poll``).
+        """
+        owner = self._owner
+        if owner is None:
+            return
+        if self.is_active and (self._yield_requested or not owner.may_publish()):
+            owner.start_yield()
+            try:
+                self.trigger_deactivate()   # the vent, once (on_deactivate)
+            except Exception as exc:  # noqa: BLE001 - a transition under way: next tick
+                self.get_logger().debug(f'deactivate on yield: {exc}')
+                return
+        self._yield_requested = False
+        error = owner.report()
+        if error:
+            self._publish_diag(DiagnosticStatus.ERROR, error, {})
 
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
@@ -634,8 +701,11 @@ class InverseKinetostaticNode(LifecycleNode):
                 p = contract.safe_pressures(inv.pressures_pa, cfg.p_min, cfg.p_max, model.A)
             except contract.UnsafePressureError as exc:
                 unsafe = exc
-        if p is not None and not self._owner.may_publish():
-            p, unsafe = None, contract.UnsafePressureError(self._owner.refusal())
+        owner = self._owner
+        if p is not None and (owner is None or not owner.may_publish()):
+            self._yield_requested = True   # _watch_owner vents and deactivates
+            self._feedback.no_command()
+            return
         unit = self._unit()
         if p is not None:   # the command first, the diagnostics after it
             with self._lock:
@@ -691,9 +761,7 @@ class InverseKinetostaticNode(LifecycleNode):
         if unsafe is not None:
             self._feedback.no_command()
             self.stats['failed'] += 1
-            msg = (f'not published ({unsafe}); last command kept' if self._owner.others
-                   else f'solver output refused by the safety gate ({unsafe}); '
-                        'last command kept')
+            msg = f'solver output refused by the safety gate ({unsafe}); last command kept'
             self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
             self._publish_diag(DiagnosticStatus.ERROR, msg, values)
             return

@@ -44,16 +44,55 @@ from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, M
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
-from .ros_util import QOS_DEPTH, descriptor
+from .ros_util import QOS_DEPTH, Param, StartupParameterError, declare_all, descriptor
 
-__all__ = ['FEEDBACK_PARAMETERS', 'FeedbackLink', 'measured_pose_qos']
+__all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'measured_pose_qos']
 
-#: The parameters FeedbackLink declares; all are read on configure.
-FEEDBACK_PARAMETERS = ('feedback', 'feedback_gain_per_s', 'feedback_max_correction_mm',
-                       'feedback_max_correction_deg', 'measured_pose_timeout_s',
-                       'measured_pose_outlier_mm', 'feedback_reset_jump_mm', 'feedback_rate_hz',
-                       'feedback_correction_frame', 'feedback_loop_lag_s',
-                       'feedback_loop_delay_s')
+_D, _S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
+_DEF = FeedbackSettings()
+#: The parameters FeedbackLink declares (what the inverse node's ``--help`` prints); all are
+#: read on configure.
+FEEDBACK_PARAMETER_TABLE = (
+    Param('feedback', 'none', descriptor(
+        "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
+        "or 'integral' (integral action on the task-space error). Read on configure.", _S,
+        constraints="one of: 'none', 'integral'")),
+) + tuple(Param(name, float(default), descriptor(text + ' Read on configure.', _D, lo=lo, hi=hi))
+          for name, default, text, lo, hi in (
+    ('feedback_gain_per_s', _DEF.gain_per_s,
+     'Integral gain [1/s]: an error decays with time constant 1/gain.', 0.01, 50.0),
+    ('feedback_max_correction_mm', _DEF.max_correction_m * 1e3,
+     'Clamp on the position correction [mm].', 0.01, 100.0),
+    ('feedback_max_correction_deg', math.degrees(_DEF.max_correction_rad),
+     'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
+    ('measured_pose_timeout_s', _DEF.measured_pose_timeout_s,
+     'Older measurements (a dropout): the integrator is frozen, its correction '
+     'stays applied [s].', 0.01, 10.0),
+    ('measured_pose_outlier_mm', _DEF.outlier_gate_m * 1e3,
+     'A measured pose this far from the median of the last five is an outlier, '
+     'never integrated [mm].', 0.1, 1000.0),
+    ('feedback_reset_jump_mm', _DEF.reset_jump_m * 1e3,
+     'A target jump this large resets the correction [mm].', 0.1, 1000.0),
+    ('feedback_rate_hz', 20.0,
+     'Rate at which the newest target is re-solved with a fresh correction [Hz].',
+     0.1, 1000.0),
+    ('feedback_loop_lag_s', 0.06,
+     "The regulators' time constant, for the loop's margins [s].", 0.0, 10.0),
+    ('feedback_loop_delay_s', 0.05,
+     "The loop's delay for its margins: regulator dead time, mocap latency, half a "
+     'control and half a measurement period [s].', 0.0, 10.0))) + (
+    Param('feedback_correction_frame', _DEF.correction_frame, descriptor(
+        "Frame the correction is integrated in: 'azimuthal' (turns with the target about "
+        "the base z-axis: a symmetric robot's mismatch is constant in it) or 'base' (an "
+        "error fixed in the base frame, e.g. one stiffer actuator). Read on configure.", _S,
+        constraints="one of: 'azimuthal', 'base'")),
+)
+#: Their names.
+FEEDBACK_PARAMETERS = tuple(p.name for p in FEEDBACK_PARAMETER_TABLE)
+#: A dropout of the measured poses (a marker occluded: about 0.5 s, every 15 s on the
+#: realistic simulated robot) is logged at INFO and counted on /diagnostics; one that lasts
+#: longer than this [s] is a WARN: the motion capture needs a look.
+DROPOUT_WARN_S = 2.0
 #: How often the margin thread looks for a new equilibrium [s].
 _MODE_POLL_S = 0.2
 
@@ -73,45 +112,10 @@ class FeedbackLink:
 
     def __init__(self, node, publish_diag: Callable) -> None:
         """Declare the feedback parameters on ``node`` (refuses a bad ``feedback`` value)."""
-        D, S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
-        node.declare_parameter('feedback', 'none', descriptor(
-            "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
-            "or 'integral' (integral action on the task-space error). Read on configure.", S,
-            constraints="one of: 'none', 'integral'"))
-        d = FeedbackSettings()
-        for name, default, text, lo, hi in (
-                ('feedback_gain_per_s', d.gain_per_s,
-                 'Integral gain [1/s]: an error decays with time constant 1/gain.', 0.01, 50.0),
-                ('feedback_max_correction_mm', d.max_correction_m * 1e3,
-                 'Clamp on the position correction [mm].', 0.01, 100.0),
-                ('feedback_max_correction_deg', math.degrees(d.max_correction_rad),
-                 'Clamp on the z-axis correction (two or more segments) [deg].', 0.01, 45.0),
-                ('measured_pose_timeout_s', d.measured_pose_timeout_s,
-                 'Older measurements (a dropout): the integrator is frozen, its correction '
-                 'stays applied [s].', 0.01, 10.0),
-                ('measured_pose_outlier_mm', d.outlier_gate_m * 1e3,
-                 'A measured pose this far from the median of the last five is an outlier, '
-                 'never integrated [mm].', 0.1, 1000.0),
-                ('feedback_reset_jump_mm', d.reset_jump_m * 1e3,
-                 'A target jump this large resets the correction [mm].', 0.1, 1000.0),
-                ('feedback_rate_hz', 20.0,
-                 'Rate at which the newest target is re-solved with a fresh correction [Hz].',
-                 0.1, 1000.0),
-                ('feedback_loop_lag_s', 0.06,
-                 "The regulators' time constant, for the loop's margins [s].", 0.0, 10.0),
-                ('feedback_loop_delay_s', 0.05,
-                 "The loop's delay for its margins: regulator dead time, mocap latency, half a "
-                 'control and half a measurement period [s].', 0.0, 10.0)):
-            node.declare_parameter(name, float(default), descriptor(
-                text + ' Read on configure.', D, lo=lo, hi=hi))
-        node.declare_parameter('feedback_correction_frame', d.correction_frame, descriptor(
-            "Frame the correction is integrated in: 'azimuthal' (turns with the target about "
-            "the base z-axis: a symmetric robot's mismatch is constant in it) or 'base' (an "
-            "error fixed in the base frame, e.g. one stiffer actuator). Read on configure.", S,
-            constraints="one of: 'azimuthal', 'base'"))
+        declare_all(node, FEEDBACK_PARAMETER_TABLE)
         mode = node.get_parameter('feedback').value
         if mode not in FEEDBACK_MODES:
-            raise ValueError(f"parameter feedback: {mode!r} is not one of {list(FEEDBACK_MODES)}")
+            raise StartupParameterError('feedback', mode, "one of: 'none', 'integral'")
         self.node = node
         self._lock = threading.Lock()
         self._refusals = Refusals(node, 'measured poses', publish_diag)
@@ -121,6 +125,10 @@ class FeedbackLink:
         self._use_orientation = False
         self._last_item = None
         self._was_fallback = True   # the loop starts waiting for measured poses
+        self._blind_since: float | None = None   # start of the current dropout
+        self._warned = False
+        self.dropouts = 0
+        self.longest_dropout_s = 0.0
         self.refused = 0
         self.received = 0
         self._mode_check: ModeCheck | None = None
@@ -252,14 +260,31 @@ class FeedbackLink:
             out = self._law.corrected_target(time.monotonic(), position, z_axis,
                                              wanted_at=self._monotonic(stamp, future=True))
             degraded, state = self._law.blind, self._law.state
+        self._log_dropout(degraded, state)
+        return out
+
+    def _log_dropout(self, degraded: bool, state: str) -> None:
+        """A dropout: INFO at its start and end (counted); a WARN once if it lasts too long."""
+        now, log = time.monotonic(), self.node.get_logger()
         if degraded != self._was_fallback:
             self._was_fallback = degraded
-            log = self.node.get_logger()
             if degraded:
-                log.warning(f'feedback: {state}; integrator frozen')
-            else:
-                log.info(f'feedback: measured poses back, integrating again ({state})')
-        return out
+                self._blind_since, self._warned = now, False
+                self.dropouts += 1
+                log.info(f'feedback: {state}; integrator frozen, correction held '
+                         f'(dropout {self.dropouts})')
+                return
+            took = '' if self._blind_since is None else f' after {now - self._blind_since:.2f} s'
+            if self._blind_since is not None:
+                self.longest_dropout_s = max(self.longest_dropout_s, now - self._blind_since)
+            self._blind_since = None
+            log.info(f'feedback: measured poses back{took}, integrating again ({state})')
+        elif (degraded and self._blind_since is not None and not self._warned
+              and now - self._blind_since > DROPOUT_WARN_S):
+            self._warned = True
+            log.warning(f'feedback: no fresh measured pose for {now - self._blind_since:.1f} s '
+                        f'(longer than the {DROPOUT_WARN_S:g} s a marker occlusion may take): '
+                        'integrator frozen, correction held; check the motion capture')
 
     def after_solve(self, inv) -> None:
         """Anti-windup input: the inverse's outcome for the corrected target."""
@@ -325,4 +350,6 @@ class FeedbackLink:
             # one count of the measured poses that did not reach the integrator: bad input
             # (frame, NaN, quaternion) and outliers; the latter also on their own
             return dict(values, feedback='integral', measured_poses_refused=(
-                self.refused + values['measured_poses_outliers']))
+                self.refused + values['measured_poses_outliers']),
+                feedback_dropouts=self.dropouts,
+                feedback_longest_dropout_s=round(self.longest_dropout_s, 3))

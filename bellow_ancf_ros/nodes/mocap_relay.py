@@ -27,23 +27,41 @@ from ..core import load_robot
 from .diagnostics import Refusals, publish_diagnostic
 from .frames import PoseFrames
 from .measured_feedback import measured_pose_qos
-from .ros_util import command_qos, descriptor, diagnostics_qos, main_for, pose_message
+from .ros_util import (Param, Topic, command_qos, declare_all, descriptor, diagnostics_qos,
+                       main_for, pose_message)
 
 __all__ = ['MocapRelay', 'main']
+
+
+S = ParameterType.PARAMETER_STRING
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot file (shipped name or YAML path) whose mocap_frame gives the transform '
+        '(a calibrated robot file).', S, read_only=True)),
+    Param('base_frame', 'base', descriptor(
+        'Frame of measured_pose (the robot base).', S, read_only=True)),
+)
+TOPICS = (
+    Topic('subscribes', 'mocap_pose', 'geometry_msgs/PoseStamped',
+          'in the mocap frame (remap it to your mocap topic; best effort)'),
+    Topic('publishes', 'measured_pose', 'geometry_msgs/PoseStamped',
+          'in base_frame, the stamp kept'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'refused poses'),
+)
 
 
 class MocapRelay(Node):
     """``mocap_pose`` in the mocap frame -> ``measured_pose`` in the base frame."""
 
-    def __init__(self, node_name: str = 'mocap_relay', **kwargs: Any) -> None:
+    NODE_NAME = 'mocap_relay'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """Read the robot file's mocap frame; subscribe and publish."""
         super().__init__(node_name, **kwargs)
-        S = ParameterType.PARAMETER_STRING
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
-            'Robot file (shipped name or YAML path) whose mocap_frame gives the transform '
-            '(a calibrated robot file).', S, read_only=True))
-        self.declare_parameter('base_frame', 'base', descriptor(
-            'Frame of measured_pose (the robot base).', S, read_only=True))
+        declare_all(self, PARAMETERS)
         cfg = load_robot(self.get_parameter('robot_config').value)
         self.frames = PoseFrames(self, self.get_parameter('base_frame').value, cfg.mocap_frame)
         self.stats = {'received': 0, 'relayed': 0, 'refused': 0}

@@ -46,7 +46,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import load_robot
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
-from .ros_util import command_qos, descriptor, diagnostics_qos, main_for
+from .ros_util import Param, Topic, command_qos, declare_all, descriptor, diagnostics_qos, main_for
 
 __all__ = ['RegulatorDriver', 'main', 'run']
 
@@ -54,22 +54,36 @@ __all__ = ['RegulatorDriver', 'main', 'run']
 COMMAND_TIMEOUT_S = 0.5
 
 
+S, D = ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot file (shipped name or YAML path): the actuator count and pressure limits.', S,
+        read_only=True)),
+    Param('command_timeout_s', COMMAND_TIMEOUT_S, descriptor(
+        'Vent when no pressure_command arrived for this long [s] (the controller republishes '
+        'at command_rate_hz).', D, lo=0.01, hi=60.0, read_only=True)),
+)
+TOPICS = (
+    Topic('subscribes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'set-points for the regulators (unit from the layout label)'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
+          '1 Hz: command age, state, counters'),
+)
+
+
 class RegulatorDriver(Node):
     """``pressure_command`` -> ``write(pressures_pa)``; vents on timeout and on shutdown."""
 
     NODE_NAME = 'regulator_driver'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
 
     def __init__(self, write: Callable[[np.ndarray], None] | None = None,
-                 node_name: str = 'regulator_driver', **kwargs: Any) -> None:
+                 node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """``write``: sends gauge pressures [Pa] to the regulators (default: logs them)."""
         super().__init__(node_name, **kwargs)
-        S, D = ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE
-        self.declare_parameter('robot_config', 'one_segment', descriptor(
-            'Robot file (shipped name or YAML path): the actuator count and pressure limits.', S,
-            read_only=True))
-        self.declare_parameter('command_timeout_s', COMMAND_TIMEOUT_S, descriptor(
-            'Vent when no pressure_command arrived for this long [s] (the controller republishes '
-            'at command_rate_hz).', D, lo=0.01, hi=60.0, read_only=True))
+        declare_all(self, PARAMETERS)
         cfg = load_robot(self.get_parameter('robot_config').value)
         self.cfg = cfg
         self.n = cfg.n_actuators_total
@@ -129,17 +143,25 @@ class RegulatorDriver(Node):
                 return
             self._last_cmd_t = None   # vent once; wait for the controller again
             self.stats['timeouts'] += 1
-        self.vent(f'no pressure_command for {self.timeout_s:g} s (controller dead or stopped)')
+        self.vent(f'no pressure_command for {self.timeout_s:g} s (controller dead or stopped)',
+                  timeout=True)
 
-    def vent(self, why: str) -> None:
-        """Send 0 Pa gauge to every regulator, log and report why."""
+    def vent(self, why: str, timeout: bool = False) -> None:
+        """Send 0 Pa gauge to every regulator, log and report why (``timeout``: a WARN)."""
         with self._lock:
             self._send(contract.vent_pressures(self.n, self.cfg.p_min, self.cfg.p_max))
             self.stats['vents'] += 1
             self.state = f'vented: {why}'
-        self.get_logger().warning(f'vented: {why}')
-        self._diag(DiagnosticStatus.ERROR if 'no pressure_command' in why
-                   else DiagnosticStatus.OK, f'vented: {why}', {})
+        self._log_vent(why, timeout)
+        self._diag(DiagnosticStatus.ERROR if timeout else DiagnosticStatus.OK,
+                   f'vented: {why}', {})
+
+    def _log_vent(self, why: str, timeout: bool) -> None:
+        """A vent on the command timeout is a WARN; on the driver's own shutdown, INFO."""
+        if timeout:
+            self.get_logger().warning(f'vented: {why}')
+        else:
+            self.get_logger().info(f'vented: {why}')
 
     # ------------------------------------------------------------ diagnostics
     def _status(self) -> None:
@@ -166,7 +188,7 @@ class RegulatorDriver(Node):
 
 def run(write: Callable[[np.ndarray], None]) -> None:
     """Run a :class:`RegulatorDriver` with your ``write`` (as ``ros2 run`` does the template)."""
-    main_for(lambda: RegulatorDriver(write), node_name=RegulatorDriver.NODE_NAME)()
+    main_for(RegulatorDriver, factory=lambda: RegulatorDriver(write))()
 
 
 main = main_for(RegulatorDriver)

@@ -9,16 +9,20 @@ node executable.  Diagnostics (statuses, the 1 Hz heartbeat) live in
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
+import tempfile
+import textwrap
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import rclpy
+import yaml
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -42,10 +46,11 @@ from . import contract
 
 __all__ = [
     'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT', 'VENT_ACK_TIMEOUT_S',
-    'WARN_THROTTLE_S', 'StartupEnvironmentError', 'StartupParameterError', 'allowed_values',
-    'command_qos', 'declare', 'descriptor', 'diagnostics_qos', 'executor_choice',
-    'guard_parameters', 'init_rclpy', 'main_for', 'make_executor', 'pose_message',
-    'pressure_message', 'publish_and_wait_acked', 'request_stop', 'run_node',
+    'WARN_THROTTLE_S', 'Param', 'StartupEnvironmentError', 'StartupParameterError', 'Topic',
+    'allowed_values', 'asks_for_help', 'command_qos', 'declare', 'declare_all', 'descriptor',
+    'diagnostics_qos', 'executor_choice', 'guard_parameters', 'init_rclpy', 'main_for',
+    'make_executor', 'node_help', 'pose_message', 'pressure_message', 'publish_and_wait_acked',
+    'request_stop', 'run_node',
 ]
 
 QOS_DEPTH = 5
@@ -63,6 +68,9 @@ _TYPE_NAMES = {
     ParameterType.PARAMETER_INTEGER: 'an integer',
     ParameterType.PARAMETER_DOUBLE: 'a floating-point number (write 1.0, not 1)',
     ParameterType.PARAMETER_STRING: 'a string',
+    ParameterType.PARAMETER_DOUBLE_ARRAY: 'a list of floating-point numbers',
+    ParameterType.PARAMETER_INTEGER_ARRAY: 'a list of integers',
+    ParameterType.PARAMETER_STRING_ARRAY: 'a list of strings',
 }
 
 
@@ -155,6 +163,81 @@ def declare(node, name: str, default: Any, d: ParameterDescriptor) -> Any:
         value = _override_value(node, name)
         reason = 'wrong type' if isinstance(exc, InvalidParameterTypeException) else ''
         raise StartupParameterError(name, value, allowed_values(d), reason) from None
+
+
+class Param(NamedTuple):
+    """One parameter of a node: the table entry both its declaration and its ``--help`` use."""
+
+    name: str
+    default: Any
+    descriptor: ParameterDescriptor
+
+
+class Topic(NamedTuple):
+    """One topic or service of a node, for its ``--help`` (``direction``: publishes, ...)."""
+
+    direction: str
+    name: str
+    type: str
+    note: str = ''
+
+
+def declare_all(node, params: Sequence[Param]) -> dict:
+    """Declare every :class:`Param` of ``params`` with :func:`declare`; name -> value."""
+    return {p.name: declare(node, p.name, p.default, p.descriptor) for p in params}
+
+
+def _help_value(value: Any) -> str:
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (list, tuple)):
+        return '[' + ', '.join(_help_value(v) for v in value) + ']'
+    return f'{value!r}'
+
+
+def node_help(executable: str, doc: str, topics: Sequence[Topic],
+              params: Sequence[Param]) -> str:
+    """The ``--help`` text of a node executable: what it does, its topics, its parameters.
+
+    ``doc``: the node module's docstring (its first paragraph is used);
+    ``params``: the table the node declares from, so that the defaults and
+    ranges printed are the ones declared.
+    """
+    first = ' '.join((doc or '').strip().split('\n\n')[0].split()).replace('``', '')
+    lines = [f'usage: ros2 run bellow_ancf_ros {executable} [--ros-args -p name:=value ...]',
+             '', *textwrap.wrap(first, 99), '']
+    for direction in dict.fromkeys(t.direction for t in topics):
+        lines.append(f'{direction}:')
+        for t in topics:
+            if t.direction == direction:
+                note = f': {t.note}' if t.note else ''
+                lines += textwrap.wrap(f'{t.name} ({t.type}){note}', 99, initial_indent='  ',
+                                       subsequent_indent=' ' * 6)
+    lines += ['', 'parameters (name: default; allowed; description):']
+    for p in params:
+        d = p.descriptor
+        when = '; read-only (start-up only)' if d.read_only else ''
+        lines.append(f'  {p.name}: {_help_value(p.default)}; {allowed_values(d)}{when}')
+        lines += textwrap.wrap(d.description, 99, initial_indent=' ' * 6,
+                               subsequent_indent=' ' * 6)
+    lines += ['', 'Start-up values: --ros-args -p name:=value or --params-file FILE. '
+              'This help starts no ROS node and publishes nothing.']
+    return '\n'.join(lines)
+
+
+def asks_for_help(args: Sequence[str]) -> bool:
+    """True when ``-h``/``--help`` is among the non-ROS arguments (``args`` without argv[0])."""
+    in_ros = False
+    for a in args:
+        if a == '--ros-args':
+            in_ros = True
+        elif a == '--' and in_ros:
+            in_ros = False
+        elif not in_ros and a in ('-h', '--help'):
+            return True
+    return False
 
 
 def _descriptor_of(node, name: str) -> ParameterDescriptor | None:
@@ -274,24 +357,41 @@ _STOP = threading.Event()
 _SPINNING = threading.Event()
 #: Set once the spin loop has ended and ``before_destroy`` (the vent) has returned.
 _VENTED = threading.Event()
-#: After the first SIGINT/SIGTERM the process exits within this time [s], whatever hangs: the
-#: vent and its acknowledgement wait (VENT_ACK_TIMEOUT_S) have their time, then the teardown of
-#: the node and the middleware gets as long again (a hang of it was seen once, on a loaded
-#: machine, in a node with a 100 Hz timer; it would otherwise keep the process alive).
+#: After the first SIGINT/SIGTERM (or the end of the spin loop) the process exits within this
+#: time [s], whatever hangs: the vent and its acknowledgement wait (VENT_ACK_TIMEOUT_S) have
+#: their time, then the teardown of the node and the middleware.  Two guards: a Python timer
+#: at CLEAN_EXIT_S (a line on stderr, status 0 after the vent, else 1), and faulthandler's
+#: watchdog at WATCHDOG_EXIT_S, a C thread that needs no GIL: it ends a process whose main
+#: thread holds the interpreter inside a C call (Fast DDS ``destroy_participant`` spinning in
+#: ``rcl_node_fini`` was seen), printing every thread's stack, status 1.
 STOP_DEADLINE_S = 2.0 * VENT_ACK_TIMEOUT_S
+#: The C watchdog's exit: before the deadline, leaving time for the stacks and the exit itself.
+WATCHDOG_EXIT_S = STOP_DEADLINE_S - 0.5
+#: The Python guard's exit: before the watchdog, so that a free interpreter ends with its line.
+CLEAN_EXIT_S = STOP_DEADLINE_S - 1.0
 _NODE_LABEL = ['node']
+_DEADLINE_ARMED = threading.Event()
 
 
 def _exit_if_still_running() -> None:  # pragma: no cover - only when a teardown hangs
     code = 0 if _VENTED.is_set() else 1
-    print(f'[{_NODE_LABEL[0]}] shutdown did not finish within {STOP_DEADLINE_S:g} s of the '
+    print(f'[{_NODE_LABEL[0]}] shutdown did not finish within {CLEAN_EXIT_S:g} s of the '
           f'signal ({"after" if code == 0 else "before"} the vent step): exiting now',
           file=sys.stderr, flush=True)
     os._exit(code)
 
 
 def _arm_stop_deadline() -> None:
-    timer = threading.Timer(STOP_DEADLINE_S, _exit_if_still_running)
+    """Start both exit guards once (see :data:`STOP_DEADLINE_S`)."""
+    if _DEADLINE_ARMED.is_set():
+        return
+    _DEADLINE_ARMED.set()
+    stream = sys.__stderr__
+    try:   # the C watchdog: runs and exits while a C call holds the GIL
+        faulthandler.dump_traceback_later(WATCHDOG_EXIT_S, exit=True, file=stream)
+    except (AttributeError, OSError, ValueError, RuntimeError):  # no usable stderr descriptor
+        pass
+    timer = threading.Timer(CLEAN_EXIT_S, _exit_if_still_running)
     timer.daemon = True
     timer.start()
 
@@ -307,9 +407,9 @@ def _first_signal(signum, frame):  # pragma: no cover - signal path
     (in a constructor), it raises KeyboardInterrupt.
     """
     _ignore_further_signals()
+    _arm_stop_deadline()
     if _SPINNING.is_set():
         _STOP.set()
-        _arm_stop_deadline()
     else:
         raise KeyboardInterrupt
 
@@ -349,8 +449,17 @@ def make_executor():
     return SingleThreadedExecutor()
 
 
-def request_stop() -> None:
-    """End :func:`run_node`'s spin loop as a first SIGINT would (a node that is done)."""
+#: Exit status of the process once :func:`run_node` has returned (:func:`request_stop`).
+_EXIT_STATUS = [0]
+
+
+def request_stop(exit_status: int = 0) -> None:
+    """End :func:`run_node`'s spin loop as a first SIGINT would (a node that is done).
+
+    ``exit_status``: the status the executable then exits with (e.g. 1 for a
+    node that gave up).
+    """
+    _EXIT_STATUS[0] = exit_status
     _STOP.set()
 
 
@@ -361,9 +470,11 @@ def run_node(node, before_destroy=None) -> None:
     From the first signal on, further SIGINT/SIGTERM are counted, not raised:
     ``ros2 launch`` and a terminal may both deliver SIGINT, and a second one
     must not interrupt the vent or its acknowledgement wait (which is bounded).
-    The first signal also starts a deadline (``STOP_DEADLINE_S``): should
-    anything hang after it, the process still exits then, with a line on
-    stderr (status 0 once the vent step returned, else 1).
+    The first signal (or the end of the loop) also starts the exit deadline
+    (:data:`STOP_DEADLINE_S`): should anything hang after it, the process
+    still exits, with a line on stderr (status 0 once the vent step returned,
+    else 1) or, when a C call holds the interpreter, with every thread's
+    stack printed by faulthandler's watchdog (status 1).
     """
     _SPINNING.set()
     executor = make_executor()
@@ -375,6 +486,7 @@ def run_node(node, before_destroy=None) -> None:
         pass
     finally:
         _ignore_further_signals()
+        _arm_stop_deadline()   # also when the node ended itself (request_stop)
         try:
             if before_destroy is not None and rclpy.ok():
                 before_destroy(node)
@@ -391,38 +503,132 @@ def run_node(node, before_destroy=None) -> None:
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
+class _ParamsFileError(Exception):
+    """A ``--params-file`` rclpy cannot read (one line: the file and what is wrong)."""
+
+
+def _params_files(args: Sequence[str]) -> list[str]:
+    """The files given with ``--params-file`` among the ROS arguments."""
+    return [b for a, b in zip(args, args[1:]) if a == '--params-file']
+
+
+def _params_file_problem(args: Sequence[str]) -> str:
+    """What is wrong with a ``--params-file`` of ``args`` that rcl would refuse, or ''.
+
+    Checked before rcl sees them (a missing file, YAML that does not parse, a
+    file that is not a mapping); what rcl refuses beyond that comes from
+    :func:`init_rclpy`.
+    """
+    for f in _params_files(args):
+        if not os.path.isfile(f):
+            return f'--params-file {f}: no such file'
+        try:
+            with open(f) as fh:
+                data = yaml.safe_load(fh)
+        except (OSError, UnicodeDecodeError) as err:
+            return f'--params-file {f}: cannot be read ({err})'
+        except yaml.YAMLError as err:
+            where = getattr(err, 'problem_mark', None)
+            line = f', line {where.line + 1}' if where is not None else ''
+            return (f'--params-file {f}: not valid YAML{line} '
+                    f'({getattr(err, "problem", None) or type(err).__name__})')
+        if not isinstance(data, dict):
+            return (f'--params-file {f}: not a ROS 2 parameters file (allowed: a mapping '
+                    '"<node name or /**>: {ros__parameters: {name: value}}")')
+    return ''
+
+
 def init_rclpy(args=None) -> None:
     """Initialise rclpy without its signal handlers; SIGINT/SIGTERM stop the node.
 
     The first signal ends the spin loop (see :func:`_first_signal`) and makes
     every later one a no-op, so that a second Ctrl-C (terminal and ``ros2 launch`` both send
-    one) cannot interrupt the vent on the way out.
+    one) cannot interrupt the vent on the way out.  ROS arguments rcl would
+    refuse (a ``--params-file`` that does not exist, is not YAML or not a
+    parameters file) raise :class:`_ParamsFileError` with one line naming the
+    file and what is wrong, and rcl's own log lines about it are held back.
     """
+    argv = sys.argv if args is None else list(args)
+    problem = _params_file_problem(argv)
+    if problem:
+        raise _ParamsFileError(problem)
     limit_blas_threads()  # small dense matrices: 1 BLAS thread is faster (core.solver)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        with _StderrHeld() as held:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # noqa: BLE001 - rclpy's RCLError (no public class in Jazzy)
+        if type(exc).__name__ != 'RCLError':
+            raise
+        text = ' '.join(str(exc).split()).split(', at /')[0]
+        files = ' '.join(_params_files(argv)) or 'the ROS arguments'
+        raise _ParamsFileError(f'{files}: refused by rcl ({text})') from None
+    if held.text:   # rcl's output of a successful init goes out as it came
+        sys.stderr.write(held.text)
     signal.signal(signal.SIGINT, _first_signal)
     signal.signal(signal.SIGTERM, _first_signal)
 
 
-def main_for(node_class, before_destroy=None, node_name: str | None = None):
+class _StderrHeld:
+    """Hold what C code writes on file descriptor 2 meanwhile (``.text`` afterwards)."""
+
+    def __enter__(self):
+        self.text = ''
+        self._file = tempfile.TemporaryFile(mode='w+b')
+        try:
+            sys.stderr.flush()
+            self._saved = os.dup(2)
+            os.dup2(self._file.fileno(), 2)
+        except OSError:   # no descriptor 2: nothing to hold
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+            self._file.seek(0)
+            self.text = self._file.read().decode(errors='replace')
+        self._file.close()
+        return False
+
+
+def main_for(node_class, before_destroy=None, node_name: str | None = None, factory=None):
     """Build ``main(args=None)`` of a node executable: init, construct, spin, clean up.
 
-    A start-up parameter the node cannot run with (:class:`StartupParameterError`,
-    or a robot file that does not load) ends the process with one line on
-    stderr and exit status :data:`STARTUP_ERROR_EXIT`, no traceback.
+    ``node_class`` has ``NODE_NAME``, ``TOPICS`` (:class:`Topic`) and
+    ``PARAMETERS`` (:class:`Param`, the table it declares from);
+    ``factory()`` builds the node (default ``node_class()``).  ``-h`` /
+    ``--help`` prints what the node does, its topics and its parameters
+    (:func:`node_help`) and exits 0 before rclpy is initialised: no node, no
+    message.  A start-up parameter the node cannot run with
+    (:class:`StartupParameterError`, a robot file that does not load, a
+    ``--params-file`` rcl refuses) ends the process with one line on stderr,
+    prefixed with the node's name, and exit status :data:`STARTUP_ERROR_EXIT`,
+    no traceback.
     """
     name = node_name or getattr(node_class, 'NODE_NAME', node_class.__name__)
+    make = factory or node_class
 
     def main(args=None) -> None:
+        argv = sys.argv if args is None else list(args)
+        if asks_for_help(argv[1:]):
+            doc = sys.modules[node_class.__module__].__doc__
+            print(node_help(name, doc, getattr(node_class, 'TOPICS', ()),
+                            getattr(node_class, 'PARAMETERS', ())), flush=True)
+            sys.exit(0)
         _NODE_LABEL[0] = name
-        init_rclpy(args)
+        try:
+            init_rclpy(argv)
+        except _ParamsFileError as exc:
+            print(f'[{name}] cannot start: {exc}', file=sys.stderr, flush=True)
+            sys.exit(STARTUP_ERROR_EXIT)
         try:
             executor_choice()
             if not numba_cache.is_compiled():   # say at once what the blank terminal is
                 print(f'[{name}] compiling the numerical kernels once after installation '
                       '(about 20 s; `ros2 run bellow_ancf_ros bellow-ancf warm-up` does it '
                       'ahead of time)', file=sys.stderr, flush=True)
-            node = node_class()
+            node = make()
             _SPINNING.set()  # from here a signal stops the node cleanly (run_node)
         except (StartupParameterError, ConfigError) as exc:
             rclpy.try_shutdown()
@@ -435,4 +641,6 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None):
             rclpy.try_shutdown()
             raise
         run_node(node, before_destroy=before_destroy)
+        if _EXIT_STATUS[0]:
+            sys.exit(_EXIT_STATUS[0])
     return main

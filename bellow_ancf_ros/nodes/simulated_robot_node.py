@@ -59,7 +59,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import IntegerRange, ParameterType, SetParametersResult
+from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -71,8 +71,11 @@ from ..core import geometry
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
 from .ros_util import (
+    Param,
     StartupParameterError,
+    Topic,
     command_qos,
+    declare_all,
     descriptor,
     diagnostics_qos,
     main_for,
@@ -160,66 +163,82 @@ def plant_effects(get) -> PlantEffects:
                                     reason) from None
 
 
+D, S, INT, A = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE_ARRAY)
+_RO = {'read_only': True}
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment_mismatched', descriptor(
+        "The simulated robot's own description (shipped name or YAML path); default the "
+        'mismatched one-segment example, a robot that is not the model.', S, **_RO)),
+    Param('n_elements', 0, descriptor(
+        "ANCF elements per actuator of the simulation; 0 = the robot file's.", INT, lo=0, hi=60,
+        **_RO)),
+    Param('payload_kg', 0.0, descriptor(
+        'Payload the simulated robot carries [kg] (settable at run time).', D,
+        lo=0.0, hi=contract.PAYLOAD_MAX_KG)),
+    Param('tip_force_n', [0.0, 0.0, 0.0], descriptor(
+        'A force pushing the end effector [N, base frame, 3 numbers] (settable at run '
+        'time: a push, a tool pressing on a surface; the controller is not told).', A)),
+    Param('base_frame', 'base', descriptor(
+        'frame_id of measured_pose (unless mocap_frame_id is set).', S, **_RO)),
+    Param('mocap_frame_id', '', descriptor(
+        'Publish measured_pose in this motion-capture frame instead of base_frame (empty: '
+        'base_frame); the base sits in it at mocap_position_m, mocap_quaternion_xyzw.', S,
+        **_RO)),
+    Param('mocap_position_m', [0.0, 0.0, 0.0], descriptor(
+        'Position of the base frame in the mocap frame [m] (3 numbers).', A, **_RO)),
+    Param('mocap_quaternion_xyzw', [0.0, 0.0, 0.0, 1.0], descriptor(
+        'Orientation of the base frame in the mocap frame (x, y, z, w).', A, **_RO)),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of pressure_command and measured_pressure: Pa or kPa (gauge).', S,
+        constraints="one of: 'Pa', 'kPa'", **_RO)),
+    Param('plant', 'realistic', descriptor(
+        "'realistic': every hardware effect below at its parameter; 'ideal': the clean "
+        'robot (0.1 s first-order regulators, mocap 100 Hz with noise only; the effect '
+        'parameters are ignored).', S, constraints="one of: 'realistic', 'ideal'", **_RO)),
+) + tuple(Param(name, default, descriptor(text, D, lo=lo, hi=hi, **_RO))
+          for name, _field, _scale, default, text, lo, hi in EFFECT_PARAMETERS) + (
+    Param('dynamics', True, descriptor(
+        "The robot's inertia and damping (the robot file's dynamics.damping_time_s): it "
+        'swings and rings; false: it jumps from equilibrium to equilibrium.  Realistic '
+        'plant only (the ideal plant is quasi-static).', ParameterType.PARAMETER_BOOL, **_RO)),
+    Param('physics_rate_hz', 0.0, descriptor(
+        'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate.  '
+        '0 = automatic: with dynamics one integrator step per physics step (40 per period '
+        'of the first mode, at least 100 Hz), else 100 Hz.  With dynamics a rate must '
+        'resolve the first mode: at least 20 steps per period (checked at start).', D,
+        lo=0.0, hi=1000.0, **_RO)),
+    Param('command_timeout_s', 0.0, descriptor(
+        'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
+        'as a regulator driver does (the inverse node republishes at command_rate_hz); '
+        '0 = off (a bench fed single commands).', D, lo=0.0, hi=60.0, **_RO)),
+    Param('seed', -1, descriptor('Seed of the noise generator; -1 = random.', INT,
+                                 lo=-1, hi=2**31 - 1, **_RO)),
+)
+TOPICS = (
+    Topic('subscribes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          "the regulators' set-points, gauge, in pressure_unit"),
+    Topic('publishes', 'measured_pose', 'geometry_msgs/PoseStamped',
+          'the motion capture: noise, latency, outliers, dropouts'),
+    Topic('publishes', 'true_pose', 'geometry_msgs/PoseStamped', 'the exact pose (ground truth)'),
+    Topic('publishes', 'measured_pressure', 'std_msgs/Float64MultiArray',
+          'the regulated pressures, at physics_rate_hz'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz status'),
+)
+
+
 class SimulatedRobotNode(Node):
     """Subscribes pressure commands, publishes measured pose and pressures of a simulated robot."""
 
-    def __init__(self, node_name: str = 'simulated_robot_node', **kwargs: Any) -> None:
+    NODE_NAME = 'simulated_robot_node'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """Declare the parameters, build the robot, start the physics thread and timers."""
         super().__init__(node_name, **kwargs)
-        D, S, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                     ParameterType.PARAMETER_INTEGER)
-        ro = {'read_only': True}
-        self.declare_parameter('robot_config', 'one_segment_mismatched', descriptor(
-            "The simulated robot's own description (shipped name or YAML path); default the "
-            'mismatched one-segment example, a robot that is not the model.', S, **ro))
-        d = descriptor('ANCF elements per actuator of the simulation; 0 = the robot file\'s.', INT,
-                       **ro)
-        d.integer_range = [IntegerRange(from_value=0, to_value=60, step=1)]
-        self.declare_parameter('n_elements', 0, d)
-        self.declare_parameter('payload_kg', 0.0, descriptor(
-            'Payload the simulated robot carries [kg] (settable at run time).', D,
-            lo=0.0, hi=contract.PAYLOAD_MAX_KG))
-        self.declare_parameter('tip_force_n', [0.0, 0.0, 0.0], descriptor(
-            'A force pushing the end effector [N, base frame, 3 numbers] (settable at run '
-            'time: a push, a tool pressing on a surface; the controller is not told).',
-            ParameterType.PARAMETER_DOUBLE_ARRAY))
-        self.declare_parameter('base_frame', 'base', descriptor(
-            'frame_id of measured_pose (unless mocap_frame_id is set).', S, **ro))
-        self.declare_parameter('mocap_frame_id', '', descriptor(
-            'Publish measured_pose in this motion-capture frame instead of base_frame (empty: '
-            'base_frame); the base sits in it at mocap_position_m, mocap_quaternion_xyzw.', S,
-            **ro))
-        A = ParameterType.PARAMETER_DOUBLE_ARRAY
-        self.declare_parameter('mocap_position_m', [0.0, 0.0, 0.0], descriptor(
-            'Position of the base frame in the mocap frame [m] (3 numbers).', A, **ro))
-        self.declare_parameter('mocap_quaternion_xyzw', [0.0, 0.0, 0.0, 1.0], descriptor(
-            'Orientation of the base frame in the mocap frame (x, y, z, w).', A, **ro))
-        self.declare_parameter('pressure_unit', 'Pa', descriptor(
-            'Unit of pressure_command and measured_pressure: Pa or kPa (gauge).', S,
-            constraints="one of: 'Pa', 'kPa'", **ro))
-        self.declare_parameter('plant', 'realistic', descriptor(
-            "'realistic': every hardware effect below at its parameter; 'ideal': the clean "
-            'robot (0.1 s first-order regulators, mocap 100 Hz with noise only; the effect '
-            'parameters are ignored).', S, constraints="one of: 'realistic', 'ideal'", **ro))
-        for name, _field, _scale, default, text, lo, hi in EFFECT_PARAMETERS:
-            self.declare_parameter(name, default, descriptor(text, D, lo=lo, hi=hi, **ro))
-        self.declare_parameter('dynamics', True, descriptor(
-            "The robot's inertia and damping (the robot file's dynamics.damping_time_s): it "
-            'swings and rings; false: it jumps from equilibrium to equilibrium.  Realistic '
-            'plant only (the ideal plant is quasi-static).', ParameterType.PARAMETER_BOOL, **ro))
-        self.declare_parameter('physics_rate_hz', 0.0, descriptor(
-            'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate.  '
-            '0 = automatic: with dynamics one integrator step per physics step (40 per period '
-            'of the first mode, at least 100 Hz), else 100 Hz.  With dynamics a rate must '
-            'resolve the first mode: at least 20 steps per period (checked at start).', D,
-            lo=0.0, hi=1000.0, **ro))
-        self.declare_parameter('command_timeout_s', 0.0, descriptor(
-            'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
-            'as a regulator driver does (the inverse node republishes at command_rate_hz); '
-            '0 = off (a bench fed single commands).', D, lo=0.0, hi=60.0, **ro))
-        d = descriptor('Seed of the noise generator; -1 = random.', INT, **ro)
-        d.integer_range = [IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]
-        self.declare_parameter('seed', -1, d)
+        declare_all(self, PARAMETERS)
         g = self.get_parameter
         unit = g('pressure_unit').value
         contract.check_unit(unit)

@@ -52,9 +52,11 @@ from ..core import geometry
 from .diagnostics import Heartbeat
 from .measured_feedback import measured_pose_qos
 from .ros_util import (
+    Param,
     StartupParameterError,
+    Topic,
     command_qos,
-    declare,
+    declare_all,
     descriptor,
     diagnostics_qos,
     main_for,
@@ -66,49 +68,64 @@ __all__ = ['TrajectoryPublisher', 'main']
 _TRAJ_PARAMS = ('trajectory', 'period_s', 'radius_m', 'height_m', 'bending_angle_deg')
 
 
+D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+           ParameterType.PARAMETER_BOOL)
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'Robot description (shipped name or YAML path); sets the default trajectory size. '
+        'Read at start-up.', S, read_only=True)),
+    Param('trajectory', 'planar_circle', descriptor(
+        'Trajectory name: ' + ', '.join(TRAJECTORY_NAMES) + ' (bending_circle: two or more '
+        'segments only).', S, constraints='one of: ' + ', '.join(TRAJECTORY_NAMES))),
+    Param('rate_hz', 10.0, descriptor(
+        'Publishing rate [Hz] (read at start-up).', D, lo=0.1, hi=1000.0, read_only=True)),
+    Param('period_s', 0.0, descriptor(
+        'Trajectory period [s]; 0 = the default (quasi-static speed, about 2 mm/s).', D,
+        lo=0.0, hi=3600.0)),
+    Param('radius_m', 0.0, descriptor(
+        'Trajectory radius [m]; 0 = the default for the robot.', D, lo=0.0, hi=1.0)),
+    Param('height_m', 0.0, descriptor(
+        'Height of the trajectory centre above the base [m]; 0 = the default.', D,
+        lo=0.0, hi=10.0)),
+    Param('bending_angle_deg', 0.0, descriptor(
+        'Bending angle of bending_circle [deg]: angle between the end-effector z-axis and '
+        'the base z-axis, tilted radially outward (paper: 0, 10, 20). Two or more segments.',
+        D, lo=0.0, hi=60.0)),
+    Param('base_frame', 'base', descriptor(
+        'frame_id of the published targets (robot base).', S)),
+    Param('loop', True, descriptor(
+        'Repeat the trajectory; false: stop publishing after one period.', B)),
+    Param('start_delay_s', 0.0, descriptor(
+        'Wait this long after start-up before publishing [s].', D, lo=0.0, hi=3600.0)),
+    Param('preview_s', 0.0, descriptor(
+        'Publish the pose wanted this far ahead, stamped with the time it is wanted at [s] '
+        '(compensates the regulators\' known lag: their dead time + time constant + half '
+        'a control period); 0 = the pose wanted now.', D, lo=0.0, hi=2.0, read_only=True)),
+    Param('ramp_in_s', 2.0, descriptor(
+        'Lead the target from the commanded pose the controller holds (commanded_pose) '
+        'onto the path over this long [s], instead of a jump; 0 = off.', D, lo=0.0,
+        hi=60.0, read_only=True)),
+)
+TOPICS = (
+    Topic('publishes', 'target_pose', 'geometry_msgs/PoseStamped',
+          'the trajectory in base_frame at rate_hz'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz heartbeat'),
+    Topic('subscribes', 'target_pose, measured_pose, commanded_pose',
+          'geometry_msgs/PoseStamped', 'where the robot is, for the lead-in (ramp_in_s)'),
+)
+
+
 class TrajectoryPublisher(Node):
     """Publishes target poses along a reference trajectory."""
 
     NODE_NAME = 'trajectory_publisher'
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_BOOL)
-        declare(self, 'robot_config', 'one_segment', descriptor(
-            'Robot description (shipped name or YAML path); sets the default trajectory size. '
-            'Read at start-up.', S, read_only=True))
-        declare(self, 'trajectory', 'planar_circle', descriptor(
-            'Trajectory name: ' + ', '.join(TRAJECTORY_NAMES) + ' (bending_circle: two or more '
-            'segments only).', S, constraints='one of: ' + ', '.join(TRAJECTORY_NAMES)))
-        declare(self, 'rate_hz', 10.0, descriptor(
-            'Publishing rate [Hz] (read at start-up).', D, lo=0.1, hi=1000.0, read_only=True))
-        declare(self, 'period_s', 0.0, descriptor(
-            'Trajectory period [s]; 0 = the default (quasi-static speed, about 2 mm/s).', D,
-            lo=0.0, hi=3600.0))
-        declare(self, 'radius_m', 0.0, descriptor(
-            'Trajectory radius [m]; 0 = the default for the robot.', D, lo=0.0, hi=1.0))
-        declare(self, 'height_m', 0.0, descriptor(
-            'Height of the trajectory centre above the base [m]; 0 = the default.', D,
-            lo=0.0, hi=10.0))
-        declare(self, 'bending_angle_deg', 0.0, descriptor(
-            'Bending angle of bending_circle [deg]: angle between the end-effector z-axis and '
-            'the base z-axis, tilted radially outward (paper: 0, 10, 20). Two or more segments.',
-            D, lo=0.0, hi=60.0))
-        declare(self, 'base_frame', 'base', descriptor(
-            'frame_id of the published targets (robot base).', S))
-        declare(self, 'loop', True, descriptor(
-            'Repeat the trajectory; false: stop publishing after one period.', B))
-        declare(self, 'start_delay_s', 0.0, descriptor(
-            'Wait this long after start-up before publishing [s].', D, lo=0.0, hi=3600.0))
-        declare(self, 'preview_s', 0.0, descriptor(
-            'Publish the pose wanted this far ahead, stamped with the time it is wanted at [s] '
-            '(compensates the regulators\' known lag: their dead time + time constant + half '
-            'a control period); 0 = the pose wanted now.', D, lo=0.0, hi=2.0, read_only=True))
-        declare(self, 'ramp_in_s', 2.0, descriptor(
-            'Lead the target from the commanded pose the controller holds (commanded_pose) '
-            'onto the path over this long [s], instead of a jump; 0 = off.', D, lo=0.0,
-            hi=60.0, read_only=True))
+        declare_all(self, PARAMETERS)
 
         robot = self.get_parameter('robot_config').value
         try:

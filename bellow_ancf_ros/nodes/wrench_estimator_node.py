@@ -26,6 +26,7 @@ Use the calibrated robot file: the estimator reads any model error as a force.
 
 from __future__ import annotations
 
+import collections
 import time
 from typing import Any
 
@@ -46,58 +47,93 @@ from . import contract
 from .diagnostics import Heartbeat, Refusals, publish_diagnostic
 from .frames import PoseFrames
 from .measured_feedback import measured_pose_qos
-from .ros_util import (StartupParameterError, command_qos, declare, descriptor, diagnostics_qos,
-                       main_for)
+from .ros_util import (WARN_THROTTLE_S, Param, StartupParameterError, Topic, command_qos,
+                       declare_all, descriptor, diagnostics_qos, main_for)
 
 __all__ = ['WrenchEstimatorNode', 'main']
 
 NODE_NAME = 'wrench_estimator_node'
+#: An outlier (a swapped marker: about 0.5 % of a motion capture's samples) is counted on
+#: /diagnostics and logged at INFO (at most every OUTLIER_INFO_S); above this share of the
+#: last OUTLIER_WINDOW pose samples it is a WARN (log and heartbeat): the markers need a look.
+OUTLIER_WARN_FRACTION = 0.05
+OUTLIER_WINDOW = 240
+OUTLIER_INFO_S = 30.0
+D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+           ParameterType.PARAMETER_BOOL)
+ro = dict(read_only=True)
+
+#: The node's parameters: what it declares and what ``--help`` prints.
+PARAMETERS = (
+    Param('robot_config', 'one_segment', descriptor(
+        'The calibrated robot file (shipped name or YAML path): its model error reads as '
+        'a force.', S, constraints='a shipped robot name or a robot YAML path', **ro)),
+    Param('mode', 'force', descriptor(
+        "'force': the tip force (3 components); 'mass': an unknown payload along gravity.",
+        S, constraints="one of: 'force', 'mass'", **ro)),
+    Param('payload_kg', 0.0, descriptor(
+        "The known payload [kg] (mode 'force'), or the first guess (mode 'mass').", D,
+        lo=0.0, hi=contract.PAYLOAD_MAX_KG, **ro)),
+    Param('position_noise_m', 0.15e-3, descriptor(
+        'Motion-capture position noise, standard deviation per axis [m].', D,
+        lo=1e-7, hi=0.1, **ro)),
+    Param('angle_noise_rad', 0.0017453292519943296, descriptor(
+        'Motion-capture orientation noise, standard deviation per axis [rad].', D,
+        lo=1e-7, hi=1.0, **ro)),
+    Param('force_rate', 0.01, descriptor(
+        'How fast the force may change: random-walk spectral density [N^2/s] '
+        '(0.01: about 0.1 N in a second).', D, lo=0.0, hi=100.0, **ro)),
+    Param('use_z_axis', True, descriptor(
+        'Use the measured z-axis as well as the position.', B, **ro)),
+    Param('rate_hz', 20.0, descriptor(
+        'estimated_wrench publication rate [Hz].', D, lo=0.1, hi=1000.0, **ro)),
+    Param('marker_scale_m_per_n', 0.1, descriptor(
+        'Length of the estimated_wrench_marker arrow per newton [m/N].', D,
+        lo=1e-4, hi=100.0, **ro)),
+    Param('pressure_timeout_s', 0.5, descriptor(
+        'Measured pressures older than this give way to pressure_command [s].', D,
+        lo=0.01, hi=60.0, **ro)),
+    Param('pressure_unit', 'Pa', descriptor(
+        'Unit of measured_pressure and pressure_command: Pa or kPa (gauge).', S,
+        constraints="one of: 'Pa', 'kPa'", **ro)),
+    Param('base_frame', 'base', descriptor(
+        'Frame of estimated_wrench (the robot base).', S, **ro)),
+)
+
+
+TOPICS = (
+    Topic('subscribes', 'measured_pose', 'geometry_msgs/PoseStamped',
+          'base_frame, the robot file\'s mocap frame or any frame tf2 knows (best effort)'),
+    Topic('subscribes', 'measured_pressure', 'std_msgs/Float64MultiArray',
+          'the regulators\' measured pressures, in pressure_unit'),
+    Topic('subscribes', 'pressure_command', 'std_msgs/Float64MultiArray',
+          'used while no fresh measured_pressure arrives'),
+    Topic('publishes', 'estimated_wrench', 'geometry_msgs/WrenchStamped',
+          'the tip force in base_frame [N], at rate_hz'),
+    Topic('publishes', 'estimated_wrench_marker', 'visualization_msgs/Marker',
+          'the force as an arrow, for RViz'),
+    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz heartbeat'),
+    Topic('services', '~/tare', 'std_srvs/Trigger', 'zero the reading'),
+)
 
 
 class WrenchEstimatorNode(Node):
     """Tip force from poses and pressures (module docstring)."""
 
     NODE_NAME = NODE_NAME
+    PARAMETERS = PARAMETERS
+    TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         """Declare the parameters (read at start-up), build the estimator, wire the topics."""
         super().__init__(node_name, **kwargs)
-        D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                   ParameterType.PARAMETER_BOOL)
-        ro = dict(read_only=True)
-        robot = declare(self, 'robot_config', 'one_segment', descriptor(
-            'The calibrated robot file (shipped name or YAML path): its model error reads as '
-            'a force.', S, constraints='a shipped robot name or a robot YAML path', **ro))
-        mode = declare(self, 'mode', 'force', descriptor(
-            "'force': the tip force (3 components); 'mass': an unknown payload along gravity.",
-            S, constraints="one of: 'force', 'mass'", **ro))
-        payload = declare(self, 'payload_kg', 0.0, descriptor(
-            "The known payload [kg] (mode 'force'), or the first guess (mode 'mass').", D,
-            lo=0.0, hi=contract.PAYLOAD_MAX_KG, **ro))
-        sigma_p = declare(self, 'position_noise_m', 0.15e-3, descriptor(
-            'Motion-capture position noise, standard deviation per axis [m].', D,
-            lo=1e-7, hi=0.1, **ro))
-        sigma_a = declare(self, 'angle_noise_rad', 0.0017453292519943296, descriptor(
-            'Motion-capture orientation noise, standard deviation per axis [rad].', D,
-            lo=1e-7, hi=1.0, **ro))
-        rate = declare(self, 'force_rate', 0.01, descriptor(
-            'How fast the force may change: random-walk spectral density [N^2/s] '
-            '(0.01: about 0.1 N in a second).', D, lo=0.0, hi=100.0, **ro))
-        declare(self, 'use_z_axis', True, descriptor(
-            'Use the measured z-axis as well as the position.', B, **ro))
-        declare(self, 'rate_hz', 20.0, descriptor(
-            'estimated_wrench publication rate [Hz].', D, lo=0.1, hi=1000.0, **ro))
-        declare(self, 'marker_scale_m_per_n', 0.1, descriptor(
-            'Length of the estimated_wrench_marker arrow per newton [m/N].', D,
-            lo=1e-4, hi=100.0, **ro))
-        declare(self, 'pressure_timeout_s', 0.5, descriptor(
-            'Measured pressures older than this give way to pressure_command [s].', D,
-            lo=0.01, hi=60.0, **ro))
-        declare(self, 'pressure_unit', 'Pa', descriptor(
-            'Unit of measured_pressure and pressure_command: Pa or kPa (gauge).', S,
-            constraints="one of: 'Pa', 'kPa'", **ro))
-        declare(self, 'base_frame', 'base', descriptor(
-            'Frame of estimated_wrench (the robot base).', S, **ro))
+        declare_all(self, PARAMETERS)
+        robot = self.get_parameter('robot_config').value
+        mode = self.get_parameter('mode').value
+        payload = self.get_parameter('payload_kg').value
+        sigma_p = self.get_parameter('position_noise_m').value
+        sigma_a = self.get_parameter('angle_noise_rad').value
+        rate = self.get_parameter('force_rate').value
         if mode not in ESTIMATOR_MODES:
             raise StartupParameterError('mode', mode, "one of: 'force', 'mass'")
         try:
@@ -120,7 +156,8 @@ class WrenchEstimatorNode(Node):
         self.frames = PoseFrames(self, self.get_parameter('base_frame').value,
                                  self.cfg.mocap_frame)
         self._pressures = {'measured': (None, -np.inf), 'command': (None, -np.inf)}
-        self.stats = {'poses': 0, 'refused': 0, 'published': 0}
+        self.stats = {'poses': 0, 'refused': 0, 'outliers': 0, 'published': 0}
+        self._recent = collections.deque(maxlen=OUTLIER_WINDOW)   # outlier or not, per pose
         self._pub = self.create_publisher(WrenchStamped, 'estimated_wrench', command_qos())
         self._pub_marker = self.create_publisher(Marker, 'estimated_wrench_marker', command_qos())
         self._marker_scale = float(self.get_parameter('marker_scale_m_per_n').value)
@@ -170,8 +207,34 @@ class WrenchEstimatorNode(Node):
             self._refuse(str(exc))
             return
         self._tip = xyz
-        if not self.estimator.update(p, xyz, z, time_s=time.monotonic()):
+        outliers = self.estimator.outliers
+        ok = self.estimator.update(p, xyz, z, time_s=time.monotonic())
+        outlier = self.estimator.outliers > outliers
+        self._recent.append(outlier)
+        if outlier:
+            self._outlier()
+        elif not ok:
             self._refuse(self.estimator.last_reason)
+
+    def outlier_share(self) -> float:
+        """Share of outliers among the last OUTLIER_WINDOW pose samples (0 with few samples)."""
+        n = len(self._recent)
+        return sum(self._recent) / n if n >= OUTLIER_WINDOW // 4 else 0.0
+
+    def _outlier(self) -> None:
+        """Count an outlier; INFO now and then, a WARN only at an abnormal share."""
+        self.stats['outliers'] += 1
+        share, n = self.outlier_share(), len(self._recent)
+        if share > OUTLIER_WARN_FRACTION:
+            self.get_logger().warning(
+                f'samples refused as outliers: {share:.0%} of the last {n} poses (a motion '
+                f'capture gives about 0.5 %): check the markers',
+                throttle_duration_sec=WARN_THROTTLE_S)
+        else:
+            self.get_logger().info(
+                f'{self.stats["outliers"]} sample(s) refused as outliers so far '
+                f'({share:.1%} of the last {n} poses; counted on /diagnostics)',
+                throttle_duration_sec=OUTLIER_INFO_S)
 
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
@@ -219,8 +282,12 @@ class WrenchEstimatorNode(Node):
         if e.payload_kg is not None:
             values.update(payload_kg=round(e.payload_kg, 5),
                           payload_std_kg=round(e.payload_std_kg, 5))
+        values['outlier_share'] = round(self.outlier_share(), 4)
         if e.samples == 0:
             return DiagnosticStatus.WARN, 'no sample yet', values
+        if self.outlier_share() > OUTLIER_WARN_FRACTION:
+            return (DiagnosticStatus.WARN, f'{self.outlier_share():.0%} of the recent poses '
+                    'are outliers: check the markers', values)
         if e.blind:
             return (DiagnosticStatus.WARN, f'{len(e.blind)} direction(s) not seen yet '
                     f'(std above {self.estimator.blind_std_n:g} N)', values)

@@ -132,11 +132,14 @@ def test_sigkilled_controller_driver_and_simulated_robot_vent_within_the_timeout
 def test_two_publishers_on_pressure_command_never_alternate(h, one):
     """The controller holds a target; an excitation publisher is started by mistake.
 
-    Once they have discovered each other neither publishes anything but a
-    vent: the commands never flip between the two; both say why, naming
-    the other node.  With the other gone, the controller commands again.
+    Once they have discovered each other both yield (ownership.py): the
+    controller vents once and deactivates itself, the excitation aborts; the
+    commands never flip back; both say why, naming the other node.  With the
+    other gone, the controller stays silent until it is activated again.
     """
     from diagnostic_msgs.msg import DiagnosticArray
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
     from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher
     from bellow_ancf_ros.nodes.ros_util import command_qos
     h.record(Float64MultiArray, 'pressure_command')
@@ -148,7 +151,7 @@ def test_two_publishers_on_pressure_command_never_alternate(h, one):
     held = inv.last_command_pa.copy()
     n0 = h.count('pressure_command')
     exc = h.add(ExcitationPublisher, dwell_s=0.5, rate_hz=20.0, exit_when_done=False)
-    wait_for(lambda: exc.refused >= 3 and inv._owner.others, what='both see each other')
+    wait_for(lambda: exc.aborted and not inv.is_active, what='both yield')
     time.sleep(1.0)
     with h.lock:
         seq = [np.array(m.data) for _, m in h.msgs['pressure_command'][n0:]]
@@ -156,22 +159,28 @@ def test_two_publishers_on_pressure_command_never_alternate(h, one):
              for c in seq]
     flips = sum(1 for a, b in zip(kinds, kinds[1:]) if {a, b} == {'controller', 'other'})
     assert flips <= 1, kinds          # at most the one switch before discovery, never back
-    n1 = h.count('pressure_command')
-    time.sleep(0.5)
-    with h.lock:
-        late = [np.array(m.data) for _, m in h.msgs['pressure_command'][n1:]]
-    assert all(not np.any(c) for c in late), late     # silence (or a vent) while two
-    assert any(exc.get_fully_qualified_name() in s.message
-               for s in _rn.diag_statuses(h, 'inverse'))
-    assert any(inv.get_fully_qualified_name() in s.message
-               for s in _rn.diag_statuses(h, 'excitation'))
-    # the intruder goes: the controller is the only publisher again and commands
+    assert kinds[-1] == 'vent', kinds
+    wait_for(lambda: any(exc.get_fully_qualified_name() in s.message
+                         for s in _rn.diag_statuses(h, 'inverse')), what='inverse ERROR')
+    wait_for(lambda: any(inv.get_fully_qualified_name() in s.message
+                         for s in _rn.diag_statuses(h, 'excitation')), what='excitation ERROR')
+    # the intruder goes: the controller does not come back by itself
     h.executor.remove_node(exc)
     h.nodes.remove(exc)
     exc.destroy_node()
     n2 = h.count('pressure_command')
+    time.sleep(2.0)
+    assert h.count('pressure_command') == n2 and not inv.is_active
+    # activate (the explicit action): the vent is held until a new target
+    change = h.service(ChangeState, f'{h.ns}/inverse_kinetostatic_node/change_state')
+    req = ChangeState.Request()
+    req.transition.id = Transition.TRANSITION_ACTIVATE
+    assert h.call(change, req).success
     wait_for(lambda: h.count('pressure_command') > n2 + 3, what='commands again')
-    np.testing.assert_allclose(h.last('pressure_command').data, held)
+    assert not np.any(h.last('pressure_command').data)
+    pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
+    wait_for(lambda: np.any(h.last('pressure_command').data), what='the target commanded')
+    np.testing.assert_allclose(h.last('pressure_command').data, held, atol=1.0)
 
 
 def test_excitation_publisher_process_exits_when_its_sequence_and_the_vent_are_done():
@@ -208,3 +217,7 @@ def test_driver_process_vents_on_ctrl_c(h):
     assert proc.returncode == 0, out[-2000:]
     assert 'regulators <- 70.00 10.00 -30.00 kPa gauge' in out
     assert 'regulators <- 0.00 0.00 0.00 kPa gauge' in out and 'vented: driver shutdown' in out
+    # its normal shutdown vent is news, not a warning (the timeout vent is the WARN)
+    vent_line = next(line for line in out.splitlines() if 'vented: driver shutdown' in line)
+    assert vent_line.startswith('[INFO]'), vent_line
+    assert '[WARN]' not in out and '[ERROR]' not in out, out[-2000:]

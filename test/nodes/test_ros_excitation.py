@@ -29,7 +29,7 @@ def wait_for(pred, timeout=20.0, what='condition'):
 
 
 @pytest.mark.parametrize('unit', ['Pa', 'kPa'])
-def test_steps_through_the_sequence_then_vents(ros_context, unit):
+def test_steps_through_the_sequence_then_vents(ros_context, unit, capfd):
     ns = f'/exc{random.randint(0, 99999)}'
     client = rclpy.create_node('rec', namespace=ns, context=ros_context)
     got, lock = [], threading.Lock()
@@ -68,5 +68,7 @@ def test_steps_through_the_sequence_then_vents(ros_context, unit):
     # it starts once the recorder is matched: every step arrives, in order
     np.testing.assert_allclose(steps, expected, rtol=1e-12, atol=1e-9)
     assert node.vented and node.published >= len(expected)
+    assert f'excitation finished: vent command (0 {unit} gauge) published' in (
+        capfd.readouterr().err)
     node.destroy_node()
     client.destroy_node()

@@ -154,7 +154,7 @@ def test_feedback_none_is_feedforward_without_measured_pose_subscription(h, one)
 
 
 def test_bad_feedback_parameter_refused(h):
-    with pytest.raises(ValueError, match="parameter feedback: 'pid'"):
+    with pytest.raises(ValueError, match="parameter feedback = 'pid' is not allowed"):
         h.add(InverseKinetostaticNode, feedback='pid')
 
 
@@ -240,6 +240,48 @@ def test_feedback_refuses_bad_poses_ignores_outliers_and_holds_through_a_dropout
     with h.lock:
         for _, m in h.msgs['pressure_command']:
             assert_safe(m.data, cfg)
+
+
+def test_designed_dropouts_are_info_and_counted_a_long_one_is_a_warn(h, one, capfd):
+    """A marker occlusion (0.5 s, every 15 s on the realistic robot) is no warning.
+
+    Short dropouts: INFO at their start and end, counted on /diagnostics
+    (feedback_dropouts); a dropout longer than DROPOUT_WARN_S: one WARN.
+    """
+    from bellow_ancf_ros.nodes.measured_feedback import DROPOUT_WARN_S
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, feedback='integral', measured_pose_timeout_s=0.25,
+                 feedback_rate_hz=50.0)
+    pub = h.publisher(PoseStamped, 'target_pose')
+    meas = h.publisher(PoseStamped, 'measured_pose')
+    target = solve_forward(one, [70e3, 10e3, -30e3]).position
+    pub.publish(target_msg(target))
+
+    def feed(seconds):
+        t_end = time.monotonic() + seconds
+        while time.monotonic() < t_end:
+            meas.publish(target_msg(target))
+            time.sleep(0.01)
+
+    feed(1.0)
+    for _ in range(2):   # two designed dropouts of 0.6 s
+        time.sleep(0.6)
+        feed(0.8)
+    wait_for(lambda: node._feedback.dropouts >= 2, what='two dropouts counted')
+    assert node._feedback.longest_dropout_s < DROPOUT_WARN_S
+    out = capfd.readouterr().err
+    assert out.count('integrator frozen, correction held') >= 2, out
+    assert 'measured poses back after' in out, out
+    assert not [line for line in out.splitlines() if line.startswith(('[WARN]', '[ERROR]'))], out
+    wait_for(lambda: any(kv(s).get('feedback_dropouts') == '2'
+                         for s in diag_statuses(h, 'inverse_kinetostatic_node: status')),
+             what='the count on /diagnostics')
+    # a dropout far longer than designed: one WARN, naming how long
+    time.sleep(DROPOUT_WARN_S + 1.0)
+    feed(0.5)
+    out = capfd.readouterr().err
+    warns = [line for line in out.splitlines() if line.startswith('[WARN]')]
+    assert len(warns) == 1 and 'no fresh measured pose for' in warns[0], out
 
 
 def test_two_segment_measured_pose_with_zero_quaternion_refused(h, two):

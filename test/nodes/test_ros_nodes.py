@@ -249,6 +249,20 @@ def test_autostart_default_is_active_and_reaches_target(h, one):
     assert st.hardware_id == 'one_segment'
 
 
+def test_a_copied_robot_file_is_named_by_its_file_in_logs_and_diagnostics(h, tmp_path, capfd):
+    """Issue 28: a lab's copy of one_segment.yaml was 'one_segment' in every log line."""
+    from bellow_ancf_ros.core.model import find_shipped
+    path = tmp_path / 'lab_arm.yaml'
+    path.write_text(find_shipped('one_segment').read_text())   # keeps 'name: one_segment'
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, robot_config=str(path))
+    assert node._cfg.name == 'lab_arm'
+    wait_for(lambda: any(s.hardware_id == 'lab_arm' and kv(s).get('robot') == 'lab_arm'
+                         for s in diag_statuses(h, 'inverse_kinetostatic_node: status')),
+             what='the heartbeat naming the robot by its file')
+    assert "configured: robot 'lab_arm'" in capfd.readouterr().err
+
+
 def test_lifecycle_services_gate_commands_and_vent(h, one):
     node, pub, _ = setup_inverse(h, autostart=False)
     base = f'{h.ns}/inverse_kinetostatic_node'

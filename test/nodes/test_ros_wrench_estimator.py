@@ -92,6 +92,50 @@ def test_estimated_wrench_tare_and_bad_samples(h):
     wait_for(lambda: node.estimator.samples > samples, what='samples after the bad ones')
 
 
+def test_outliers_are_counted_and_info_unless_their_share_is_abnormal(h, capfd):
+    """A swapped marker now and then (the realistic mocap: 0.5 %) is counted, logged at INFO.
+
+    An abnormal share (here 20 %) is a WARN, in the log and the heartbeat.
+    """
+    from bellow_ancf_ros.nodes.wrench_estimator_node import OUTLIER_WARN_FRACTION
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(WrenchEstimatorNode, robot_config='one_segment', rate_hz=50.0)
+    pub_p = h.publisher(Float64MultiArray, 'measured_pressure')
+    pub_pose = h.client.create_publisher(PoseStamped, 'measured_pose', measured_pose_qos())
+    wait_for(lambda: pub_pose.get_subscription_count() >= 1, what='measured_pose matched')
+    p = np.array([30e3, 10e3, 50e3])
+    pos = solve_forward(node.estimator.model, p).position
+    jump = np.array([0.0, 0.02, 0.0])   # a swapped marker: 20 mm
+
+    def stream(n, every):
+        for i in range(n):
+            pub_p.publish(pressure_msg(p))
+            pub_pose.publish(target_msg(pos + (jump if i % every == every - 1 else 0.0)))
+            time.sleep(0.008)
+
+    pub_p.publish(pressure_msg(p))   # pressures first (a pose before them is another refusal)
+    wait_for(lambda: node._current_pressures() is not None, what='pressures in')
+    stream(240, 80)   # 3 outliers in 240 samples (1.3 %)
+    wait_for(lambda: node.stats['outliers'] >= 3, what='three outliers counted')
+    assert node.outlier_share() <= OUTLIER_WARN_FRACTION
+    out = capfd.readouterr().err
+    assert 'refused as outliers so far' in out, out
+    assert not [line for line in out.splitlines() if line.startswith(('[WARN]', '[ERROR]'))], out
+    # the count in the heartbeat, which does not complain about them (it may WARN about the
+    # directions the data cannot see yet: one segment's vertical force)
+    wait_for(lambda: any(int(_rn.kv(s).get('outliers', '0')) >= 3 and 'outlier' not in s.message
+                         for s in diag_statuses(h, 'wrench_estimator_node: status')),
+             what='the count in the heartbeat')
+    stream(240, 5)    # 20 %: the markers need a look
+    wait_for(lambda: node.outlier_share() > OUTLIER_WARN_FRACTION, what='an abnormal share')
+    out = capfd.readouterr().err
+    assert any(line.startswith('[WARN]') and 'check the markers' in line
+               for line in out.splitlines()), out
+    wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'outliers' in s.message
+                         for s in diag_statuses(h, 'wrench_estimator_node: status')),
+             what='WARN heartbeat')
+
+
 def _wrench(force, frame='base'):
     m = WrenchStamped()
     m.header.frame_id = frame

@@ -101,7 +101,7 @@ class TipForceEstimator:
             self.x, self.P = np.array([self.payload_kg]), np.eye(1) * (initial_std_n / gn) ** 2
         self._n = n
         self.tare_offset = np.zeros(n)
-        self.samples = self.refused = 0
+        self.samples = self.refused = self.outliers = 0   # outliers: part of refused
         self.outlier_gate_m = float(outlier_gate_m)
         self._gate = MedianGate(self.outlier_gate_m)   # received positions
         self.last_reason = ""
@@ -145,6 +145,7 @@ class TipForceEstimator:
         if np.any(p < cfg.p_min - 1.0) or np.any(p > cfg.p_max + 1.0):
             return self._refuse("pressures outside the limits")
         if self._gate.refuses(y):
+            self.outliers += 1
             return self._refuse("outlier: the position is far from the recent ones")
         p = np.clip(p, cfg.p_min, cfg.p_max)
         if time_s is not None:

@@ -4,7 +4,11 @@
   set-point arrives after a dead time, passes a play (backlash) operator of
   width ``hysteresis_pa``, and the pressure follows it as a first-order lag
   ``tau dp/dt = w - p`` (exact between set-point changes), slew-limited and
-  within the hardware limits ``[p_min, p_max]`` of the robot file.
+  within the hardware limits ``[p_min, p_max]`` of the robot file.  The
+  vent, a set-point of exactly 0 Pa gauge, opens the exhaust to atmosphere:
+  it bypasses the play (the pressure goes to 0, not to the edge of the
+  band, half the hysteresis away), with the same dead time and lag (the
+  exhaust flow through the valve).
 * :class:`BellowCreep`: the part ``fraction`` of each actuator's stage-1
   elongation (eq. 10) that follows a pressure change with time constant
   ``time_constant_s``; the equilibrium is solved at the *effective*
@@ -98,8 +102,10 @@ class PressureRegulators:
         while self._pending and self._pending[0][0] <= end:
             t_on, c = self._pending.popleft()
             self._advance(t_on - self.time_s)
-            # play operator: the valve moves only when the set-point leaves the band
-            self.setpoint_pa = np.clip(self.setpoint_pa, c - half, c + half)
+            # play operator: the valve moves only when the set-point leaves the band; the
+            # vent (0 Pa gauge) opens the exhaust to atmosphere instead: no play
+            self.setpoint_pa = np.where(c == 0.0, 0.0,
+                                        np.clip(self.setpoint_pa, c - half, c + half))
         self._advance(end - self.time_s)
         self.time_s = end
         return self.pressures_pa.copy()

@@ -81,7 +81,7 @@ class ConfigError(ValueError):
         if len(lines) == 1:
             message = f'{source}: {lines[0]}'
         else:
-            message = f'{source}: {len(lines)} problems:\n  ' + '\n  '.join(lines)
+            message = f'{source}: {len(lines)} problems: ' + '; '.join(lines)   # one line
         super().__init__(message)
 
 
@@ -789,6 +789,12 @@ def load_robot(name_or_path: str | os.PathLike) -> RobotConfig:
     a YAML file.  Raises :class:`ConfigError` for an unknown name, a missing
     or unreadable file, a YAML syntax error (or duplicate key) and every
     invalid value.
+
+    A robot loaded from a path is named by its file (``name`` = the file's
+    stem, ``my_robot`` for ``lab/my_robot.yaml``), whatever its ``name:``
+    entry says: a copied shipped file keeps ``name: one_segment`` inside, and
+    logs, diagnostics and reports would otherwise call every lab's robot
+    ``one_segment``.  A shipped robot keeps its name.
     """
     if _looks_like_path(name_or_path):
         path = Path(name_or_path).expanduser()
@@ -805,4 +811,7 @@ def load_robot(name_or_path: str | os.PathLike) -> RobotConfig:
         raise ConfigError([(str(path), f'cannot read file: {exc}')], str(path)) from exc
     except yaml.YAMLError as exc:
         raise ConfigError([(str(path), f'YAML syntax error: {exc}')], str(path)) from exc
-    return robot_from_dict(data, source=str(path))
+    cfg = robot_from_dict(data, source=str(path))
+    if _looks_like_path(name_or_path) and cfg.name != path.stem:
+        cfg = dataclasses.replace(cfg, name=path.stem)   # named by its file (docstring)
+    return cfg

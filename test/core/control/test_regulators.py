@@ -104,6 +104,30 @@ def test_hysteresis_is_a_play_of_its_width():
         PressureRegulators(1, -50e3, 150e3, dead_time_s=float('nan'))
 
 
+def test_the_vent_exhausts_to_atmosphere_past_the_play():
+    """A 0 Pa gauge set-point opens the exhaust: 0, not the band's edge (0.5 kPa), either side.
+
+    Dead time and lag stay; other set-points keep their play.
+    """
+    h, tau, dead = 1e3, 0.06, 0.015
+    for start in (60e3, -40e3):   # from pressure and from vacuum
+        reg = PressureRegulators(3, -50e3, 150e3, time_constant_s=tau, hysteresis_pa=h,
+                                 dead_time_s=dead, slew_rate_pa_per_s=1e6)
+        reg.set_command([start, start, 0.5 * start])
+        reg.step(1.0)
+        held = reg.pressures_pa.copy()
+        reg.set_command([0.0, 0.0, 0.0])
+        np.testing.assert_allclose(reg.step(0.5 * dead), held)       # the dead time
+        p = reg.step(0.5 * dead + tau)[0]                            # one time constant
+        assert p == pytest.approx(held[0] * math.exp(-1.0), rel=1e-6)   # the lag to 0
+        np.testing.assert_allclose(reg.step(1.0), 0.0, atol=0.01)    # 0 Pa, not +-500 Pa
+        # a set-point near 0 but not the vent keeps the play
+        reg.set_command([2e3, 2e3, 2e3])
+        reg.step(1.0)
+        reg.set_command([1e-3, 1e-3, 1e-3])
+        assert reg.step(1.0)[0] == pytest.approx(1e-3 + h / 2, abs=1e-3)
+
+
 @pytest.fixture(scope='module')
 def stage1():
     return RobotModel(load_robot('one_segment_mismatched')).stage1

@@ -153,6 +153,19 @@ def test_realistic_robot_answers_later_and_creeps():
     assert z_end == pytest.approx(ideal.true_pose()[0][2], abs=1e-6)   # same equilibrium
 
 
+def test_the_realistic_robot_vents_to_zero_despite_the_play():
+    """Issue 28: the vent left 0.5 kPa (half the 1 kPa hysteresis) on measured_pressure."""
+    real = SimulatedRobot('one_segment_mismatched', seed=0, effects=PlantEffects())
+    assert real.effects.regulator_hysteresis_pa == 1e3
+    real.command([100e3, 40e3, -30e3])
+    for _ in range(50):
+        real.step(0.02)
+    real.command([0.0, 0.0, 0.0])   # the vent command (contract.vent_pressures)
+    for _ in range(50):
+        real.step(0.02)
+    np.testing.assert_allclose(real.pressures_pa, 0.0, atol=0.01)   # Pa
+
+
 def test_capture_sees_the_pose_one_latency_ago():
     e = PlantEffects.ideal(position_noise_m=0.0, angle_noise_rad=0.0, mocap_latency_s=0.008,
                            regulator_time_constant_s=0.05)

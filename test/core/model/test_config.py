@@ -97,7 +97,9 @@ def test_load_by_path_and_name_agree(tmp_path):
     copy_path = tmp_path / 'robot.yml'
     copy_path.write_text((REPO_CONFIG / 'two_segment.yaml').read_text())
     copied = load_robot(copy_path)
-    assert copied == by_name and copied.source == str(copy_path)
+    assert copied.source == str(copy_path)
+    # the same robot, named by its file (test_a_robot_loaded_from_a_path_is_named_by_its_file)
+    assert copied.name == 'robot' and copied == dataclasses.replace(by_name, name='robot')
 
 
 def test_shipped_names_and_search_order():
@@ -114,6 +116,20 @@ def test_shipped_search_falls_back_to_sys_prefix(tmp_path, monkeypatch):
     monkeypatch.setattr(config_mod.sys, 'prefix', str(tmp_path))
     assert find_shipped('only_here') == share / 'only_here.yaml'
     assert load_robot('only_here').name == 'one_segment'
+
+
+def test_a_robot_loaded_from_a_path_is_named_by_its_file(tmp_path, monkeypatch):
+    """A copied shipped file keeps 'name: one_segment' inside: logs would say one_segment."""
+    path = tmp_path / 'lab_robot_3.yaml'
+    path.write_text((REPO_CONFIG / 'one_segment.yaml').read_text())
+    cfg = load_robot(path)
+    assert cfg.name == 'lab_robot_3' and cfg.source == str(path)
+    assert cfg == dataclasses.replace(load_robot('one_segment'), name='lab_robot_3')
+    assert cfg.to_dict()['name'] == 'lab_robot_3'   # written back under its own name
+    monkeypatch.chdir(tmp_path)
+    assert load_robot('./lab_robot_3.yaml').name == 'lab_robot_3'
+    assert load_robot(str(REPO_CONFIG / 'two_segment.yaml')).name == 'two_segment'
+    assert load_robot('two_segment').name == 'two_segment'   # a shipped name: unchanged
 
 
 def test_dataclasses_are_frozen_and_replace_works():
@@ -419,6 +435,11 @@ def test_all_problems_reported_together(two):
     err = refused(two, 'actuator.l0_m', 'segments[1].n_actuators', 'model.n_elements', 'extra')
     assert len(err.issues) == 4
     assert isinstance(err, ValueError)
+    # one line, as every error of the package ("<dict>: 4 problems: a; b; ...")
+    message = str(err)
+    assert '\n' not in message and ':;' not in message, message
+    assert message.startswith('<dict>: 4 problems: '), message
+    assert all(f'{key}: {reason}' in message for key, reason in err.issues), message
 
 
 # ------------------------------------------------------------------ file level
