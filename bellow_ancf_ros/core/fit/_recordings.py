@@ -514,8 +514,9 @@ class PoseStream:
         order = np.argsort(self.times_s, kind='stable')
         self.times_s, self.positions_m = self.times_s[order], self.positions_m[order]
         self.pressure_times_s = np.asarray(self.pressure_times_s, dtype=float).ravel()
-        self.pressures_pa = np.asarray(self.pressures_pa, dtype=float).reshape(
-            len(self.pressure_times_s), -1)
+        p = np.asarray(self.pressures_pa, dtype=float)
+        self.pressures_pa = p.reshape(len(self.pressure_times_s), -1) if p.size else \
+            np.zeros((len(self.pressure_times_s), 0))
         order = np.argsort(self.pressure_times_s, kind='stable')
         self.pressure_times_s = self.pressure_times_s[order]
         self.pressures_pa = self.pressures_pa[order]
@@ -652,6 +653,8 @@ def read_pose_stream_bag(path, pose_topic: str = POSE_TOPIC,
     if times is not stamps:
         notes.append('poses without header stamps: the receive times are used')
     frame = max(frames, key=frames.get)
+    if p_topic is not None and not cmd_t:
+        notes.append(f'topic {p_topic} holds no messages: no recorded pressures')
     if cmd_t:
         # the commands' receive times, on the poses' clock
         shift = float(np.median(stamps - np.array(recv))) if times is stamps else 0.0
