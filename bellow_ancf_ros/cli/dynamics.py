@@ -334,15 +334,15 @@ def _cmd_identify_damping(args) -> int:
         raise UsageError(f'{"--bag" if args.bag else "--csv"}: {exc}') from None
     t, x = stream.times_s, stream.positions_m
     try:
-        if args.t_start_s is None:
+        window = None
+        t0, t1 = args.t_start_s, args.t_end_s
+        if t0 is None or t1 is None:
             window = fitting.ringdown_window(t, x, t_end_s=args.t_end_s)
-            t0 = window.t_start_s
-        else:
-            window, t0 = None, args.t_start_s
-        fit = fitting.fit_free_vibration(t, x, t0, args.t_end_s)
+            t0 = window.t_start_s if t0 is None else t0
+            t1 = window.t_end_s if t1 is None else t1
+        fit = fitting.fit_free_vibration(t, x, t0, t1)
     except ValueError as exc:
         raise UsageError(f'no free vibration to fit: {one_line(exc)}') from None
-    t1 = float(t[-1]) if args.t_end_s is None else float(args.t_end_s)
     if args.pressures_kpa is not None:
         p = check_pressures_kpa(model, args.pressures_kpa)
         p_source = '--pressures-kpa'
@@ -521,7 +521,9 @@ def register_identify_damping(isub) -> None:
                     'window: the motion starts where the tip has left its first position by a '
                     'tenth of its largest excursion; the fit starts half a period of the '
                     'strongest oscillation later (about the first peak after a release, when '
-                    'the faster modes have died out) and runs to the end. CSV: columns t_s,x_m,'
+                    "the faster modes have died out) and ends where a first fit's envelope has "
+                    'sunk to twice its RMS residual (the noise), after at least three periods, '
+                    'or at the end. CSV: columns t_s,x_m,'
                     'y_m,z_m (optional p1_kpa,...; others ignored); bag: measured_pose '
                     '(PoseStamped) and pressure_command if present.',
         epilog='Example: bellow-ancf identify damping --csv release.csv --payload-kg 0.05')
@@ -535,7 +537,7 @@ def register_identify_damping(isub) -> None:
     p.add_argument('--t-start-s', type=finite_float, default=None, metavar='T0',
                    help='start of the fitted window [s, recording time]; default: see above')
     p.add_argument('--t-end-s', type=finite_float, default=None, metavar='T1',
-                   help='end of the fitted window [s]; default: the last pose')
+                   help='end of the fitted window [s]; default: see above')
     p.add_argument('--pressure-topic', default=fitting.PRESSURE_TOPIC, metavar='T',
                    help='bag topic of the pressure commands; default: %(default)s')
     p.add_argument('--pose-topic', default=fitting.POSE_TOPIC, metavar='T',

@@ -237,7 +237,8 @@ def test_identify_damping_recovers_the_damping_time_from_a_csv(capsys, tmp_path,
 
 
 def test_identify_damping_under_mocap_noise(capsys, tmp_path, one):
-    t, x = ring_down(one, [0, 0, 0], 0.05, [0.5, 0.0, 0.0], 1.5)
+    """0.15 mm noise, 120 Hz, a release from 9 mm: 30 noise seeds gave -5 % to +4 %."""
+    t, x = ring_down(one, [0, 0, 0], 0.05, [1.0, 0.0, 0.0], 1.5)
     x = x + np.random.default_rng(26).normal(0.0, 0.15e-3, x.shape)
     rec = tmp_path / 'noisy.csv'
     write_stream_csv(rec, t, x)       # no pressures in the file: given on the command line

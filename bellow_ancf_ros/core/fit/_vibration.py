@@ -12,13 +12,17 @@ mode at the recorded equilibrium has the measured damping ratio (the ratio
 grows monotonically with it; ``scipy.optimize.brentq``).
 
 Which part of a recording to fit (:func:`ringdown_window`): the motion starts
-where the tip has left its first recorded position by a tenth of its largest
-excursion from it; the fit starts half a period of the strongest oscillation
+where the tip (a running median of five poses) has left its first recorded
+position (the median of the first five) by a tenth of its largest excursion
+from it; the fit starts half a period of the strongest oscillation
 later.  A release (or a step) starts at rest at a turning point of the first
 mode, so this is about its first peak after the release, by which time the
 faster modes, more damped (Kelvin-Voigt damping grows with the frequency),
 have died out; the strongest oscillation's frequency comes from a first fit
-from the motion's start.
+from the motion's start.  The window ends where that first fit's envelope has
+sunk to twice its RMS residual (the noise, on a real recording; a long tail of
+noise alone can pull the nonlinear fit off), after at least three periods, or
+at the recording's end.
 """
 
 from __future__ import annotations
@@ -35,6 +39,10 @@ __all__ = ["FreeVibrationFit", "DampingIdentification", "RingdownWindow", "fit_f
 
 #: The motion starts where the tip has left its first position by this share of its excursion.
 MOTION_SHARE = 0.1
+#: The window ends where the first fit's envelope is this many times its RMS residual ...
+FADE_NOISE_FACTOR = 2.0
+#: ... but holds at least this many periods after its start.
+MIN_PERIODS = 3.0
 
 
 @dataclass
@@ -174,7 +182,7 @@ def identify_damping(fit: FreeVibrationFit, equilibrium, max_damping_time_s: flo
 
 @dataclass
 class RingdownWindow:
-    """Where a recorded ring-down starts (module doc): ``t_motion_s``, ``t_start_s`` [s]."""
+    """The window of a recorded ring-down (module doc): motion start, fit start and end [s]."""
 
     t_motion_s: float
     t_start_s: float
@@ -198,17 +206,25 @@ def ringdown_window(times_s, positions_m, t_end_s: float | None = None) -> Ringd
     t, x = t[order], x[order]
     if len(t) < 20:
         raise ValueError(f"only {len(t)} samples; need at least 20")
-    ref = np.median(x[:3], axis=0)
-    dist = np.linalg.norm(x - ref, axis=1)
+    # a running median of five poses: single noisy poses do not start the motion
+    idx = np.clip(np.arange(len(t))[:, None] + np.arange(-2, 3)[None, :], 0, len(t) - 1)
+    xs = np.median(x[idx], axis=1)
+    dist = np.linalg.norm(xs - np.median(x[:5], axis=0), axis=1)
     if not dist.max() > 0:
         raise ValueError("the tip does not move")
     t_motion = float(t[np.argmax(dist > MOTION_SHARE * dist.max())])
     first = fit_free_vibration(t, x, t_motion, t_end_s)
-    t_start = t_motion + 0.5 / max(first.damped_frequency_hz, 1e-9)
+    period = 1.0 / max(first.damped_frequency_hz, 1e-9)
+    t_start = t_motion + 0.5 * period
     t_end = float(t[-1])
     if t_start >= t_end:
         raise ValueError(f"the recording ends ({t_end:.4g} s) before half a period after the "
-                         f"motion starts ({t_motion:.4g} s + {0.5 / first.damped_frequency_hz:.3g}"
-                         " s)")
+                         f"motion starts ({t_motion:.4g} s + {0.5 * period:.3g} s)")
+    # end where the first fit's envelope has sunk to the noise (its RMS residual)
+    sigma = 2 * np.pi * first.frequency_hz * first.damping_ratio
+    level = FADE_NOISE_FACTOR * first.rms_residual_m
+    if sigma > 0 and 0 < level < first.amplitude_m:
+        t_fade = first.t_start_s + np.log(first.amplitude_m / level) / sigma
+        t_end = min(t_end, max(t_fade, t_start + MIN_PERIODS * period))
     return RingdownWindow(t_motion_s=t_motion, t_start_s=float(t_start), t_end_s=t_end,
                           frequency_hz=first.damped_frequency_hz)
