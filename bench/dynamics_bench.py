@@ -23,6 +23,7 @@ equilibrium, median of ``--reps``.  One BLAS thread, as the nodes run.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -126,8 +127,10 @@ def main():
     ap.add_argument("--segments", type=int, nargs="+", default=[1, 2, 3], choices=[1, 2, 3])
     args = ap.parse_args()
     limit_blas_threads()
+    load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     print(f"dynamics bench: GeneralizedAlpha at the default step, {args.reps} repetitions "
-          f"after a warm-up run; real-time factor = simulated s / wall s", flush=True)
+          f"after a warm-up run; real-time factor = simulated s / wall s; {os.cpu_count()} "
+          f"CPUs, load average {load} (1, 5, 15 min)", flush=True)
     for m in args.segments:
         bench_robot(m, args.reps)
 
