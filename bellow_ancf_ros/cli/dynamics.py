@@ -514,18 +514,19 @@ def register_identify_damping(isub) -> None:
     p = isub.add_parser(
         'damping', help='first-mode frequency and damping from a recorded release or step',
         description='Fit the free vibration of the first mode, x(t) = c + A exp(-zeta w t) '
-                    'cos(w_d t + phi) along its principal direction, to the recorded end-effector '
-                    "positions, then find the robot file's dynamics.damping_time_s that gives "
-                    'the model the measured damping ratio at the recorded equilibrium (the '
-                    "recording's pressures, else --pressures-kpa, and --payload-kg). Default "
-                    'window: the motion starts where the tip has left its first position by a '
-                    'tenth of its largest excursion; the fit starts half a period of the '
-                    'strongest oscillation later (about the first peak after a release, when '
-                    "the faster modes have died out) and ends where a first fit's envelope has "
-                    'sunk to twice its RMS residual (the noise), after at least three periods, '
-                    'or at the end. CSV: columns t_s,x_m,'
-                    'y_m,z_m (optional p1_kpa,...; others ignored); bag: measured_pose '
-                    '(PoseStamped) and pressure_command if present.',
+                    'cos(w_d t + phi) along its principal direction, to the recorded '
+                    "end-effector positions, then find the robot file's dynamics.damping_time_s"
+                    ' that gives the model the measured damping ratio at the recorded '
+                    "equilibrium (--pressures-kpa, else the recording's pressures, and "
+                    '--payload-kg). Default window: the motion starts where the tip (a running '
+                    'median of five poses) has left its first position by a tenth of its '
+                    'largest excursion; the fit starts half a period of the strongest '
+                    'oscillation later (about the first peak after a release, when the faster '
+                    "modes have died out) and ends where a first fit's envelope has sunk to "
+                    'twice its RMS residual (the noise), after at least three periods, or at '
+                    'the end. CSV: columns t_s,x_m,y_m,z_m (optional p1_kpa,...; others '
+                    'ignored); bag: measured_pose (PoseStamped) and pressure_command if '
+                    'present.',
         epilog='Example: bellow-ancf identify damping --csv release.csv --payload-kg 0.05')
     add_config(p)
     src = p.add_mutually_exclusive_group(required=True)
