@@ -37,7 +37,8 @@ class SampledMotion:
     ``constraint_violation`` (largest ``|C(q)|`` over the samples); the
     pressures are NaN when the run was given no pressures;
     ``report``: the integrator's :class:`StepReport` of the whole run;
-    ``step_s``: the step used; ``step_wall_s``: wall time of each step.
+    ``step_s``: the step used; ``step_wall_s``: wall time of each step (the
+    mean over its sample interval).
     """
 
     times_s: np.ndarray
