@@ -29,8 +29,9 @@ This interface is a contract other programs script against:
 * One module per command family, each adding its subcommands through its
   ``register(subparsers)`` (:data:`COMMAND_FAMILIES`, in help order):
   :mod:`.solve` (``forward``, ``inverse``), :mod:`.loads` (``compliance``,
-  ``stiffness``), :mod:`.identify` (``identify
-  stiffness|deff|da``), :mod:`.studies` (``convergence``, ``workspace``,
+  ``stiffness``), :mod:`.dynamics` (``modes``, ``simulate``; also ``identify
+  damping``), :mod:`.identify` (``identify
+  stiffness|deff|da|damping``), :mod:`.studies` (``convergence``, ``workspace``,
   ``compare-pcc``), :mod:`.track` (``track``), :mod:`.calibrate`
   (``calibrate``), :mod:`.record` (``record``), :mod:`.warmup` (``warm-up``);
   shared helpers in
@@ -55,8 +56,8 @@ from .common import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, PROG, Parser, SolverError
 __all__ = ['main', 'build_parser', 'UsageError', 'json_safe']
 
 #: Modules of this package that add subcommands, in the order of ``--help``.
-COMMAND_FAMILIES = ('solve', 'loads', 'identify', 'studies', 'track', 'calibrate', 'record',
-                    'warmup')
+COMMAND_FAMILIES = ('solve', 'loads', 'dynamics', 'identify', 'studies', 'track', 'calibrate',
+                    'record', 'warmup')
 
 
 def build_parser() -> argparse.ArgumentParser:

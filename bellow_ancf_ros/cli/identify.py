@@ -7,6 +7,7 @@
                                    [--plot PNG] [--yaml-out FILE] [--json]
     bellow-ancf identify deff --csv FILE [--confidence C] [--config C] [--plot PNG] [--json]
     bellow-ancf identify da --drop-mm D --tip-mass-kg M [--config C] [--elements N] [--json]
+    bellow-ancf identify damping (--csv FILE | --bag DIR) ...   (module :mod:`.dynamics`)
 
 A readable table on stdout, or with ``--json`` one JSON object on one line
 (SI units, non-finite numbers as ``null``); plots are PNG files.
@@ -34,6 +35,7 @@ from ..core import identification as ident
 from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_out, emit_json,
                      finite_float, fraction, int_at_least, load_config, nonneg_float, one_line,
                      positive_float, print_lines, run_study, warn)
+from .dynamics import register_identify_damping
 from .output import figure, fmt, open_out, save_figure, table
 
 
@@ -230,14 +232,16 @@ def _cmd_identify_da(args):
 
 # ------------------------------------------------------------ parser
 def register(subparsers):
-    """Add ``identify`` with its subcommands ``stiffness``, ``deff`` and ``da``."""
+    """Add ``identify`` with its subcommands ``stiffness``, ``deff``, ``da`` and ``damping``."""
     ip = subparsers.add_parser(
-        'identify', help='identify k(lam), D_eff or D_a from experiments (paper section V)',
+        'identify', help='identify k(lam), D_eff, D_a (paper section V) or the damping time '
+                         'from experiments',
         description='Parameter identification of the equivalent actuator (paper section V).')
     isub = ip.add_subparsers(dest='identify_command', metavar='WHAT', required=True)
     _register_stiffness(isub)
     _register_deff(isub)
     _register_da(isub)
+    register_identify_damping(isub)
 
 
 def _register_stiffness(isub):

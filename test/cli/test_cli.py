@@ -466,7 +466,8 @@ def test_command_family_hook_dispatches_extra_subcommand(capsys, monkeypatch):
 def test_help_lists_every_family_in_order(capsys):
     code, out, _ = run(capsys, '--help')
     assert code == 0
-    commands = ['forward', 'inverse', 'compliance', 'stiffness', 'identify', 'convergence',
+    commands = ['forward', 'inverse', 'compliance', 'stiffness', 'modes', 'simulate',
+                'identify', 'convergence',
                 'workspace', 'compare-pcc',
                 'track', 'calibrate', 'record', 'warm-up']
     listed = [m.group(1) for m in re.finditer(r'^    (\S+)', out, re.MULTILINE)]

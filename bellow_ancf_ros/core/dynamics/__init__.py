@@ -7,6 +7,8 @@
   of any equilibrium (:class:`ModalAnalysis`, :class:`Mode`);
 * :class:`GeneralizedAlpha`: the index-3 time integrator (Arnold & Bruels),
   pressures, payload and tip force functions of time;
+* :func:`sample_motion`: a run sampled at fixed instants (:class:`SampledMotion`),
+  :func:`piecewise_linear` pressures from a table;
 
 docs/dynamics.md states the model and its sources.
 """
@@ -17,8 +19,10 @@ from ._integrator import (MAX_DEFAULT_STEP_S, MIN_STEPS_PER_PERIOD, STEPS_PER_PE
                           warm_up_dynamics)
 from ._modes import (ModalAnalysis, ModalError, Mode, ReducedSystem, natural_modes,
                      reduced_system)
+from ._sampling import SampledMotion, piecewise_linear, sample_motion, sampling_step
 
 __all__ = ["DynamicState", "DynamicsError", "GeneralizedAlpha", "Inertia",
            "MAX_DEFAULT_STEP_S", "MIN_STEPS_PER_PERIOD", "ModalAnalysis", "ModalError", "Mode",
-           "ReducedSystem", "STEPS_PER_PERIOD", "StepReport", "default_step", "natural_modes",
-           "reduced_system", "warm_up_dynamics"]
+           "ReducedSystem", "STEPS_PER_PERIOD", "SampledMotion", "StepReport", "default_step",
+           "natural_modes", "piecewise_linear", "reduced_system", "sample_motion",
+           "sampling_step", "warm_up_dynamics"]

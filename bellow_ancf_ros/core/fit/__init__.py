@@ -4,32 +4,38 @@
   distance from the paper's test rigs (eqs. 31-33);
 * :class:`Cantilever`: the cantilever rig's beam model;
 * :class:`Recording` and its readers and writers (CSV, rosbag2 through
-  ``rosbags``);
+  ``rosbags``); :class:`PoseStream`, :func:`read_pose_stream`: the raw poses
+  of a recorded release or step;
 * :mod:`.calibration`: a robot file's parameters and the base-in-mocap
   transform from recorded pressures and poses;
 * :func:`excitation_sequence`, :func:`simulate_recording`: what to record;
 * :func:`fit_free_vibration`, :func:`identify_damping`: the first mode's
   frequency and damping from a recorded release or step, and the damping
-  time that reproduces them.
+  time that reproduces them; :func:`ringdown_window`: which part of a
+  recording to fit.
 """
 
 from . import calibration, identification
 from ._cantilever import Cantilever, CantileverResult
 from ._excitation import excitation_sequence, random_pressures, simulate_recording
-from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_TOPIC, PRESSURE_TOPIC, BagWriter,
-                          Recording,
-                          RecordingError, csv_header, pressure_unit, read_bag, read_csv,
-                          read_recording, settled_samples, write_bag, write_csv)
+from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_STREAM_COLUMNS, POSE_TOPIC,
+                          PRESSURE_TOPIC, BagWriter, PoseStream, Recording, RecordingError,
+                          csv_header, pressure_unit, read_bag, read_csv, read_pose_stream,
+                          read_pose_stream_bag, read_pose_stream_csv, read_recording,
+                          settled_samples, write_bag, write_csv)
 from ._sensitivities import RecordingModel
-from ._vibration import (DampingIdentification, FreeVibrationFit, fit_free_vibration,
-                         identify_damping)
+from ._vibration import (DampingIdentification, FreeVibrationFit, RingdownWindow,
+                         fit_free_vibration, identify_damping, ringdown_window)
 from .calibration import CalibrationError, CalibrationResult, calibrate
 
 __all__ = [
     "BagWriter", "CalibrationError", "DampingIdentification", "FreeVibrationFit",
-    "fit_free_vibration", "identify_damping", "CalibrationResult", "Cantilever",
+    "fit_free_vibration", "identify_damping", "RingdownWindow", "ringdown_window",
+    "CalibrationResult", "Cantilever",
     "CantileverResult",
-    "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_TOPIC", "PRESSURE_TOPIC", "Recording",
+    "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_STREAM_COLUMNS", "POSE_TOPIC",
+    "PRESSURE_TOPIC", "PoseStream", "Recording", "read_pose_stream", "read_pose_stream_bag",
+    "read_pose_stream_csv",
     "RecordingError", "RecordingModel", "calibrate", "calibration", "csv_header",
     "excitation_sequence", "identification", "pressure_unit", "random_pressures", "read_bag",
     "read_csv", "read_recording", "settled_samples", "simulate_recording", "write_bag",

@@ -26,6 +26,15 @@ as a unit quaternion ``x, y, z, w``).
   (first half and second half of the kept poses differ by more than
   ``drift_tol_m``) is dropped as not settled.
 
+A *pose stream* (:class:`PoseStream`, :func:`read_pose_stream`) is the raw
+motion instead: every pose as recorded (a release or a step ringing down),
+with the pressures where the recording has them.  CSV: columns ``t_s, x_m,
+y_m, z_m`` and optionally ``p1_kpa ... pN_kpa`` (other columns, such as the
+z-axis or a quaternion, are ignored; ``bellow-ancf simulate --csv`` writes
+such a file); bag: every ``measured_pose`` message (times: the header
+stamps, the capture times, when all are set, else the receive times) and
+``pressure_command`` when the bag has it.
+
 Every problem is a :class:`RecordingError` (a ``ValueError``) with a one-line
 message naming the file, line or topic.  No ROS import.
 """
@@ -45,7 +54,8 @@ from ..geometry import quaternion_mean
 __all__ = [
     'RecordingError', 'Recording', 'csv_header', 'read_csv', 'write_csv', 'settled_samples',
     'read_bag', 'write_bag', 'read_recording', 'PRESSURE_TOPIC', 'POSE_TOPIC',
-    'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit', 'BagWriter',
+    'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit', 'BagWriter', 'PoseStream',
+    'read_pose_stream', 'read_pose_stream_csv', 'read_pose_stream_bag', 'POSE_STREAM_COLUMNS',
 ]
 
 PRESSURE_TOPIC = 'pressure_command'
@@ -473,3 +483,191 @@ def read_recording(csv_path=None, bag_path=None, n_actuators: int | None = None,
     if csv_path is not None:
         return read_csv(csv_path, n_actuators)
     return read_bag(bag_path, n_actuators=n_actuators, **bag_options)
+
+
+# ------------------------------------------------------------ pose streams
+#: The columns a pose-stream CSV file must have (module doc).
+POSE_STREAM_COLUMNS = ('t_s', 'x_m', 'y_m', 'z_m')
+
+
+@dataclass
+class PoseStream:
+    """Raw end-effector positions over time and the pressures in effect (SI units).
+
+    ``times_s`` (n,), ``positions_m`` (n, 3), sorted by time;
+    ``pressure_times_s`` (m,) and ``pressures_pa`` (m, A): the pressure
+    inputs (empty when the recording has none); ``frame_id`` as in
+    :class:`Recording`.
+    """
+
+    times_s: np.ndarray
+    positions_m: np.ndarray
+    pressure_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pressures_pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    source: str = ''
+    frame_id: str = ''
+    notes: list = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.times_s = np.asarray(self.times_s, dtype=float).ravel()
+        self.positions_m = np.asarray(self.positions_m, dtype=float).reshape(-1, 3)
+        order = np.argsort(self.times_s, kind='stable')
+        self.times_s, self.positions_m = self.times_s[order], self.positions_m[order]
+        self.pressure_times_s = np.asarray(self.pressure_times_s, dtype=float).ravel()
+        p = np.asarray(self.pressures_pa, dtype=float)
+        self.pressures_pa = p.reshape(len(self.pressure_times_s), -1) if p.size else \
+            np.zeros((len(self.pressure_times_s), 0))
+        order = np.argsort(self.pressure_times_s, kind='stable')
+        self.pressure_times_s = self.pressure_times_s[order]
+        self.pressures_pa = self.pressures_pa[order]
+
+    def __len__(self) -> int:
+        return len(self.times_s)
+
+    @property
+    def has_pressures(self) -> bool:
+        """Whether the recording holds pressures."""
+        return len(self.pressure_times_s) > 0
+
+    def pressures_at(self, t_s: float):
+        """The pressures [Pa] in effect at ``t_s`` (the last input at or before it), or None."""
+        if not self.has_pressures:
+            return None
+        k = int(np.searchsorted(self.pressure_times_s, t_s, side='right')) - 1
+        return self.pressures_pa[max(k, 0)].copy()
+
+
+def read_pose_stream_csv(path) -> PoseStream:
+    """Read a pose-stream CSV file (module doc: ``t_s, x_m, y_m, z_m [, p1_kpa ...]``)."""
+    label = str(path)
+    try:
+        fh = open(path, newline='', encoding='utf-8-sig')
+    except OSError as exc:
+        raise RecordingError(f'{label}: cannot read file: {exc.strerror or exc}') from None
+    header, rows = None, []
+    with fh:
+        reader = csv.reader(fh)
+        try:
+            for row in reader:
+                cells = [c.strip() for c in row]
+                if not any(cells) or cells[0].startswith('#'):
+                    continue
+                if header is None:
+                    header = [c.lower() for c in cells]
+                    missing = [c for c in POSE_STREAM_COLUMNS if c not in header]
+                    if missing:
+                        raise RecordingError(
+                            f'{label}, line {reader.line_num}: no column {missing[0]} (expected '
+                            f'{",".join(POSE_STREAM_COLUMNS)}[,p1_kpa,...]; got '
+                            f'{",".join(header)})')
+                    continue
+                if len(cells) != len(header):
+                    raise RecordingError(f'{label}, line {reader.line_num}: expected '
+                                         f'{len(header)} fields, got {len(cells)}')
+                try:
+                    values = [float(c) for c in cells]
+                except ValueError:
+                    raise RecordingError(f'{label}, line {reader.line_num}: not a number in '
+                                         f'{",".join(cells)!r}') from None
+                rows.append(values)
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise RecordingError(f'{label}, line {reader.line_num}: malformed CSV: '
+                                 f'{exc}') from None
+    if header is None:
+        raise RecordingError(f'{label}: the file is empty (expected the header '
+                             f'{",".join(POSE_STREAM_COLUMNS)})')
+    if not rows:
+        raise RecordingError(f'{label}: no data rows after the header')
+    data = np.array(rows)
+    col = {name: i for i, name in enumerate(header)}
+    t = data[:, col['t_s']]
+    x = data[:, [col['x_m'], col['y_m'], col['z_m']]]
+    n_p = 0
+    while f'p{n_p + 1}_kpa' in col:
+        n_p += 1
+    p = data[:, [col[f'p{i + 1}_kpa'] for i in range(n_p)]] * 1e3
+    keep = np.isfinite(t) & np.all(np.isfinite(x), axis=1)
+    notes = []
+    if not np.all(keep):
+        notes.append(f'{int(np.count_nonzero(~keep))} row(s) with NaN or inf dropped')
+    if n_p:
+        keep_p = keep & np.all(np.isfinite(p), axis=1)
+        return PoseStream(t[keep], x[keep], t[keep_p], p[keep_p], source=label, notes=notes)
+    return PoseStream(t[keep], x[keep], source=label, notes=notes)
+
+
+def read_pose_stream_bag(path, pose_topic: str = POSE_TOPIC,
+                         pressure_topic: str = PRESSURE_TOPIC) -> PoseStream:
+    """Read every pose (and pressure command, if any) of a rosbag2 directory (module doc)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
+    label = str(path)
+    if not Path(path).exists():
+        raise RecordingError(f'{label}: no such bag directory')
+    store = _typestore()
+    notes = []
+    try:
+        with Reader(path) as reader:
+            topics = {c.topic: c.msgtype for c in reader.connections}
+            x_topic = _find_topic(topics, pose_topic, label, '--pose-topic')
+            if topics[x_topic] != POSE_STAMPED:
+                raise RecordingError(f'{label}: topic {x_topic} has type {topics[x_topic]}, '
+                                     f'expected {POSE_STAMPED}')
+            try:
+                p_topic = _find_topic(topics, pressure_topic, label, '--pressure-topic')
+            except RecordingError:
+                p_topic = None
+                notes.append(f'no {pressure_topic} topic: no recorded pressures')
+            if p_topic is not None and topics[p_topic] != FLOAT64_MULTI_ARRAY:
+                raise RecordingError(f'{label}: topic {p_topic} has type {topics[p_topic]}, '
+                                     f'expected {FLOAT64_MULTI_ARRAY}')
+            recv, stamps, pos, cmd_t, cmd_p = [], [], [], [], []
+            frames = {}
+            conns = [c for c in reader.connections if c.topic in (p_topic, x_topic)]
+            for conn, stamp, raw in reader.messages(connections=conns):
+                msg = store.deserialize_cdr(raw, conn.msgtype)
+                if conn.topic == x_topic:
+                    p = msg.pose.position
+                    recv.append(stamp * 1e-9)
+                    stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+                    pos.append((p.x, p.y, p.z))
+                    frames[msg.header.frame_id] = frames.get(msg.header.frame_id, 0) + 1
+                else:
+                    values = np.asarray(msg.data, dtype=float)
+                    where = f'{label}: {p_topic} message {len(cmd_t) + 1}'
+                    if cmd_p and values.size != len(cmd_p[0]):
+                        raise RecordingError(f'{where}: {values.size} pressures, earlier '
+                                             f'messages had {len(cmd_p[0])}')
+                    cmd_t.append(stamp * 1e-9)
+                    cmd_p.append(values * pressure_unit(msg, where))
+    except RecordingError:
+        raise
+    except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
+        raise RecordingError(f'{label}: cannot read the bag: '
+                             f'{type(exc).__name__}: {exc}') from None
+    if not pos:
+        raise RecordingError(f'{label}: topic {x_topic} holds no messages')
+    stamps = np.array(stamps)
+    times = stamps if np.all(stamps > 0) else np.array(recv)
+    if times is not stamps:
+        notes.append('poses without header stamps: the receive times are used')
+    frame = max(frames, key=frames.get)
+    if p_topic is not None and not cmd_t:
+        notes.append(f'topic {p_topic} holds no messages: no recorded pressures')
+    if cmd_t:
+        # the commands' receive times, on the poses' clock
+        shift = float(np.median(stamps - np.array(recv))) if times is stamps else 0.0
+        cmd_t = np.array(cmd_t) + shift
+    return PoseStream(times, np.array(pos), np.asarray(cmd_t, dtype=float),
+                      np.array(cmd_p) if cmd_p else np.zeros((0, 0)), source=label,
+                      frame_id=frame, notes=notes)
+
+
+def read_pose_stream(csv_path=None, bag_path=None, **bag_options) -> PoseStream:
+    """Read a pose stream from a CSV file or a bag directory (exactly one of the two)."""
+    if (csv_path is None) == (bag_path is None):
+        raise RecordingError('give exactly one of a CSV file and a bag directory')
+    if csv_path is not None:
+        return read_pose_stream_csv(csv_path)
+    return read_pose_stream_bag(bag_path, **bag_options)

@@ -10,6 +10,19 @@ peak and the envelope's logarithmic decrement.  :func:`identify_damping`
 then finds the Kelvin-Voigt retardation time for which the model's first
 mode at the recorded equilibrium has the measured damping ratio (the ratio
 grows monotonically with it; ``scipy.optimize.brentq``).
+
+Which part of a recording to fit (:func:`ringdown_window`): the motion starts
+where the tip (a running median of five poses) has left its first recorded
+position (the median of the first five) by a tenth of its largest excursion
+from it; the fit starts half a period of the strongest oscillation
+later.  A release (or a step) starts at rest at a turning point of the first
+mode, so this is about its first peak after the release, by which time the
+faster modes, more damped (Kelvin-Voigt damping grows with the frequency),
+have died out; the strongest oscillation's frequency comes from a first fit
+from the motion's start.  The window ends where that first fit's envelope has
+sunk to twice its RMS residual (the noise, on a real recording; a long tail of
+noise alone can pull the nonlinear fit off), after at least three periods, or
+at the recording's end.
 """
 
 from __future__ import annotations
@@ -21,8 +34,15 @@ from scipy.optimize import brentq, least_squares
 
 from ..dynamics import reduced_system
 
-__all__ = ["FreeVibrationFit", "DampingIdentification", "fit_free_vibration",
-           "identify_damping"]
+__all__ = ["FreeVibrationFit", "DampingIdentification", "RingdownWindow", "fit_free_vibration",
+           "identify_damping", "ringdown_window"]
+
+#: The motion starts where the tip has left its first position by this share of its excursion.
+MOTION_SHARE = 0.1
+#: The window ends where the first fit's envelope is this many times its RMS residual ...
+FADE_NOISE_FACTOR = 2.0
+#: ... but holds at least this many periods after its start.
+MIN_PERIODS = 3.0
 
 
 @dataclass
@@ -158,3 +178,53 @@ def identify_damping(fit: FreeVibrationFit, equilibrium, max_damping_time_s: flo
     return DampingIdentification(fit=fit, damping_time_s=float(beta),
                                  model_frequency_hz=float(np.sqrt(red.w2[0]) / (2 * np.pi)),
                                  model_damping_ratio=float(red.damped_first(beta, alpha)[1]))
+
+
+@dataclass
+class RingdownWindow:
+    """The window of a recorded ring-down (module doc): motion start, fit start and end [s]."""
+
+    t_motion_s: float
+    t_start_s: float
+    t_end_s: float
+    frequency_hz: float      # damped frequency of the first fit, from the motion's start
+
+
+def ringdown_window(times_s, positions_m, t_end_s: float | None = None) -> RingdownWindow:
+    """The window to fit of a recorded release or step (module doc).
+
+    Raises ValueError (one line) when the tip does not move or the motion
+    holds no oscillation :func:`fit_free_vibration` can fit.
+    """
+    t = np.asarray(times_s, dtype=float).ravel()
+    x = np.asarray(positions_m, dtype=float).reshape(len(t), -1)
+    keep = np.isfinite(t) & np.all(np.isfinite(x), axis=1)
+    if t_end_s is not None:
+        keep &= t <= t_end_s
+    t, x = t[keep], x[keep]
+    order = np.argsort(t, kind="stable")
+    t, x = t[order], x[order]
+    if len(t) < 20:
+        raise ValueError(f"only {len(t)} samples; need at least 20")
+    # a running median of five poses: single noisy poses do not start the motion
+    idx = np.clip(np.arange(len(t))[:, None] + np.arange(-2, 3)[None, :], 0, len(t) - 1)
+    xs = np.median(x[idx], axis=1)
+    dist = np.linalg.norm(xs - np.median(x[:5], axis=0), axis=1)
+    if not dist.max() > 0:
+        raise ValueError("the tip does not move")
+    t_motion = float(t[np.argmax(dist > MOTION_SHARE * dist.max())])
+    first = fit_free_vibration(t, x, t_motion, t_end_s)
+    period = 1.0 / max(first.damped_frequency_hz, 1e-9)
+    t_start = t_motion + 0.5 * period
+    t_end = float(t[-1])
+    if t_start >= t_end:
+        raise ValueError(f"the recording ends ({t_end:.4g} s) before half a period after the "
+                         f"motion starts ({t_motion:.4g} s + {0.5 * period:.3g} s)")
+    # end where the first fit's envelope has sunk to the noise (its RMS residual)
+    sigma = 2 * np.pi * first.frequency_hz * first.damping_ratio
+    level = FADE_NOISE_FACTOR * first.rms_residual_m
+    if sigma > 0 and 0 < level < first.amplitude_m:
+        t_fade = first.t_start_s + np.log(first.amplitude_m / level) / sigma
+        t_end = min(t_end, max(t_fade, t_start + MIN_PERIODS * period))
+    return RingdownWindow(t_motion_s=t_motion, t_start_s=float(t_start), t_end_s=t_end,
+                          frequency_hz=first.damped_frequency_hz)

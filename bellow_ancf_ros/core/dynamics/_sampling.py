@@ -1,0 +1,172 @@
+"""A sampled simulation: the end effector's motion at fixed instants (docs/dynamics.md).
+
+:func:`sample_motion` advances a started :class:`GeneralizedAlpha` to the
+end time and records the end effector (position, z-axis) and the energy at
+the start and at every ``sample_s``.  The samples fall on steps: when the
+sampling interval is not a whole number of steps, the step is shortened to
+``sample_s / ceil(sample_s / step_s)`` (a constant step keeps the
+integrator's factorisation).  A failed step ends the run at the last
+converged sample; what was computed is returned with the failure's status.
+
+:func:`piecewise_linear` turns a table of pressures over time into the
+input function of :meth:`GeneralizedAlpha.advance` (linear between rows,
+held at the first and last row outside them).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..status import DynamicsStatus
+from ._integrator import GeneralizedAlpha, StepReport
+
+__all__ = ["SampledMotion", "sample_motion", "piecewise_linear", "sampling_step"]
+
+
+@dataclass
+class SampledMotion:
+    """The end effector's motion at the sample instants (SI units).
+
+    ``times_s`` (n,), ``positions_m`` (n, 3), ``z_axes`` (n, 3) (the end
+    effector's z-axis, base frame), ``pressures_pa`` (n, A) (the input at
+    each sample), ``energy_j`` (n,) (total energy, eqs. 15-17 plus kinetic),
+    ``constraint_violation`` (largest ``|C(q)|`` over the samples); the
+    pressures are NaN when the run was given no pressures;
+    ``report``: the integrator's :class:`StepReport` of the whole run;
+    ``step_s``: the step used; ``step_wall_s``: wall time of each step (the
+    mean over its sample interval).
+    """
+
+    times_s: np.ndarray
+    positions_m: np.ndarray
+    z_axes: np.ndarray
+    pressures_pa: np.ndarray
+    energy_j: np.ndarray
+    constraint_violation: float
+    report: StepReport
+    step_s: float
+    step_wall_s: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+
+    @property
+    def success(self) -> bool:
+        return self.report.success
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall-clock second of the run."""
+        span = float(self.times_s[-1] - self.times_s[0]) if len(self.times_s) else 0.0
+        return span / self.report.wall_s if self.report.wall_s > 0 else math.inf
+
+    def samples(self) -> list:
+        """``[{"t_s", "position_m", "z_axis"}, ...]`` (the CLI's JSON samples)."""
+        return [{"t_s": float(t), "position_m": [float(v) for v in x],
+                 "z_axis": [float(v) for v in z]}
+                for t, x, z in zip(self.times_s, self.positions_m, self.z_axes)]
+
+
+def sampling_step(step_s: float, sample_s: float | None) -> float:
+    """The step that puts the samples on steps: ``sample_s / ceil(sample_s / step_s)``."""
+    if sample_s is None:
+        return float(step_s)
+    if not (math.isfinite(sample_s) and sample_s > 0):
+        raise ValueError(f"sample_s = {sample_s!r} is not allowed; allowed: a positive time [s]")
+    k = max(1, math.ceil(sample_s / step_s * (1 - 1e-12)))
+    return float(sample_s) / k
+
+
+def piecewise_linear(times_s, values):
+    """``f(t)``: ``values`` (n, A) linear in ``t`` between ``times_s``, held outside them.
+
+    Raises ValueError when the times are not increasing or the shapes differ.
+    """
+    t = np.asarray(times_s, dtype=float).ravel()
+    v = np.asarray(values, dtype=float).reshape(len(t), -1)
+    if len(t) == 0:
+        raise ValueError("no rows")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("the times must increase strictly from row to row")
+    cols = v.T.copy()
+
+    def f(time_s):
+        return np.array([np.interp(time_s, t, c) for c in cols])
+    return f
+
+
+def sample_motion(integrator: GeneralizedAlpha, t_end: float, sample_s: float | None = None,
+                  pressures_pa=None, load=None, time_budget_s: float | None = None
+                  ) -> SampledMotion:
+    """Advance a started ``integrator`` to ``t_end`` and sample the end effector (module doc).
+
+    Parameters
+    ----------
+    integrator : a :class:`GeneralizedAlpha` after ``start`` or ``start_released``.
+    t_end : end time [s].
+    sample_s : sampling interval [s]; default: every step.  The integrator's
+        step is shortened to :func:`sampling_step` when needed.
+    pressures_pa, load : the inputs, as :meth:`GeneralizedAlpha.advance` takes them.
+    time_budget_s : wall-clock budget of the whole run.
+
+    Returns
+    -------
+    SampledMotion
+        Whatever was computed; ``report.status`` says whether the run
+        reached ``t_end``.
+    """
+    ig = integrator
+    if ig.state is None:
+        raise RuntimeError("call start(fw) first")
+    ig.step_s = sampling_step(ig.step_s, sample_s)
+    every = ig.step_s if sample_s is None else float(sample_s)
+    model = ig.model
+
+    def p_at(t):
+        if pressures_pa is None:  # the stretches are given, not the pressures
+            return np.full(model.A, np.nan)
+        return np.asarray(pressures_pa(t) if callable(pressures_pa) else pressures_pa,
+                          dtype=float)
+
+    times, pos, zax, pres, energy, walls = [], [], [], [], [], []
+    worst = 0.0
+
+    def record():
+        nonlocal worst
+        x, rot = ig.end_effector()
+        times.append(ig.state.t)
+        pos.append(x)
+        zax.append(rot[:, 2])
+        pres.append(p_at(ig.state.t))
+        energy.append(ig.energy()["total_j"])
+        worst = max(worst, ig.constraint_violation())
+
+    total = StepReport()
+    t0 = time.perf_counter()
+    record()
+    n = max(0, int(round((t_end - ig.state.t) / every)))
+    for k in range(1, n + 1):
+        t_next = min(times[0] + k * every, t_end) if k < n else t_end
+        budget = None if time_budget_s is None else time_budget_s - (time.perf_counter() - t0)
+        if budget is not None and budget <= 0:
+            total.status = DynamicsStatus.TIME_BUDGET
+            break
+        w0 = time.perf_counter()
+        rep = ig.advance(t_next, pressures_pa=pressures_pa, load=load, time_budget_s=budget)
+        walls.extend([(time.perf_counter() - w0) / max(rep.steps, 1)] * max(rep.steps, 1))
+        for key in ("steps", "iterations", "factorizations", "halvings"):
+            setattr(total, key, getattr(total, key) + getattr(rep, key))
+        if not rep.success:
+            total.status = rep.status
+            if ig.state.t > times[-1]:
+                record()
+            break
+        record()
+    total.wall_s = time.perf_counter() - t0
+    total.message = total.status.message if total.success else (
+        f"{total.status.message} at t = {ig.state.t:.6g} s")
+    return SampledMotion(times_s=np.array(times), positions_m=np.array(pos),
+                         z_axes=np.array(zax), pressures_pa=np.array(pres),
+                         energy_j=np.array(energy), constraint_violation=float(worst),
+                         report=total, step_s=float(ig.step_s), step_wall_s=np.array(walls))
