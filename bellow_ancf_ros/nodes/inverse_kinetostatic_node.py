@@ -367,6 +367,9 @@ class InverseKinetostaticNode(LifecycleNode):
         """Feedback state for the heartbeat; WARN while no fresh measured pose arrives."""
         values = self._feedback.status()
         margin = self._feedback.margin_warning
+        ringing = self._feedback.oscillation_error
+        if ringing is not None and self._active:
+            return DiagnosticStatus.ERROR, f'feedback: {ringing}', values
         if margin is not None and self._active:
             return DiagnosticStatus.WARN, f'loop margins: {margin}', values
         if self._feedback.fallback and self._active:

@@ -26,6 +26,11 @@ of their own, when the payload or the force changes and every two seconds
 while the robot moves; a gain that leaves less than the documented margins
 (gain margin 3, phase margin 45 deg) is logged once per change as a warning
 with the safe gain, and reported on ``/diagnostics`` (WARN) while it lasts.
+The first mode found there is watched for an oscillation
+(:class:`~bellow_ancf_ros.core.control.OscillationWatchdog`): a sustained or
+growing swing of the measured error near it halves the gain and holds the
+correction for a window, with one ERROR line naming the frequency seen, and
+an ERROR on ``/diagnostics`` for ten seconds.
 """
 
 from __future__ import annotations
@@ -93,6 +98,8 @@ FEEDBACK_PARAMETERS = tuple(p.name for p in FEEDBACK_PARAMETER_TABLE)
 #: realistic simulated robot) is logged at INFO and counted on /diagnostics; one that lasts
 #: longer than this [s] is a WARN: the motion capture needs a look.
 DROPOUT_WARN_S = 2.0
+#: How long /diagnostics reports an oscillation watchdog's trip as an ERROR [s].
+TRIP_REPORT_S = 10.0
 #: How often the margin thread looks for a new equilibrium [s].
 _MODE_POLL_S = 0.2
 
@@ -132,6 +139,8 @@ class FeedbackLink:
         self.refused = 0
         self.received = 0
         self._mode_check: ModeCheck | None = None
+        self._trips_logged = 0
+        self._trip_t = -math.inf
         self._mode_fw = None
         self._mode_result = None
         self._mode_wake = threading.Event()
@@ -260,7 +269,16 @@ class FeedbackLink:
             out = self._law.corrected_target(time.monotonic(), position, z_axis,
                                              wanted_at=self._monotonic(stamp, future=True))
             degraded, state = self._law.blind, self._law.state
+            wd = self._law.watchdog
+            trip = None
+            if wd is not None and wd.trips > self._trips_logged:
+                self._trips_logged, trip = wd.trips, wd.last_trip
+                self._trip_t, gain = time.monotonic(), self._law.gain_per_s
         self._log_dropout(degraded, state)
+        if trip is not None:
+            self.node.get_logger().error(
+                f'feedback: {trip.message}; gain cut to {gain:.3g} /s, correction held for '
+                f'{2 / wd.frequency_hz:.2f} s (trip {wd.trips})')
         return out
 
     def _log_dropout(self, degraded: bool, state: str) -> None:
@@ -317,8 +335,26 @@ class FeedbackLink:
             if res is None:
                 continue
             self._mode_result = res
+            with self._lock:   # the watchdog watches the first mode where the robot is held
+                if self._law is not None:
+                    self._law.watch(res.frequency_hz)
             if before is None or before.ok != res.ok or (res.moved and not res.ok):
                 (log.info if res.ok else log.warning)(f'loop margins: {res.message}')
+
+    def trips(self) -> int:
+        """How often the oscillation watchdog tripped since configure."""
+        with self._lock:
+            wd = None if self._law is None else self._law.watchdog
+            return 0 if wd is None else wd.trips
+
+    @property
+    def oscillation_error(self) -> str | None:
+        """What the oscillation watchdog saw, for :data:`TRIP_REPORT_S` after its last trip."""
+        law = self._law
+        wd = None if law is None else law.watchdog
+        if wd is None or wd.last_trip is None or time.monotonic() - self._trip_t > TRIP_REPORT_S:
+            return None
+        return f'{wd.last_trip.message}; feedback gain cut to {law.gain_per_s:.3g} /s'
 
     @property
     def margin_warning(self) -> str | None:

@@ -536,3 +536,28 @@ def test_loop_margins_with_the_robots_mode_on_diagnostics(h, two):
     wait_for(lambda: safe._feedback.status().get('loop_margins_ok') == 'true', timeout=30.0,
              what='the safe gain checked')
     assert safe._feedback.margin_warning is None
+
+
+def test_a_ringing_loop_trips_the_watchdog_with_one_error(h, one):
+    """Measured poses swinging 2 mm at 9 Hz (near the one-segment robot's 10.6 Hz mode)."""
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, feedback='integral', name='ringing')
+    fw = solve_forward(one, [40e3, 0.0, 0.0])
+    tgt = h.publisher(PoseStamped, 'target_pose')
+    meas = h.publisher(PoseStamped, 'measured_pose')
+    wait_for(lambda: tgt.get_subscription_count() >= 1 and meas.get_subscription_count() >= 1,
+             what='subscribed')
+    tgt.publish(target_msg(fw.position))
+    wait_for(lambda: node._feedback.status().get('loop_first_mode_hz') is not None,
+             timeout=30.0, what='the first mode found')
+    t0 = time.monotonic()
+    while node._feedback.trips() == 0 and time.monotonic() - t0 < 20.0:
+        t = time.monotonic() - t0
+        swing = 2e-3 * math.sin(2 * math.pi * 9.0 * t)
+        meas.publish(target_msg(fw.position + np.array([swing, 0.0, 0.0])))
+        time.sleep(1 / 120)
+    assert node._feedback.trips() >= 1
+    wait_for(lambda: any(s.level == DiagnosticStatus.ERROR and 'oscillation at' in s.message
+                         for s in diag_statuses(h, 'ringing')), what='ERROR on /diagnostics')
+    values = node._feedback.status()
+    assert values['oscillation_trips'] >= 1 and float(values['feedback_gain_per_s']) <= 1.25

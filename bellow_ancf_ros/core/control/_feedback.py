@@ -306,6 +306,14 @@ class IntegralFeedback:
             self.rejected += 1
             return False
         self._meas_t, self._meas_p, self._meas_z = float(t), p, z
+        if self.watchdog is not None and self._history:
+            # every accepted sample, at the measurements' rate: a control step is too slow
+            # to see a swing near a stiff robot's mode
+            then = self._target_at(float(t))
+            trip = None if then is None else self.watchdog.feed(float(t), then[0] - p)
+            if trip is not None:
+                self.gain_scale *= 0.5
+                self._hold_until = float(t) + self.watchdog.window_s
         return True
 
     def measurement_age(self, t: float) -> float | None:
@@ -389,13 +397,9 @@ class IntegralFeedback:
             self.state = TRACKING
             return
         p_t, z_t = then
-        if self.watchdog is not None:
-            trip = self.watchdog.feed(self._meas_t, p_t - self._meas_p)
-            if trip is not None:
-                self.gain_scale *= 0.5
-                self._hold_until = self._meas_t + self.watchdog.window_s
-                self.state = OSCILLATING
-                return
+        if self._meas_t < self._hold_until:   # the watchdog tripped on this sample
+            self.state = OSCILLATING
+            return
         k = self.gain_per_s * dt
         # the error measured at the target then, turned to the current target's azimuth
         turn = rotation_z(self._phi - self._azimuth(p_t))
