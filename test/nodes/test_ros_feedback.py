@@ -561,3 +561,5 @@ def test_a_ringing_loop_trips_the_watchdog_with_one_error(h, one):
                          for s in diag_statuses(h, 'ringing')), what='ERROR on /diagnostics')
     values = node._feedback.status()
     assert values['oscillation_trips'] >= 1 and float(values['feedback_gain_per_s']) <= 1.25
+    seen = float(values['oscillation_seen'].split('oscillation at ')[1].split(' Hz')[0])
+    assert abs(seen - 9.0) < 0.5   # the frequency it saw

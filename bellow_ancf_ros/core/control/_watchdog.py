@@ -88,13 +88,14 @@ class OscillationWatchdog:
         self._samples = []
         self._start = None
         self.amplitudes.clear()
+        self._recent = deque(maxlen=3)
 
-    def _fit(self, t: np.ndarray, e: np.ndarray):
+    def _fit(self, t: np.ndarray, e: np.ndarray, band=BAND):
         """Largest sinusoid amplitude over the band, and its frequency, of one window."""
         t = t - t[0]
         base = np.column_stack([np.ones_like(t), t, t * t])
         best = (0.0, self.frequency_hz)
-        for factor in BAND:
+        for factor in band:
             w = 2 * math.pi * factor * self.frequency_hz
             X = np.column_stack([base, np.cos(w * t), np.sin(w * t)])
             coef, *_ = np.linalg.lstsq(X, e, rcond=None)
@@ -113,6 +114,7 @@ class OscillationWatchdog:
         ts = np.array([s[0] for s in self._samples])
         es = np.array([s[1] for s in self._samples])
         self._samples, self._start = [], float(t)
+        self._recent.append((ts, es))
         if len(ts) < 8:
             return None
         amp, freq = self._fit(ts, es)
@@ -128,6 +130,10 @@ class OscillationWatchdog:
             reason = f'growing {g} times in a row'
         if reason is None:
             return None
+        # the frequency seen, over the last windows (a finer resolution than one window's)
+        ts = np.concatenate([w[0] for w in self._recent])
+        es = np.concatenate([w[1] for w in self._recent])
+        freq = self._fit(ts, es, np.linspace(BAND[0], BAND[-1], 76))[1]
         self.trips += 1
         self.last_trip = WatchdogTrip(t, freq, amp, reason)
         self.amplitudes.clear()
