@@ -1,11 +1,19 @@
-"""Text tables, output files and PNG figures of the ``bellow-ancf`` subcommands.
+"""Text tables, output files, robot files and PNG figures of the ``bellow-ancf`` subcommands.
 
+Robot files written by a command (``identify ... --yaml-out``, ``calibrate
+--out``) are the source robot file's text with the new values put in their
+places (its unit comments and layout stay), provenance comments on top, and
+the output file's name (without ``.yaml``) as the robot's ``name``.
 Figures use matplotlib's Agg canvas, imported on first use.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
+import re
+
+import yaml
 
 from .common import UsageError
 
@@ -46,6 +54,113 @@ def actuator_columns(cfg):
     for j, seg in enumerate(cfg.segments):
         names += [f's{j + 1}_a{i + 1}_kpa' for i in range(seg.n_actuators)]
     return names
+
+
+# ------------------------------------------------------- robot files
+def _flow(value) -> str:
+    """``value`` as YAML flow text (a scalar, or ``[a, b]``)."""
+    return yaml.safe_dump([value], default_flow_style=True, width=10**6).strip()[1:-1]
+
+
+def values_in_place(original: str, d: dict) -> str | None:
+    """``original``'s text (its comments, order, layout) with the values of ``d`` put in.
+
+    Handles the robot-file schema: top-level keys, one level of nested
+    mappings, and the ``segments`` list of mappings; values are scalars or
+    flow lists, comments after them.  Keys of ``d`` the text lacks are
+    appended.  None when the result would not read back as ``d`` (the
+    caller then writes a plain dump).
+    """
+    out, section, seg = [], None, -1
+    seen = set()
+    lines = original.splitlines()
+    while lines and (not lines[0].strip() or lines[0].lstrip().startswith('#')):
+        lines.pop(0)   # the nominal file's own header: the provenance lines replace it
+    for line in lines:
+        body = line.lstrip()
+        indent = len(line) - len(body)
+        m = re.match(r'(- )?([A-Za-z_]\w*):(\s*)([^#]*?)(\s*)(#.*)?$', body)
+        if not body or body.startswith('#') or m is None:
+            out.append(line)
+            continue
+        item, key, gap, value, pad, comment = m.groups()
+        if indent == 0:
+            section, path = key, (key,)
+        elif item:
+            seg += 1
+            path = (section, seg, key)
+        elif section == 'segments':
+            path = (section, seg, key)
+        else:
+            path = (section, key)
+        target = d
+        try:
+            for k in path:
+                target = target[k]
+        except (KeyError, IndexError, TypeError):
+            out.append(line)
+            continue
+        seen.add(path[0])
+        if isinstance(target, dict) or not value:
+            out.append(line)
+            continue
+        try:
+            same = yaml.safe_load(value) == target
+        except yaml.YAMLError:
+            return None
+        new = value if same else _flow(target)
+        head = line[:indent] + (item or '') + key + ':' + (gap or ' ')
+        text = head + new
+        if comment:
+            width = len(head) + len(value) + len(pad or '')
+            text += ' ' * max(1, width - len(text)) + comment
+        out.append(text)
+    extra = {k: v for k, v in d.items() if k not in seen}
+    text = '\n'.join(out) + '\n'
+    if extra:
+        text += yaml.safe_dump(extra, sort_keys=False, default_flow_style=None)
+    try:
+        same = yaml.safe_load(text) == yaml.safe_load(yaml.safe_dump(d))
+    except yaml.YAMLError:
+        return None
+    return text if same else None
+
+
+def robot_name_for(path) -> str:
+    """The robot name a written robot file gets: its file name without ``.yaml`` / ``.yml``."""
+    name = Path(str(path)).name
+    for suffix in ('.yaml', '.yml'):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[:-len(suffix)]
+    return name
+
+
+def source_text(source) -> str | None:
+    """The text of the robot file ``source`` came from (None when not from a readable file)."""
+    try:
+        return Path(str(source)).read_text(encoding='utf-8')
+    except OSError:
+        return None
+
+
+def robot_file_text(d: dict, header: list[str], original: str | None = None) -> str:
+    """A robot file: ``header`` comment lines, then ``d`` in ``original``'s layout.
+
+    With the source file's text (``original``), its comments and layout are
+    kept and the values of ``d`` put in their places (its own header comment
+    lines are replaced by ``header``); without it, or when its layout cannot
+    be kept, a plain YAML dump of ``d``.
+    """
+    text = None if original is None else values_in_place(original, d)
+    if text is None:
+        text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+    return ''.join(f'# {line}\n' if line else '#\n' for line in header) + text
+
+
+def write_text(path, option, text: str) -> None:
+    """Write ``text`` to ``path`` for ``option``; failure is a :class:`UsageError`."""
+    with open_out(path, option) as fh:
+        fh.write(text)
 
 
 # ----------------------------------------------------------- figures

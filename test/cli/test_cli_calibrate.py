@@ -207,7 +207,7 @@ def test_values_in_place_keeps_layout_and_reads_back(one_cfg):
     """The calibrated file: the nominal text, its comments, the new values; else a plain dump."""
     import yaml
 
-    from bellow_ancf_ros.cli.calibrate import _values_in_place
+    from bellow_ancf_ros.cli.output import values_in_place as _values_in_place
 
     for name in ('one_segment', 'two_segment'):
         cfg = load_robot(name)
