@@ -129,7 +129,7 @@ def _cmd_identify_stiffness(args):
 
 
 def _stage1_check(k_coeffs, l0, d_eff, cfg):
-    """``(usable, message)``: is stage 1 of ``cfg`` with these values monotonic over its limits?"""
+    """``(usable, message)``: whether stage 1 of ``cfg`` with these values is monotonic."""
     try:
         Stage1(k_coeffs, l0, d_eff, cfg.p_min, cfg.p_max)
     except ValueError as exc:
