@@ -29,7 +29,8 @@ from ..core.fit import (POSE_TOPIC, PRESSURE_TOPIC, CalibrationError, Calibratio
                         RecordingError, calibrate, read_bag, read_csv)
 from .common import (EXIT_OK, SolverError, UsageError, config_help, emit_json, nonneg_float,
                      warn)
-from .output import robot_file_text, robot_name_for, source_text, write_text
+from .output import (figure, robot_file_text, robot_name_for, save_figure, source_text,
+                     write_text)
 
 __all__ = ['register', 'robot_yaml_text', 'plot_residuals']
 
@@ -75,32 +76,35 @@ def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source:
 
 
 def plot_residuals(result: CalibrationResult, path: str) -> None:
-    """PNG: position and z-axis error of every sample, before and after calibration."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    """PNG: position and z-axis error of every sample, before and after calibration.
 
-    fig = Figure(figsize=(10, 6), dpi=100)
-    FigureCanvasAgg(fig)
+    Log scales: the calibrated errors are two orders of magnitude below the
+    nominal ones (0.06 mm against 4 mm on the shipped recording) and would lie
+    flat on a linear axis.  Legends above the panels, off the points.
+    """
+    fig = figure(10, 7, constrained=True)
     idx = np.arange(1, result.samples + 1)
     ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2, sharex=None)
-    ax1.plot(idx, result.errors_before_mm, '.', color='tab:red', ms=4,
-             label=f'nominal, best frame (RMSE {result.rmse_before_mm:.3f} mm)')
-    ax1.plot(idx, result.errors_after_mm, '.', color='tab:blue', ms=4,
-             label=f'calibrated (RMSE {result.rmse_after_mm:.3f} mm)')
-    ax1.set_ylabel('position error [mm]')
-    ax1.legend(fontsize=8)
-    ax1.grid(True, alpha=0.3)
-    ax2.plot(idx, result.angle_errors_before_deg, '.', color='tab:red', ms=4,
-             label=f'nominal (RMSE {result.rmse_before_deg:.3f} deg)')
-    ax2.plot(idx, result.angle_errors_after_deg, '.', color='tab:blue', ms=4,
-             label=f'calibrated (RMSE {result.rmse_after_deg:.3f} deg)')
+    panels = ((ax1, result.errors_before_mm, result.errors_after_mm, result.rmse_before_mm,
+               result.rmse_after_mm, 'mm', 'position error [mm]'),
+              (ax2, result.angle_errors_before_deg, result.angle_errors_after_deg,
+               result.rmse_before_deg, result.rmse_after_deg, 'deg', 'z-axis error [deg]'))
+    for ax, before, after, rmse_before, rmse_after, unit, label in panels:
+        before, after = np.asarray(before, float), np.asarray(after, float)
+        positive = np.concatenate([before, after])
+        positive = positive[np.isfinite(positive) & (positive > 0)]
+        floor = positive.min() / 2 if positive.size else 1e-6   # an exact 0 on a log axis
+        ax.semilogy(idx, np.maximum(before, floor), '.', color='tab:red', ms=4,
+                    label=f'nominal, best frame (RMSE {rmse_before:.3f} {unit})')
+        ax.semilogy(idx, np.maximum(after, floor), '.', color='tab:blue', ms=4,
+                    label=f'calibrated (RMSE {rmse_after:.3f} {unit})')
+        ax.set_ylabel(label + ', log scale')
+        ax.grid(True, which='both', alpha=0.3)
+        ax.legend(fontsize=8, loc='lower center', bbox_to_anchor=(0.5, 1.0), ncol=2,
+                  frameon=False)
     ax2.set_xlabel('sample')
-    ax2.set_ylabel('z-axis error [deg]')
-    ax2.legend(fontsize=8)
-    ax2.grid(True, alpha=0.3)
     fig.suptitle('calibration residuals per sample', fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, format='png')
+    save_figure(fig, path)
 
 
 def _table(result: CalibrationResult) -> list[str]:
@@ -165,11 +169,7 @@ def _cmd_calibrate(args) -> int:
                                    args.mocap_frame_id or rec.frame_id or 'world',
                                    source_text(cfg.source), robot_name_for(args.out)))
     if args.plot:
-        try:
-            plot_residuals(result, args.plot)
-        except OSError as exc:
-            raise UsageError(f'--plot {args.plot}: cannot write file: '
-                             f'{exc.strerror or exc}') from None
+        plot_residuals(result, args.plot)
     if args.json:
         d = result.to_dict()
         d.update(config=str(cfg.source), data=source, out=args.out, plot=args.plot)

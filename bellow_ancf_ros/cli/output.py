@@ -164,17 +164,67 @@ def write_text(path, option, text: str) -> None:
 
 
 # ----------------------------------------------------------- figures
-def figure(width=10.0, height=4.5):
-    """A matplotlib figure without a GUI backend."""
+def figure(width=10.0, height=4.5, constrained=False):
+    """A matplotlib figure without a GUI backend.
+
+    ``constrained``: matplotlib's constrained layout, which makes room for
+    legends placed outside the axes (:func:`legend_outside`).
+    """
     from matplotlib.figure import Figure
-    return Figure(figsize=(width, height), dpi=100)
+    return Figure(figsize=(width, height), dpi=100,
+                  layout='constrained' if constrained else None)
+
+
+def legend_outside(fig, ax, where='lower center', **kwargs):
+    """The legend of ``ax`` (and its twin axes) outside every axes, at ``where`` of ``fig``.
+
+    The figure must be ``constrained`` (:func:`figure`), which reserves the
+    room; the legend then never hides a data point.  ``where``: ``'lower
+    center'``, ``'upper center'``, ``'right upper'``, ... (matplotlib's
+    ``'outside ...'`` locations).
+    """
+    handles, labels = [], []
+    for a in [ax, *ax.get_shared_x_axes().get_siblings(ax)]:
+        for h, label in zip(*a.get_legend_handles_labels()):
+            if label not in labels:
+                handles.append(h)
+                labels.append(label)
+    kwargs.setdefault('fontsize', 8)
+    kwargs.setdefault('frameon', False)
+    return fig.legend(handles, labels, loc=f'outside {where}', **kwargs)
+
+
+def fit_3d_axes(ax, points, min_span, pad=0.05):
+    """Limits of a 3-D axes around ``points`` (n, 3), each axis at least ``min_span`` wide.
+
+    A coordinate that barely moves (z of a circle at a constant height) would
+    otherwise be scaled to its round-off (an offset label like
+    ``1e-11+2.09e2`` over the axis label); the tick labels never use an offset,
+    and the axes box is shrunk a little so that the z label stays inside the figure.
+    """
+    import numpy as np
+    from matplotlib.ticker import ScalarFormatter
+
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    setters = (ax.set_xlim, ax.set_ylim, ax.set_zlim)
+    for k, (axis, setter) in enumerate(zip((ax.xaxis, ax.yaxis, ax.zaxis), setters)):
+        formatter = ScalarFormatter(useOffset=False)
+        axis.set_major_formatter(formatter)
+        if len(P):
+            lo, hi = float(P[:, k].min()), float(P[:, k].max())
+            half = max(hi - lo, min_span) * (0.5 + pad)
+            mid = 0.5 * (lo + hi)
+            setter(mid - half, mid + half)
+    ax.set_box_aspect(None, zoom=0.85)
 
 
 def save_figure(fig, path):
     """Write ``fig`` as PNG to ``path``; failure is a :class:`UsageError`."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     FigureCanvasAgg(fig)
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     try:
         fig.savefig(path, format='png')
     except OSError as exc:
