@@ -347,6 +347,30 @@ def test_ros2_run_lines_start_with_their_parameters(colcon_install):
             _stop(node, ctx)
 
 
+def _documented_base_frame_nodes():
+    """``(nodes with, nodes without)`` the ``base_frame`` parameter, as docs/ros.md says."""
+    text = (REPO / 'docs' / 'ros.md').read_text()
+    bullet = re.search(r'^\* `base_frame` .*?;$', text, re.M | re.S).group(0)
+    with_part, _, without_part = bullet.partition('(not')
+    return (set(re.findall(r'`(\w+_\w+)`', with_part)) - {'base_frame'},
+            set(re.findall(r'`(\w+_\w+)`', without_part)))
+
+
+def test_documented_common_parameters_are_declared():
+    """Every node declares ``robot_config``; ``base_frame`` exactly those docs/ros.md names."""
+    with_frame, without_frame = _documented_base_frame_nodes()
+    assert with_frame | without_frame == set(NODES) and not with_frame & without_frame
+    for exe, cls in NODES.items():
+        node, ctx = _start(cls, [])
+        try:
+            assert node.has_parameter('robot_config'), exe
+            assert node.has_parameter('base_frame') == (exe in with_frame), exe
+            if exe in with_frame:
+                assert node.get_parameter('base_frame').value == 'base', exe
+        finally:
+            _stop(node, ctx)
+
+
 def _block_robots():
     """The robot of each block's inverse node (its ``ros2 run`` or ``ros2 launch`` line)."""
     out = {}
