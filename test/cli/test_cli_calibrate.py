@@ -59,6 +59,7 @@ def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
     cfg = load_robot(out)
     text = out.read_text()
     assert str(csv_path) in text and 'RMSE' in text
+    assert cfg.name == 'cal'                             # named after the written file
     assert cfg.segments[0].pitch_radius * 1e3 == pytest.approx(
         d['parameters']['segments[0].pitch_radius_mm']['value'], rel=1e-12)
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'

@@ -1,7 +1,7 @@
 """A ``ros2`` command for the tests: the two verbs the documentation runs on a colcon install.
 
 ``ros2cli`` is not on PyPI.  What the real tools do was measured with ROS 2
-Jazzy (ros2cli 0.32.2; ``/work/shared/docs/ros_stack.md``), and this does
+Jazzy (ros2cli 0.32.2) on a ROS install, and this does
 exactly that, nothing more:
 
 * ``ros2 run PKG EXE [ARGS ...]``: the first prefix ``P`` on
