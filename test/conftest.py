@@ -147,6 +147,33 @@ class ColconInstall:
                               timeout=timeout, stdin=subprocess.DEVNULL)
 
 
+def _seed_kernel_cache(installed_core: Path) -> None:
+    """Copy the checkout's compiled kernels into the install's cache (a test-time shortcut).
+
+    The first ``warm-up`` of a fresh install compiles for about a minute of
+    CPU; the checkout's venv has compiled the same sources (``make venv``).
+    numba keys its cache by the source directory (``<dir name>_<sha1 of its
+    path>``, ``numba.core.caching``) and checks each source file's mtime and
+    size, which the copy and colcon keep: the renamed copies load.  Should
+    numba not take them, the install compiles as a user's would: slower, not wrong.
+    """
+    import hashlib
+
+    from bellow_ancf_ros.core import numba_cache
+
+    ours = numba_cache.cache_dir()
+    if not ours.is_dir() or not str(ours).startswith(str(REPO)):
+        return
+    target = installed_core / '__pycache__' / ours.name
+    for sub in ours.iterdir():
+        name = sub.name.rsplit('_', 1)[0]               # linalg, model, solve
+        installed_dir = installed_core / name
+        if not installed_dir.is_dir():
+            continue
+        digest = hashlib.sha1(str(installed_dir).encode()).hexdigest()
+        shutil.copytree(sub, target / f'{name}_{digest}', dirs_exist_ok=True)
+
+
 @pytest.fixture(scope='session')
 def colcon_install(tmp_path_factory):
     """One ``colcon build`` of a copy of the checkout per test session, and a ``ros2`` shim.
@@ -170,6 +197,7 @@ def colcon_install(tmp_path_factory):
     assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-4000:]
     inst = ColconInstall(root)
     assert inst.prefix.is_dir(), list(inst.install.iterdir())
+    _seed_kernel_cache(inst.site_packages() / PKG / 'core')
     inst.bin.mkdir()
     shim = inst.bin / 'ros2'
     shim.write_text(f'#!/bin/sh\nexec {sys.executable} {TEST_DIR / "support" / "ros2_shim.py"} '
