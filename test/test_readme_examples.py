@@ -19,9 +19,11 @@ Commands are collected from the code blocks of ``README.md`` and of every
   For every line each documented option is in the subcommand's ``--help``.
 * ``.venv/bin/python -m bellow_ancf_ros.nodes...`` lines start as processes,
   come up and stop cleanly on Ctrl-C.
-* ``ros2 run`` lines (a ROS install is needed for the ``ros2`` command):
-  the same node class starts with the same ``--ros-args`` and the
-  parameters given there are in effect; ``ros2 param set`` values are
+* ``ros2 run bellow_ancf_ros <node>`` lines: run as written on the colcon
+  install (as above; each in its own ROS domain), the node comes up and ends
+  with status 0 on Ctrl-C; and in-process, the same node class starts with the
+  same ``--ros-args`` (shipped files from the install) and the parameters
+  given there are in effect; ``ros2 param set`` values are
   accepted; ``ros2 lifecycle set`` transitions succeed; the ``ros2 topic pub``
   target is reachable on the robot the block's inverse node (``ros2 run`` or
   ``ros2 launch`` line) runs.  ``ros2 launch`` lines:
@@ -80,7 +82,11 @@ SHARE = '$(ros2 pkg prefix --share bellow_ancf_ros)'
 STARTED = {'inverse_kinetostatic_node': 'active: pressure commands enabled',
            'forward_kinetostatic_node': 'listening on',
            'trajectory_publisher': 'publishing',
-           'simulated_robot_node': 'simulating robot'}
+           'simulated_robot_node': 'simulating robot',
+           'excitation_publisher': 'excitation of robot',
+           'mocap_relay': 'relaying mocap_pose',
+           'regulator_driver': 'regulator driver for',
+           'wrench_estimator_node': 'estimating the tip'}
 
 
 def code_lines(documents=None):
@@ -369,6 +375,56 @@ def test_documented_common_parameters_are_declared():
                 assert node.get_parameter('base_frame').value == 'base', exe
         finally:
             _stop(node, ctx)
+
+
+def test_documented_ros2_run_node_lines_start_on_a_colcon_install(colcon_install):
+    """Each ``ros2 run bellow_ancf_ros <node> ...`` line, as written, starts the installed node.
+
+    In bash after ``source install/setup.sh``, from a directory outside the
+    source tree, each line in its own ``ROS_DOMAIN_ID`` (as if run alone); the
+    node must come up (its first log line) and end with status 0 on Ctrl-C.
+    """
+    lines = [line for _, line in code_lines()
+             if line.startswith('ros2 run bellow_ancf_ros ') and not line.startswith(ROS2_RUN_CLI)]
+    assert len(lines) >= 8 and any(SHARE in line for line in lines)
+    domains = random.sample(range(0, 102), len(lines))
+    procs = []
+    for k, (line, domain) in enumerate(zip(lines, domains)):
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                   PYTHONUNBUFFERED='1',
+                   PATH=str(colcon_install.bin) + os.pathsep + os.environ.get('PATH', ''))
+        env.pop('AMENT_PREFIX_PATH', None)
+        env.pop('PYTHONPATH', None)
+        log = colcon_install.root / f'node_line_{k}.log'
+        script = (f'. {colcon_install.install / "setup.sh"} && cd {colcon_install.outside} '
+                  f'&& exec {line}')
+        with open(log, 'w') as out:
+            procs.append((line, log, subprocess.Popen(
+                ['bash', '-c', script], env=env, stdout=out, stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_default_sigint)))
+    try:
+        deadline = time.monotonic() + 120.0
+        for line, log, proc in procs:
+            marker = STARTED[shlex.split(line)[3]]
+            while marker not in log.read_text():
+                assert proc.poll() is None, (line, log.read_text())
+                assert time.monotonic() < deadline, (line, log.read_text())
+                time.sleep(0.1)
+            # the installed node ran, not the checkout's module
+            assert str(REPO) not in log.read_text(), log.read_text()
+    finally:
+        for *_, proc in procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGINT)
+        codes = []
+        for _, _, proc in procs:
+            try:
+                codes.append(proc.wait(20.0))
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                codes.append(proc.wait(5.0))
+    assert codes == [0] * len(procs), [(line, log.read_text()[-1500:])
+                                      for (line, log, _), code in zip(procs, codes) if code]
 
 
 def _block_robots():
