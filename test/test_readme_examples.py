@@ -390,8 +390,8 @@ def test_documented_ros2_run_node_lines_start_on_a_colcon_install(colcon_install
     domains = random.sample(range(0, 102), len(lines))
     procs = []
     for k, (line, domain) in enumerate(zip(lines, domains)):
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-                   PYTHONUNBUFFERED='1',
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
+                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                    PATH=str(colcon_install.bin) + os.pathsep + os.environ.get('PATH', ''))
         env.pop('AMENT_PREFIX_PATH', None)
         env.pop('PYTHONPATH', None)
@@ -423,8 +423,9 @@ def test_documented_ros2_run_node_lines_start_on_a_colcon_install(colcon_install
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 codes.append(proc.wait(5.0))
-    assert codes == [0] * len(procs), [(line, log.read_text()[-1500:])
-                                      for (line, log, _), code in zip(procs, codes) if code]
+    failed = [(line, log.read_text()[-1500:])
+              for (line, log, _), code in zip(procs, codes) if code]
+    assert codes == [0] * len(procs), failed
 
 
 def _block_robots():
