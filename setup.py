@@ -26,6 +26,8 @@ data_files = [
     ('share/' + PACKAGE_NAME, ['package.xml']),
     ('share/' + PACKAGE_NAME + '/config', _files('config/*.yaml')),
     ('share/' + PACKAGE_NAME + '/data', _files('data/*.csv')),
+    # the example recording (rosbag2 directory) that README's `calibrate --bag` line reads
+    ('share/' + PACKAGE_NAME + '/data/one_segment_bag', _files('data/one_segment_bag/*')),
     ('share/' + PACKAGE_NAME + '/rviz', _files('rviz/*.rviz')),
 ]
 _launch_files = _files('launch/*.launch.py')

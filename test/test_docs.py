@@ -127,6 +127,16 @@ def test_readme_is_a_front_door_that_links_every_page():
     assert {p.relative_to(REPO).as_posix() for p in PAGES} <= pages
 
 
+def test_ros_md_names_every_launch_argument():
+    """docs/ros.md's list of launch arguments is the launch file's, no more, no less."""
+    launch = (REPO / 'launch' / 'bellow_ancf.launch.py').read_text()
+    declared = set(re.findall(r"DeclareLaunchArgument\(\s*'(\w+)'", launch))
+    assert {'sim', 'sim_plant', 'rviz'} <= declared
+    text = (REPO / 'docs' / 'ros.md').read_text()
+    listed = re.search(r'its arguments \((.*?)\) override', text, re.S).group(1)
+    assert set(re.findall(r'`(\w+)`', listed)) == declared
+
+
 def test_the_checks_find_what_is_wrong():
     """The path, link and heading checks do fail on a wrong citation."""
     text = ('see `bellow_ancf_ros/core/no_such_module.py`, `config/one_segment.yaml`, '

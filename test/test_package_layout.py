@@ -2,12 +2,13 @@
 
 colcon (colcon-core, colcon-ros, colcon-python-setup-py; all on PyPI) builds
 a copy of the package source in a temporary directory (a copy, so that a
-virtual environment or build tree inside the checkout is never crawled).
+virtual environment or build tree inside the checkout is never crawled; one
+build per test session, the ``colcon_install`` fixture of ``test/conftest.py``).
 Then the files must be where ``ros2 run`` and ``ros2 launch`` look for them:
 
 * ``share/ament_index/resource_index/packages/bellow_ancf_ros`` (marker),
 * ``share/bellow_ancf_ros/package.xml``, ``config/*.yaml``, ``launch/*.launch.py``,
-  ``rviz/*.rviz``,
+  ``rviz/*.rviz``, ``data/`` (the example files and the recording),
 * executables ``lib/bellow_ancf_ros/<node>`` (console scripts),
 
 and an installed executable must start.
@@ -16,7 +17,6 @@ and an installed executable must start.
 import os
 import py_compile
 import random
-import shutil
 import signal
 import stat
 import subprocess
@@ -36,9 +36,6 @@ NODE_EXECUTABLES = {
 }
 MESSAGE_DEPENDENCIES = ('rclpy', 'geometry_msgs', 'std_msgs', 'visualization_msgs',
                         'diagnostic_msgs', 'lifecycle_msgs')
-_SKIP = shutil.ignore_patterns('.git', '.venv', 'venv', 'build', 'install', 'log',
-                               '__pycache__', '.pytest_cache', '.hypothesis', '.ruff_cache',
-                               '*.egg-info', '*.png')
 
 
 def test_every_module_of_the_package_imports():
@@ -75,27 +72,6 @@ def test_nodes_params_file_is_a_ros_params_file():
     assert data['/**']['ros__parameters']['pressure_unit'] in ('Pa', 'kPa')
 
 
-@pytest.fixture(scope='module')
-def colcon_install(tmp_path_factory):
-    try:
-        import colcon_core  # noqa: F401
-    except ImportError:
-        pytest.fail('colcon is not installed: pip install -r requirements.txt '
-                    '(colcon-core, colcon-ros, colcon-python-setup-py)')
-    root = tmp_path_factory.mktemp('colcon')
-    src = root / 'src' / PKG
-    shutil.copytree(REPO, src, ignore=_SKIP)
-    cmd = [sys.executable, '-m', 'colcon', '--log-base', str(root / 'log'), 'build',
-           '--base-paths', str(root / 'src'), '--build-base', str(root / 'build'),
-           '--install-base', str(root / 'install'), '--event-handlers', 'console_direct-']
-    res = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=300,
-                         stdin=subprocess.DEVNULL)
-    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-4000:]
-    prefix = root / 'install' / PKG    # colcon's default isolated layout
-    assert prefix.is_dir(), list((root / 'install').iterdir())
-    return prefix
-
-
 def _site_packages(prefix):
     found = list(prefix.glob('lib/python3*/site-packages'))
     assert found, 'no site-packages in the install prefix'
@@ -103,6 +79,7 @@ def _site_packages(prefix):
 
 
 def test_ament_index_marker_and_package_xml(colcon_install):
+    colcon_install = colcon_install.prefix
     marker = colcon_install / 'share' / 'ament_index' / 'resource_index' / 'packages' / PKG
     assert marker.is_file()
     pxml = colcon_install / 'share' / PKG / 'package.xml'
@@ -117,17 +94,30 @@ def test_ament_index_marker_and_package_xml(colcon_install):
         assert dep in deps, dep
 
 
-def test_config_and_launch_files_installed(colcon_install):
-    share = colcon_install / 'share' / PKG
-    for name in ('one_segment.yaml', 'two_segment.yaml', 'nodes.yaml'):
-        assert (share / 'config' / name).read_text() == (REPO / 'config' / name).read_text()
-    launch = share / 'launch' / 'bellow_ancf.launch.py'
-    assert launch.read_text() == (REPO / 'launch' / 'bellow_ancf.launch.py').read_text()
-    rviz = share / 'rviz' / 'bellow_ancf.rviz'
-    assert rviz.read_text() == (REPO / 'rviz' / 'bellow_ancf.rviz').read_text()
+#: the checkout's folders installed to ``share/bellow_ancf_ros/`` as they are, except these
+#: files (the generators of data/ are tools of the checkout)
+SHARED_DIRS = ('config', 'launch', 'rviz', 'data')
+NOT_SHARED = ('data/make_synthetic.py', 'data/make_recording.py')
+
+
+def test_config_launch_rviz_and_data_files_installed(colcon_install):
+    """Every file of config/, launch/, rviz/ and data/ (the bag too) is in the share directory."""
+    share = colcon_install.share
+    files = [p for d in SHARED_DIRS for p in sorted((REPO / d).rglob('*'))
+             if p.is_file() and '__pycache__' not in p.parts
+             and p.relative_to(REPO).as_posix() not in NOT_SHARED]
+    missing = [p.relative_to(REPO).as_posix() for p in files
+               if not (share / p.relative_to(REPO)).is_file()]
+    assert not missing, f'not installed to share/{PKG}: {missing} (setup.py data_files)'
+    for p in files:
+        assert (share / p.relative_to(REPO)).read_bytes() == p.read_bytes(), p
+    names = {p.relative_to(REPO).as_posix() for p in files}
+    assert {'config/nodes.yaml', 'launch/bellow_ancf.launch.py', 'rviz/bellow_ancf.rviz',
+            'data/tensile_test_segment.csv', 'data/one_segment_bag/metadata.yaml'} <= names
 
 
 def test_node_executables_installed(colcon_install):
+    colcon_install = colcon_install.prefix
     lib = colcon_install / 'lib' / PKG
     missing = [exe for exe in NODE_EXECUTABLES if not (lib / exe).is_file()]
     have = sorted(p.name for p in lib.iterdir()) if lib.is_dir() else None
@@ -159,6 +149,7 @@ def test_ros2_run_lookup_and_shipped_robots(colcon_install, tmp_path):
     ``ros2 run`` takes the prefix that holds the marker, then lib/<pkg>/<exe>
     in it.
     """
+    colcon_install = colcon_install.prefix
     code = f'''
 import os, sys
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
@@ -185,6 +176,7 @@ print('ROBOT', load_robot('two_segment').source)
 
 
 def test_installed_executable_starts_and_stops_cleanly(colcon_install, tmp_path):
+    colcon_install = colcon_install.prefix
     exe = colcon_install / 'lib' / PKG / 'trajectory_publisher'
     if not exe.is_file():
         pytest.fail(f'{exe} not installed (see test_node_executables_installed)')

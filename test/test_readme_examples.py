@@ -3,16 +3,27 @@
 Commands are collected from the code blocks of ``README.md`` and of every
 ``docs/*.md`` page.
 
-* ``bellow-ancf ...`` lines: concrete ones (no placeholder left once the
-  optional ``[...]`` parts are dropped) run and exit 0, except the long
-  studies listed in ``SLOW`` (tested with smaller inputs in
-  ``test/cli/test_cli_tools.py``); for every line each documented option is in
-  the subcommand's ``--help``.
+* ``ros2 run bellow_ancf_ros bellow-ancf ...`` lines (the command line is
+  written that way everywhere: after a colcon install the console script is
+  in ``lib/bellow_ancf_ros``, not on ``PATH``): concrete ones (no placeholder
+  left once the optional ``[...]`` parts are dropped) run as written, in bash,
+  after ``source install/setup.sh`` of a colcon build of this checkout (the
+  session's ``colcon_install`` fixture), from a directory outside any source
+  tree (a line that names a file an earlier line of its code block names runs
+  after it, in its directory; the others two at a time), with a
+  ``ros2`` command that does what ``ros2 run`` and ``ros2 pkg prefix`` do
+  (``test/support/ros2_shim.py``), so that shipped files are found as
+  ``$(ros2 pkg prefix --share bellow_ancf_ros)/...``; they must exit 0.  Lines
+  on the user's own recordings (:data:`USER_RECORDINGS`) are not run
+  (``test/cli/test_cli_calibrate.py`` runs ``calibrate`` on simulated ones).
+  For every line each documented option is in the subcommand's ``--help``.
 * ``.venv/bin/python -m bellow_ancf_ros.nodes...`` lines start as processes,
   come up and stop cleanly on Ctrl-C.
-* ``ros2 run`` lines (a ROS install is needed for the ``ros2`` command):
-  the same node class starts with the same ``--ros-args`` and the
-  parameters given there are in effect; ``ros2 param set`` values are
+* ``ros2 run bellow_ancf_ros <node>`` lines: run as written on the colcon
+  install (as above; each in its own ROS domain), the node comes up and ends
+  with status 0 on Ctrl-C; and in-process, the same node class starts with the
+  same ``--ros-args`` (shipped files from the install) and the parameters
+  given there are in effect; ``ros2 param set`` values are
   accepted; ``ros2 lifecycle set`` transitions succeed; the ``ros2 topic pub``
   target is reachable on the robot the block's inverse node (``ros2 run`` or
   ``ros2 launch`` line) runs.  ``ros2 launch`` lines:
@@ -23,6 +34,7 @@ Commands are collected from the code blocks of ``README.md`` and of every
 import os
 import random
 import re
+from concurrent.futures import ThreadPoolExecutor
 import shlex
 import signal
 import subprocess
@@ -61,15 +73,20 @@ NODES = {'mocap_relay': MocapRelay, 'regulator_driver': RegulatorDriver,
          'excitation_publisher': ExcitationPublisher,
          'simulated_robot_node': SimulatedRobotNode,
          'wrench_estimator_node': WrenchEstimatorNode}
-#: studies that take 25-45 s on the 2-core machine; only their options are checked here
-SLOW = ('workspace', 'compare-pcc')
-#: commands that read the user's own recording; test/test_cli_calibrate.py runs them on
-#: simulated recordings (CSV and both bag storages); only their options are checked here
-NEEDS_RECORDING = ('calibrate',)
+#: the user's own recordings a documented line reads (docs/calibration.md); such lines are
+#: only checked for their options (test/cli/test_cli_calibrate.py runs calibrate on simulated
+#: recordings, CSV and both bag storages)
+USER_RECORDINGS = ('my_robot_bag', 'samples.csv')
+#: the shipped files' directory as the documentation writes it (a colcon install's share dir)
+SHARE = '$(ros2 pkg prefix --share bellow_ancf_ros)'
 STARTED = {'inverse_kinetostatic_node': 'active: pressure commands enabled',
            'forward_kinetostatic_node': 'listening on',
            'trajectory_publisher': 'publishing',
-           'simulated_robot_node': 'simulating robot'}
+           'simulated_robot_node': 'simulating robot',
+           'excitation_publisher': 'excitation of robot',
+           'mocap_relay': 'relaying mocap_pose',
+           'regulator_driver': 'regulator driver for',
+           'wrench_estimator_node': 'estimating the tip'}
 
 
 def code_lines(documents=None):
@@ -100,13 +117,22 @@ def is_concrete(args):
     return not any(re.fullmatch(r'[A-Z][A-Z0-9]*', a) or a == '...' for a in args)
 
 
-#: the command line as a ROS user runs it after installation: the same command
+#: the command line as a ROS user runs it after installation
 ROS2_RUN_CLI = 'ros2 run bellow_ancf_ros bellow-ancf '
 
 
-def cli_lines():
-    return [line.replace(ROS2_RUN_CLI, 'bellow-ancf ', 1) for _, line in code_lines()
-            if line.startswith(('bellow-ancf ', ROS2_RUN_CLI))]
+def cli_lines(with_blocks=False):
+    """The documented command lines, as ``bellow-ancf ...`` with ``SHARE`` for the share dir."""
+    out = [(block, line.replace(ROS2_RUN_CLI, 'bellow-ancf ', 1).replace(SHARE, 'SHARE'))
+           for block, line in code_lines() if line.startswith(ROS2_RUN_CLI)]
+    return out if with_blocks else [line for _, line in out]
+
+
+def test_the_command_line_is_written_as_ros2_run():
+    """Bare ``bellow-ancf`` is not on PATH after a colcon install; no code block uses it."""
+    bare = [(block, line) for block, line in code_lines()
+            if line.startswith('bellow-ancf') or ' data/' in line or ' config/' in line]
+    assert not bare, bare
 
 
 def test_readme_has_the_examples_this_file_checks():
@@ -147,32 +173,73 @@ def test_every_documented_cli_option_exists(capsys):
             assert opt in helps[sub], (line, opt)
 
 
-def test_concrete_cli_examples_run(tmp_path):
-    ran = []
-    procs = []
-    for line in cli_lines():
-        args = shlex.split(strip_optional(line))[1:]
-        if not is_concrete(args) or args[0] in SLOW + NEEDS_RECORDING:
+def _files_of(line):
+    """The files a command line names (``.yaml``, ``.csv``, ``.png``, a bag directory)."""
+    return {a for a in shlex.split(line) if a.endswith(('.yaml', '.yml', '.csv', '.png', '_bag'))}
+
+
+def _concrete_chains():
+    """The documented CLI lines that run, as written, in chains.
+
+    A line joins the chain of the last earlier line of its code block that
+    names one of its files (it may read what that line wrote); other lines
+    start their own chain.  Chains are ``(name, [lines])``, in document order.
+    """
+    chains = []
+    for block, line in cli_lines(with_blocks=True):
+        args = shlex.split(strip_optional(line))
+        if not is_concrete(args[1:]) or any(r in args for r in USER_RECORDINGS):
             continue
-        # relative data paths are the repository's; outputs go to a scratch directory
-        args = [str(REPO / a) if a.startswith('data/') else a for a in args]
-        procs.append((line, subprocess.Popen(
-            [sys.executable, '-m', 'bellow_ancf_ros.cli', *args], cwd=tmp_path,
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            stdin=subprocess.DEVNULL)))
-        ran.append(args[0])
-        if len(procs) >= 2:      # two cores
-            _finish(procs.pop(0))
-    for p in procs:
-        _finish(p)
-    assert {'identify', 'convergence', 'track'} <= set(ran), ran
+        written = strip_optional(line).replace('bellow-ancf ', ROS2_RUN_CLI, 1)
+        written = written.replace('SHARE', SHARE)
+        mine = [c for c in chains if c[0] == block
+                and any(_files_of(x) & _files_of(written) for x in c[2])]
+        if mine:
+            mine[-1][2].append(written)
+        else:
+            chains.append((block, len(chains), [written]))
+    return [(f'{doc.replace("/", "_")}_{b}_{k}', lines) for (doc, b), k, lines in chains]
 
 
-def _finish(item):
-    line, proc = item
-    out, err = proc.communicate(timeout=300)
-    assert proc.returncode == 0, (line, err[-2000:])
-    assert out.strip(), line
+def _run_chain(install, name, lines):
+    """Run the lines of one chain in order, in a fresh directory outside the checkout."""
+    cwd = install.outside / name
+    cwd.mkdir()
+    done = []
+    for line in lines:
+        res = install.shell(line, cwd)
+        assert res.returncode == 0, (name, line, res.stderr[-2000:])
+        assert res.stdout.strip(), (name, line, res.stderr[-2000:])
+        done.append((line, res))
+    return done
+
+
+def test_documented_cli_lines_run_on_a_colcon_install(colcon_install):
+    """Each concrete ``ros2 run bellow_ancf_ros bellow-ancf`` line runs as written."""
+    chains = _concrete_chains()
+    ran = {shlex.split(line)[4] for _, lines in chains for line in lines}
+    assert {'warm-up', 'identify', 'calibrate', 'convergence', 'workspace', 'compare-pcc',
+            'track'} <= ran, ran
+    readme = [c for c in chains if any('one_segment_bag' in x for x in c[1])]
+    assert len(readme) == 1 and len(readme[0][1]) == 3, chains   # identify x2 -> calibrate
+    # warm-up first, alone: it compiles the install's kernels, once
+    first = [c for c in chains if any(' warm-up' in x for x in c[1])][0]
+    chains.remove(first)
+    results = _run_chain(colcon_install, *first)
+    warm = results[0][1]
+    # the installed package ran (its kernel cache is in the install), not the checkout's
+    assert str(colcon_install.prefix) in warm.stdout, warm.stdout
+    with ThreadPoolExecutor(2) as pool:       # two cores
+        for done in pool.map(lambda chain: _run_chain(colcon_install, *chain), chains):
+            results += done
+    outputs = {line: res.stdout for line, res in results}
+    # README's "Your own robot": identify writes my_robot.yaml, calibrate reads it and the bag
+    assert 'position RMSE' in outputs[readme[0][1][-1]]
+    written = colcon_install.outside / readme[0][0] / 'my_robot_calibrated.yaml'
+    from bellow_ancf_ros.core import load_robot
+    calibrated = load_robot(str(written))
+    assert calibrated.name == 'my_robot_calibrated' and calibrated.mocap_frame is not None
+    assert '# unpressurised actuator length [m]' in written.read_text()   # comments kept
 
 
 # ------------------------------------------------------------------ nodes
@@ -224,11 +291,16 @@ def test_venv_node_commands_start_and_stop(tmp_path):
     assert codes == [0] * len(procs), [log.read_text() for _, _, log, _ in procs]
 
 
-def _ros2_run_lines():
-    """(block, executable, ros-args) of every ``ros2 run bellow_ancf_ros`` line."""
+def _ros2_run_lines(share=None):
+    """(block, executable, ros-args) of every ``ros2 run bellow_ancf_ros`` node line.
+
+    ``$(ros2 pkg prefix --share bellow_ancf_ros)`` becomes ``share``.
+    """
     out = []
     for block, line in code_lines():
         if line.startswith('ros2 run bellow_ancf_ros ') and not line.startswith(ROS2_RUN_CLI):
+            if share is not None:
+                line = line.replace(SHARE, str(share))
             args = shlex.split(line)
             out.append((block, args[3], args[4:]))
     return out
@@ -266,10 +338,11 @@ def _given_parameters(ros_args, node_name):
     return out
 
 
-def test_ros2_run_lines_start_with_their_parameters():
-    lines = _ros2_run_lines()
+def test_ros2_run_lines_start_with_their_parameters(colcon_install):
+    """The node starts with the line's arguments (shipped files: the install's share dir)."""
+    lines = _ros2_run_lines(colcon_install.share)
+    assert any(colcon_install.share.as_posix() in ' '.join(a) for _, _, a in lines)
     for _, exe, ros_args in lines:
-        ros_args = [str(REPO / a) if a.startswith('config/') else a for a in ros_args]
         node, ctx = _start(NODES[exe], ros_args)
         try:
             for name, value in _given_parameters(ros_args, exe).items():
@@ -278,6 +351,81 @@ def test_ros2_run_lines_start_with_their_parameters():
                 assert node.is_active
         finally:
             _stop(node, ctx)
+
+
+def _documented_base_frame_nodes():
+    """``(nodes with, nodes without)`` the ``base_frame`` parameter, as docs/ros.md says."""
+    text = (REPO / 'docs' / 'ros.md').read_text()
+    bullet = re.search(r'^\* `base_frame` .*?;$', text, re.M | re.S).group(0)
+    with_part, _, without_part = bullet.partition('(not')
+    return (set(re.findall(r'`(\w+_\w+)`', with_part)) - {'base_frame'},
+            set(re.findall(r'`(\w+_\w+)`', without_part)))
+
+
+def test_documented_common_parameters_are_declared():
+    """Every node declares ``robot_config``; ``base_frame`` exactly those docs/ros.md names."""
+    with_frame, without_frame = _documented_base_frame_nodes()
+    assert with_frame | without_frame == set(NODES) and not with_frame & without_frame
+    for exe, cls in NODES.items():
+        node, ctx = _start(cls, [])
+        try:
+            assert node.has_parameter('robot_config'), exe
+            assert node.has_parameter('base_frame') == (exe in with_frame), exe
+            if exe in with_frame:
+                assert node.get_parameter('base_frame').value == 'base', exe
+        finally:
+            _stop(node, ctx)
+
+
+def test_documented_ros2_run_node_lines_start_on_a_colcon_install(colcon_install):
+    """Each ``ros2 run bellow_ancf_ros <node> ...`` line, as written, starts the installed node.
+
+    In bash after ``source install/setup.sh``, from a directory outside the
+    source tree, each line in its own ``ROS_DOMAIN_ID`` (as if run alone); the
+    node must come up (its first log line) and end with status 0 on Ctrl-C.
+    """
+    lines = [line for _, line in code_lines()
+             if line.startswith('ros2 run bellow_ancf_ros ') and not line.startswith(ROS2_RUN_CLI)]
+    assert len(lines) >= 8 and any(SHARE in line for line in lines)
+    domains = random.sample(range(0, 102), len(lines))
+    procs = []
+    for k, (line, domain) in enumerate(zip(lines, domains)):
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
+                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                   PATH=str(colcon_install.bin) + os.pathsep + os.environ.get('PATH', ''))
+        env.pop('AMENT_PREFIX_PATH', None)
+        env.pop('PYTHONPATH', None)
+        log = colcon_install.root / f'node_line_{k}.log'
+        script = (f'. {colcon_install.install / "setup.sh"} && cd {colcon_install.outside} '
+                  f'&& exec {line}')
+        with open(log, 'w') as out:
+            procs.append((line, log, subprocess.Popen(
+                ['bash', '-c', script], env=env, stdout=out, stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_default_sigint)))
+    try:
+        deadline = time.monotonic() + 120.0
+        for line, log, proc in procs:
+            marker = STARTED[shlex.split(line)[3]]
+            while marker not in log.read_text():
+                assert proc.poll() is None, (line, log.read_text())
+                assert time.monotonic() < deadline, (line, log.read_text())
+                time.sleep(0.1)
+            # the installed node ran, not the checkout's module
+            assert str(REPO) not in log.read_text(), log.read_text()
+    finally:
+        for *_, proc in procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGINT)
+        codes = []
+        for _, _, proc in procs:
+            try:
+                codes.append(proc.wait(20.0))
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                codes.append(proc.wait(5.0))
+    failed = [(line, log.read_text()[-1500:])
+              for (line, log, _), code in zip(procs, codes) if code]
+    assert codes == [0] * len(procs), failed
 
 
 def _block_robots():

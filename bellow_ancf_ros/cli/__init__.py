@@ -22,10 +22,17 @@ This interface is a contract other programs script against:
   warm-started from the previous converged solution, and flush one JSON line
   per row.  A bad row is reported on stderr with its line number and skipped;
   the other rows are still answered.
-* Exit status: 0 success; 1 a single solve did not converge (the result is
-  still printed, ``converged`` false) or the solver failed internally; 2 bad
-  input, reported as one line ``bellow-ancf: error: ...`` on stderr (in batch
-  mode: 2 at the end if any row was bad).
+* Exit status, one rule for every subcommand: 0 every result asked for was
+  reached; 1 a result asked for was not reached, the result still printed
+  (``forward``: no converged equilibrium; ``inverse``: the target not reached,
+  stably: ``reachable``/``success`` false, the best in-limit pressures
+  printed; a batch: any such row; ``track``: any point; ``workspace``: any
+  point without a stable equilibrium; ``identify da``: no root; a robot file
+  refused) or the solver failed internally; 2 bad input, reported as one
+  line ``bellow-ancf: error: ...`` on stderr (in batch mode: 2 at the end if
+  any row was bad; the good rows are still answered).  Findings of a study
+  (``compare-pcc``'s unusable points, ``stiffness``'s buckling payloads) are
+  results, exit 0.
 * One module per command family, each adding its subcommands through its
   ``register(subparsers)`` (:data:`COMMAND_FAMILIES`, in help order):
   :mod:`.solve` (``forward``, ``inverse``), :mod:`.loads` (``compliance``,
@@ -66,7 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description='Kinetostatic ANCF model of bellow-shaped soft continuum robots: '
                     'forward (pressures -> pose) and inverse (pose -> pressures) problems.',
-        epilog='Exit status: 0 success, 1 a solve did not converge, 2 bad input.',
+        epilog='Exit status: 0 every result asked for was reached; 1 a result asked for was '
+               'not reached (a solve that did not converge, an inverse target not reached; '
+               'the result is still printed); 2 bad input.',
     )
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for family in COMMAND_FAMILIES:

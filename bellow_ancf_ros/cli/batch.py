@@ -83,11 +83,13 @@ def row_numbers(cells, names) -> list[float]:
     return values
 
 
-def run_batch(rows: CsvRows, parse_row, solve_row, to_dict) -> int:
+def run_batch(rows: CsvRows, parse_row, solve_row, to_dict, reached) -> int:
     """Solve every row, warm-starting from the previous converged result; JSON Lines out.
 
     ``parse_row(cells) -> job`` and ``solve_row(job, previous) -> result`` raise
-    :class:`UsageError` for a bad row; ``to_dict(result)`` gives the JSON record.
+    :class:`UsageError` for a bad row; ``to_dict(result)`` gives the JSON record;
+    ``reached(result)``: whether the row got what was asked for (else exit status 1
+    at the end, :data:`~bellow_ancf_ros.cli.common.EXIT_FAILED`; a bad row: 2).
     """
     bad = failed = 0
     previous = None
@@ -109,6 +111,8 @@ def run_batch(rows: CsvRows, parse_row, solve_row, to_dict) -> int:
                 continue
             if result.converged:
                 previous = result
+            if not reached(result):
+                failed += 1
             record = to_dict(result)
             record['line'] = line
             emit_json(record)

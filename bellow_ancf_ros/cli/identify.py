@@ -5,12 +5,16 @@
     bellow-ancf identify stiffness --csv FILE [--order N] [--force-per segment|actuator]
                                    [--gravity-share-n F] [--l0-m L] [--config C]
                                    [--plot PNG] [--yaml-out FILE] [--json]
-    bellow-ancf identify deff --csv FILE [--confidence C] [--config C] [--plot PNG] [--json]
+    bellow-ancf identify deff --csv FILE [--confidence C] [--config C] [--plot PNG]
+                              [--yaml-out FILE] [--json]
     bellow-ancf identify da --drop-mm D --tip-mass-kg M [--config C] [--elements N] [--json]
     bellow-ancf identify damping (--csv FILE | --bag DIR) ...   (module :mod:`.dynamics`)
 
 A readable table on stdout, or with ``--json`` one JSON object on one line
-(SI units, non-finite numbers as ``null``); plots are PNG files.
+(SI units, non-finite numbers as ``null``); plots are PNG files.  ``--yaml-out``
+writes the ``--config`` robot file with the identified values in their places
+(its comments and layout kept; :func:`~bellow_ancf_ros.cli.output.robot_file_text`),
+named after the output file.
 
 Data files are CSV with ``#`` comment lines, one header row of column names
 and numeric rows:
@@ -28,7 +32,6 @@ and numeric rows:
 from __future__ import annotations
 
 import numpy as np
-import yaml
 
 from ..core import Stage1
 from ..core import identification as ident
@@ -36,7 +39,8 @@ from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_out, emit
                      finite_float, fraction, int_at_least, load_config, nonneg_float, one_line,
                      positive_float, print_lines, run_study, warn)
 from .dynamics import register_identify_damping
-from .output import figure, fmt, open_out, save_figure, table
+from .output import (figure, fmt, robot_file_text, robot_name_for, save_figure, source_text,
+                     table, write_text)
 
 
 # -------------------------------------------------------- data files
@@ -72,11 +76,7 @@ def _cmd_identify_stiffness(args):
     fit = run_study(ident.fit_stiffness, dl, force, order=args.order, l0=l0,
                     force_per=args.force_per, n_actuators=n_a, gravity_share_n=fg)
     # is the derived k(lam) usable by stage 1 of this robot?
-    try:
-        Stage1(fit.k_coeffs, l0, cfg.d_eff, cfg.p_min, cfg.p_max)
-        stage1_ok, stage1_msg = True, 'P -> lam monotonic over the pressure limits'
-    except ValueError as exc:
-        stage1_ok, stage1_msg = False, one_line(exc)
+    stage1_ok, stage1_msg = _stage1_check(fit.k_coeffs, l0, cfg.d_eff, cfg)
     d = fit.to_dict()
     d.update(csv=args.csv, config=cfg.name, stage1_ok=stage1_ok, stage1_message=stage1_msg,
              yaml_out=args.yaml_out)
@@ -87,8 +87,15 @@ def _cmd_identify_stiffness(args):
                  f'{stage1_msg}')
             status = EXIT_FAILED
         else:
-            fitted = cfg.replace(l0=float(l0), stiffness_coeffs=tuple(fit.k_coeffs))
-            _write_robot_yaml(args.yaml_out, fitted, fit, args.csv)
+            fitted = cfg.replace(l0=float(l0),
+                                 stiffness_coeffs=tuple(_digits(c) for c in fit.k_coeffs))
+            _write_robot_file(args.yaml_out, cfg, fitted, [
+                f'Robot description written by `bellow-ancf identify stiffness` from {args.csv}:',
+                'actuator.l0_m and actuator.stiffness_coeffs_n_per_m (k(lam) ascending in lam, '
+                'N/m) come from',
+                f'the fit F(dl) = {ident.poly_text([0.0] + list(fit.f_coeffs), "dl")} '
+                f'(R^2 = {fit.r2:.6f}, RMS = {fit.rms_n:.4g} N);',
+                f'the rest is robot {cfg.name} ({cfg.source}).'])
     if args.plot:
         _plot_stiffness(fit, args.plot)
     if args.json:
@@ -115,22 +122,33 @@ def _cmd_identify_stiffness(args):
         f'stage 1       {"ok" if stage1_ok else "NOT usable"}: {stage1_msg}',
     ]
     if args.yaml_out and stage1_ok:
-        lines.append(f'robot file    {args.yaml_out} (robot {cfg.name} with this l0 and k(lam))')
+        lines.append(f'robot file    {args.yaml_out}: robot {robot_name_for(args.yaml_out)!r}, '
+                     f'{cfg.name} with this l0 and k(lam)')
     if args.plot:
         lines.append(f'plot          {args.plot}')
     print_lines(lines)
     return status
 
 
-def _write_robot_yaml(path, cfg, fit, source):
-    text = yaml.safe_dump(cfg.to_dict(), sort_keys=False, default_flow_style=None)
-    header = (f'# Robot description written by `bellow-ancf identify stiffness` from {source}.\n'
-              '# actuator.l0_m and actuator.stiffness_coeffs_n_per_m '
-              '(k(lam) ascending in lam, N/m)\n'
-              f'# come from the fit F(dl) = {ident.poly_text([0.0] + list(fit.f_coeffs), "dl")}\n'
-              f'# (R^2 = {fit.r2:.6f}, RMS = {fit.rms_n:.4g} N); the rest is robot {cfg.name}.\n')
-    with open_out(path, '--yaml-out') as fh:
-        fh.write(header + text)
+def _stage1_check(k_coeffs, l0, d_eff, cfg):
+    """``(usable, message)``: whether stage 1 of ``cfg`` with these values is monotonic."""
+    try:
+        Stage1(k_coeffs, l0, d_eff, cfg.p_min, cfg.p_max)
+    except ValueError as exc:
+        return False, one_line(exc)
+    return True, 'P -> lam monotonic over the pressure limits'
+
+
+def _digits(value):
+    """``value`` to 6 significant digits (far below a fit's standard error) for a robot file."""
+    return float(f'{value:.6g}')
+
+
+def _write_robot_file(path, cfg, fitted, header):
+    """Write robot ``fitted`` (``cfg`` with identified values) in the layout of ``cfg``'s file."""
+    d = fitted.to_dict()
+    d['name'] = robot_name_for(path)
+    write_text(path, '--yaml-out', robot_file_text(d, header, source_text(cfg.source)))
 
 
 def _plot_stiffness(fit, path):
@@ -158,22 +176,38 @@ def _cmd_identify_deff(args):
     data = _read_data(args.csv)
     p, _ = _column(data, args.csv, [('pressure_kpa', 1e3), ('pressure_pa', 1.0)], 'pressure')
     source = 'force_n'
+    cfg = load_config(args) if args.yaml_out or 'force_n' not in data else None
     if 'force_n' in data:
         f = data['force_n']
     else:
         length, source = _column(data, args.csv, [('length_mm', 1e-3), ('length_m', 1.0)],
                                  'actuation force (force_n) or length')
-        cfg = load_config(args)
         f = ident.actuation_force_from_length(length, cfg.stiffness_coeffs, cfg.l0,
                                               args.gravity_share_n)
     fit = run_study(ident.fit_deff, p, f, confidence=args.confidence)
     d = fit.to_dict()
-    d.update(csv=args.csv, force_source=source)
+    d.update(csv=args.csv, force_source=source, yaml_out=args.yaml_out)
+    status = EXIT_OK
+    if args.yaml_out:
+        stage1_ok, stage1_msg = _stage1_check(cfg.stiffness_coeffs, cfg.l0, fit.d_eff_m, cfg)
+        d.update(config=cfg.name, stage1_ok=stage1_ok, stage1_message=stage1_msg)
+        if not stage1_ok:
+            warn('--yaml-out not written: the fitted D_eff is not usable with this robot: '
+                 f'{stage1_msg}')
+            status = EXIT_FAILED
+        else:
+            lo, hi = fit.d_eff_ci_m
+            _write_robot_file(args.yaml_out, cfg, cfg.replace(d_eff=_digits(fit.d_eff_m)), [
+                f'Robot description written by `bellow-ancf identify deff` from {args.csv}:',
+                f'actuator.d_eff_mm comes from the fit F_a = pi/4 D_eff^2 P + c '
+                f'(D_eff = {fit.d_eff_m * 1e3:.4f} mm, {100 * fit.confidence:g} % interval '
+                f'[{lo * 1e3:.4f}, {hi * 1e3:.4f}] mm, R^2 = {fit.r2:.6f});',
+                f'the rest is robot {cfg.name} ({cfg.source}).'])
     if args.plot:
         _plot_deff(fit, args.plot)
     if args.json:
         emit_json(d)
-        return EXIT_OK
+        return status
     lo, hi = fit.d_eff_ci_m
     lines = [
         f'data          {args.csv}: {fit.n_points} points, {fit.pressure_range_pa[0] / 1e3:g} .. '
@@ -184,10 +218,13 @@ def _cmd_identify_deff(args):
         f'{100 * fit.confidence:g} % confidence interval [{lo * 1e3:.4f}, {hi * 1e3:.4f}] mm',
         f'fit quality   R^2 = {fit.r2:.6f}, RMS residual = {fit.rms_n:.4g} N',
     ]
+    if args.yaml_out and status == EXIT_OK:
+        lines.append(f'robot file    {args.yaml_out}: robot {robot_name_for(args.yaml_out)!r}, '
+                     f'{cfg.name} with this D_eff')
     if args.plot:
         lines.append(f'plot          {args.plot}')
     print_lines(lines)
-    return EXIT_OK
+    return status
 
 
 def _plot_deff(fit, path):
@@ -271,7 +308,8 @@ def _register_stiffness(isub):
                    help="unpressurised actuator length [m]; default: the robot file's l0")
     add_config(p)
     p.add_argument('--yaml-out', metavar='FILE',
-                   help='write a robot file (--config robot with the identified l0 and k(lam))')
+                   help='write a robot file: the --config robot file with the identified l0 and '
+                        'k(lam) in place (comments kept), named after FILE')
     add_out(p)
     p.set_defaults(func=_cmd_identify_stiffness)
 
@@ -294,6 +332,9 @@ def _register_deff(isub):
     p.add_argument('--gravity-share-n', type=finite_float, default=0.0, metavar='F',
                    help='gravity load F_g [N] subtracted in length mode; default: %(default)s')
     add_config(p)
+    p.add_argument('--yaml-out', metavar='FILE',
+                   help='write a robot file: the --config robot file with the identified D_eff '
+                        'in place (comments kept), named after FILE')
     add_out(p)
     p.set_defaults(func=_cmd_identify_deff)
 

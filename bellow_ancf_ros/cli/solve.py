@@ -137,7 +137,17 @@ def _cmd_forward(args) -> int:
         emit_json(d)
     else:
         print_lines(_forward_summary(model, d, seconds))
-    return EXIT_OK if fw.converged else EXIT_FAILED
+    return EXIT_OK if _forward_reached(fw) else EXIT_FAILED
+
+
+def _forward_reached(fw) -> bool:
+    """What ``forward`` was asked for: a converged equilibrium (exit status 0)."""
+    return bool(fw.converged)
+
+
+def _inverse_reached(inv) -> bool:
+    """What ``inverse`` was asked for: pressures that reach the target, stably (exit status 0)."""
+    return bool(inv.success and inv.reachable)
 
 
 def _forward_batch(args, model: RobotModel) -> int:
@@ -159,7 +169,7 @@ def _forward_batch(args, model: RobotModel) -> int:
         return call_solver(solve_forward, model, pressures, payload_kg=args.payload_kg,
                            warm_start=previous, tip_force_n=args.tip_force_n)
 
-    return run_batch(rows, parse_row, solve_row, lambda fw: fw.to_dict())
+    return run_batch(rows, parse_row, solve_row, lambda fw: fw.to_dict(), _forward_reached)
 
 
 # ----------------------------------------------------------- inverse
@@ -189,7 +199,7 @@ def _cmd_inverse(args) -> int:
         emit_json(d)
     else:
         print_lines(_inverse_summary(model, d, seconds))
-    return EXIT_OK if inv.converged else EXIT_FAILED
+    return EXIT_OK if _inverse_reached(inv) else EXIT_FAILED
 
 
 def _inverse_dict(inv) -> dict:
@@ -245,7 +255,7 @@ def _inverse_batch(args, model: RobotModel) -> int:
                            payload_kg=args.payload_kg, warm_start=previous,
                            tip_force_n=args.tip_force_n)
 
-    return run_batch(rows, parse_row, solve_row, _inverse_dict)
+    return run_batch(rows, parse_row, solve_row, _inverse_dict, _inverse_reached)
 
 
 # ------------------------------------------------------------ parser
@@ -282,7 +292,8 @@ def register(subparsers) -> None:
                     'or more segments, target z-axis -> pressures within the hardware limits.  '
                     'With --targets-csv, one solve per CSV row (header row; columns x,y,z and, '
                     'for two or more segments, zx,zy,zz), warm-started along the rows, printed '
-                    'as JSON Lines.',
+                    'as JSON Lines.  Exit status 1 when a target is not reached (the best '
+                    'in-limit pressures are still printed, reachable false).',
     )
     _add_common(inv)
     tgt = inv.add_mutually_exclusive_group(required=True)

@@ -29,7 +29,8 @@ from ..core import limit_blas_threads, studies
 from .common import (EXIT_FAILED, EXIT_OK, add_config, add_out, add_quiet, emit_json,
                      int_at_least, load_config, payload_mass, positive_float, print_lines,
                      progress, run_study)
-from .output import actuator_columns, figure, open_out, save_figure, table
+from .output import (actuator_columns, figure, fit_3d_axes, legend_outside, open_out,
+                     save_figure, table)
 
 
 # ------------------------------------------------------- convergence
@@ -70,7 +71,7 @@ def _cmd_convergence(args):
 
 
 def _plot_convergence(res, path):
-    fig = figure(7.5, 4.5)
+    fig = figure(7.5, 5.0, constrained=True)
     ax = fig.add_subplot(1, 1, 1)
     ns = np.array([r.n for r in res.rows])
     err = np.array([np.nan if r.error_m is None else max(r.error_m, 1e-12)
@@ -89,9 +90,10 @@ def _plot_convergence(res, path):
     ax.set_ylabel(f'tip error vs n = {res.reference_n} [mm]', color='tab:blue')
     ax.grid(True, alpha=0.3, which='both')
     ax2 = ax.twinx()
-    ax2.plot(ns, [r.time_s * 1e3 for r in res.rows], 's-', color='tab:red', ms=4)
+    ax2.plot(ns, [r.time_s * 1e3 for r in res.rows], 's-', color='tab:red', ms=4,
+             label='solve time (right axis)')
     ax2.set_ylabel('solve time [ms]', color='tab:red')
-    ax.legend(fontsize=8, loc='upper right')
+    legend_outside(fig, ax, 'lower center', ncol=3)
     ax.set_title(f'element convergence ({res.config_name})')
     save_figure(fig, path)
 
@@ -158,31 +160,61 @@ def _payload_colors(n):
     return [cmap(0.15 + 0.7 * k / max(1, n - 1)) for k in range(n)]
 
 
+def _scheme_colors(n):
+    """``n`` distinct colours (tab10 up to 10, tab20 up to 20, then spread over a hue circle)."""
+    from matplotlib import colormaps
+    if n <= 10:
+        return [colormaps['tab10'](k) for k in range(n)]
+    if n <= 20:
+        return [colormaps['tab20'](k) for k in range(n)]
+    return [colormaps['hsv'](k / n) for k in range(n)]
+
+
+#: line styles of the payloads in the workspace plot (cycled)
+_PAYLOAD_STYLES = ('-', '--', ':', '-.')
+
+
 def _plot_workspace(res, path):
-    fig = figure(11, 5)
+    """Boundary curves: one colour per actuation scheme, one line style per payload."""
+    from matplotlib.lines import Line2D
+
+    n_schemes = len(res['schemes'])
+    fig = figure(13, 5.5, constrained=True)
     ax3 = fig.add_subplot(1, 2, 1, projection='3d')
     ax2 = fig.add_subplot(1, 2, 2)
-    colors = _payload_colors(len(res['payloads_kg']))
-    for m, col in zip(res['payloads_kg'], colors):
-        for k in range(len(res['schemes'])):
+    colors = _scheme_colors(n_schemes)
+    styles = [_PAYLOAD_STYLES[i % len(_PAYLOAD_STYLES)] for i in range(len(res['payloads_kg']))]
+    drawn = []
+    for m, style in zip(res['payloads_kg'], styles):
+        for k in range(n_schemes):
             pts = np.array([r['position_m'] for r in res['rows']
                             if r['payload_kg'] == m and r['scheme'] == k
                             and r['converged'] and r['stable'] is not False]) * 1e3
             if pts.size == 0:
                 continue
-            label = f'{m * 1e3:g} g' if k == 0 else None
-            ax3.plot(pts[:, 0], pts[:, 1], pts[:, 2], '-', color=col, lw=1, label=label)
-            ax2.plot(pts[:, 0], pts[:, 1], '-', color=col, lw=1, label=label)
+            drawn.append(pts)
+            ax3.plot(pts[:, 0], pts[:, 1], pts[:, 2], style, color=colors[k], lw=1)
+            ax2.plot(pts[:, 0], pts[:, 1], style, color=colors[k], lw=1)
     ax3.set_xlabel('x [mm]')
     ax3.set_ylabel('y [mm]')
     ax3.set_zlabel('z [mm]')
     ax3.set_title(f'workspace boundaries ({res["config"]})')
-    ax3.legend(fontsize=8, title='payload')
+    if drawn:
+        fit_3d_axes(ax3, np.concatenate(drawn), min_span=5.0)
     ax2.set_xlabel('x [mm]')
     ax2.set_ylabel('y [mm]')
     ax2.set_aspect('equal', adjustable='datalim')
     ax2.set_title('top view')
     ax2.grid(True, alpha=0.3)
+    handles = [Line2D([], [], color=colors[k], lw=1.5, label=f'{k + 1}: {name}')
+               for k, name in enumerate(res['schemes'])]
+    fig.legend(handles=handles, loc='outside right upper', fontsize=7, frameon=False,
+               title='actuation scheme', title_fontsize=8)
+    if len(res['payloads_kg']) > 1:
+        fig.legend(handles=[Line2D([], [], color='k', ls=st, lw=1, label=f'{m * 1e3:g} g')
+                            for m, st in zip(res['payloads_kg'], styles)],
+                   loc='outside right lower', fontsize=7, frameon=False, title='payload',
+                   title_fontsize=8)
     save_figure(fig, path)
 
 
@@ -242,7 +274,7 @@ def _cmd_compare_pcc(args):
 
 
 def _plot_pcc(res, path):
-    fig = figure(11, 4.8)
+    fig = figure(11, 5.4, constrained=True)
     ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     colors = _payload_colors(len(res['payloads_kg']))
     rows = res['rows']
@@ -275,12 +307,11 @@ def _plot_pcc(res, path):
     ax1.set_ylabel('z [mm]')
     ax1.set_title('end effector, side view (x-z)')
     ax1.grid(True, alpha=0.3)
-    ax1.legend(fontsize=8)
+    legend_outside(fig, ax1, 'lower center', ncol=len(res['payloads_kg']) + 1)
     ax2.set_xlabel('actuation index (elongation sweep, then the workspace schemes)')
     ax2.set_ylabel('|ANCF - PCC| [mm]')
     ax2.set_title(f'PCC vs ANCF ({res["config"]})')
     ax2.grid(True, alpha=0.3)
-    ax2.legend(fontsize=8, title='payload')
     save_figure(fig, path)
 
 

@@ -17,11 +17,14 @@ from __future__ import annotations
 import csv
 import math
 
+import numpy as np
+
 from ..core import limit_blas_threads, studies, trajectories
 from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_out, add_quiet,
                      emit_json, finite_float, int_at_least, load_config, make_model,
                      payload_mass, positive_float, print_lines, progress, run_study)
-from .output import actuator_columns, figure, fmt, open_out, save_figure, table
+from .output import (actuator_columns, figure, fit_3d_axes, fmt, legend_outside, open_out,
+                     save_figure, table)
 
 
 # ------------------------------------------------------------- track
@@ -109,26 +112,29 @@ def _track_lines(args, cfg, model, res, st):
 
 
 def _plot_track(res, path):
-    fig = figure(13, 4.5)
+    fig = figure(14, 5, constrained=True)
+    fig.get_layout_engine().set(wspace=0.1)   # room for the 3-D z label beside the top view
     ax1 = fig.add_subplot(1, 3, 1, projection='3d')
     ax2 = fig.add_subplot(1, 3, 2)
     ax3 = fig.add_subplot(1, 3, 3)
     T, Pp = res.targets_m * 1e3, res.predicted_m * 1e3
     ax1.plot(T[:, 0], T[:, 1], T[:, 2], '-', color='k', lw=1.5, label='desired')
     ax1.plot(Pp[:, 0], Pp[:, 1], Pp[:, 2], 'o', color='tab:orange', ms=2.5,
-             label='predicted (forward)')
+             label='predicted (forward model at the feedforward pressures)')
     ax1.set_xlabel('x [mm]')
     ax1.set_ylabel('y [mm]')
     ax1.set_zlabel('z [mm]')
-    ax1.legend(fontsize=8)
+    # a circle at one height: z varies by round-off; show at least 10 mm of each axis
+    fit_3d_axes(ax1, np.concatenate([T, Pp]), min_span=10.0)
     ax1.set_title(f'{res.trajectory} ({res.config_name}, {res.payload_kg * 1e3:g} g)')
-    ax2.plot(T[:, 0], T[:, 1], '-', color='k', lw=1.5, label='desired')
-    ax2.plot(Pp[:, 0], Pp[:, 1], 'o', color='tab:orange', ms=2.5, label='predicted')
+    ax2.plot(T[:, 0], T[:, 1], '-', color='k', lw=1.5)
+    ax2.plot(Pp[:, 0], Pp[:, 1], 'o', color='tab:orange', ms=2.5)
     ax2.set_aspect('equal', adjustable='datalim')
     ax2.set_xlabel('x [mm]')
     ax2.set_ylabel('y [mm]')
     ax2.set_title('top view')
     ax2.grid(True, alpha=0.3)
+    legend_outside(fig, ax1, 'lower center', ncol=2)
     cols = _actuator_columns_cfgless(res.pressures_pa.shape[1])
     for k in range(res.pressures_pa.shape[1]):
         ax3.plot(res.times_s, res.pressures_pa[:, k] / 1e3, '-', lw=1, label=cols[k])
@@ -136,7 +142,8 @@ def _plot_track(res, path):
     ax3.set_ylabel('pressure [kPa]')
     ax3.set_title('feedforward pressures')
     ax3.grid(True, alpha=0.3)
-    ax3.legend(fontsize=7, ncol=2)
+    fig.legend(*ax3.get_legend_handles_labels(), loc='outside right upper', fontsize=7,
+               frameon=False, title='actuator', title_fontsize=8)
     save_figure(fig, path)
 
 

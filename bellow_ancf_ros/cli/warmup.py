@@ -4,8 +4,8 @@ Registered by :func:`register` into the parser of :mod:`bellow_ancf_ros.cli`::
 
     bellow-ancf warm-up [--config C ...]
 
-The first start after an installation compiles the kernels (about 20 s on a
-2-core machine) into the cache of these sources
+The first start after an installation compiles the kernels (about a minute on
+a 2-core machine) into the cache of these sources
 (:mod:`bellow_ancf_ros.core.numba_cache`); a lab runs this once after
 ``colcon build`` (``ros2 run bellow_ancf_ros bellow-ancf warm-up``) so that no
 node pays it, nor several nodes of one launch at once.
@@ -43,7 +43,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         'warm-up', help='compile the numerical kernels now (once after installation)',
         description='Compile (or load) every numerical kernel the nodes use, so that no node '
-                    'start pays the one-time compilation (about 20 s).',
+                    'start pays the one-time compilation (about a minute on 2 cores).',
         epilog='Example: ros2 run bellow_ancf_ros bellow-ancf warm-up')
     p.add_argument('--config', nargs='+', action='extend', metavar='CFG',
                    help='robots to warm up (file paths or shipped names); default: '

@@ -77,7 +77,7 @@ def is_compiled() -> bool:
 
     Looks for numba's index files of the three compiled modules in
     :data:`CACHE_DIR`; a first start after installation compiles them
-    (about 20 s on a 2-core machine), later starts load them.
+    (about a minute on a 2-core machine), later starts load them.
     """
     if not CACHE_DIR.is_dir():
         return False

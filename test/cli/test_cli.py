@@ -295,7 +295,7 @@ def test_inverse_two_segment_with_z_axis(capsys, two):
 def test_inverse_unreachable_target(capsys):
     # 3 cm above the tip of the fully extended robot (about 107.5 mm at 150 kPa)
     code, out, err = run(capsys, 'inverse', '--position', 0, 0, 0.14, '--json')
-    assert code == 0, err            # the solve itself worked; the target is out of reach
+    assert code == 1, err            # a result asked for, not reached: 1, the result printed
     d = one_json(out)
     assert d['reachable'] is False and d['success'] is False
     p = np.array(d['pressures_pa'])
@@ -304,6 +304,43 @@ def test_inverse_unreachable_target(capsys):
     assert any(a != 0 for a in d['active_limits'])
     assert d['position_error_m'] > 0.02
     assert 'unreachable' in d['message']
+
+
+def test_unreachable_is_exit_1_for_inverse_its_batch_and_track(capsys, tmp_path, one):
+    """One rule: a target not reached is exit status 1, the answers still printed."""
+    code, out, _ = run(capsys, 'inverse', '--position', 0, 0, 0.14)
+    assert code == 1 and re.search(r'reachable\s+no', out), out
+    reached = solve_forward(one, np.array([100e3, 0, 0])).position
+    path = write(tmp_path, 't.csv', f'x,y,z\n{",".join(map(repr, map(float, reached)))}\n'
+                                    '0,0,0.14\n')
+    code, out, err = run(capsys, 'inverse', '--targets-csv', path, '--json')
+    assert code == 1 and err == ''
+    assert [r['reachable'] for r in json_lines(out)] == [True, False]
+    code, out, _ = run(capsys, 'inverse', '--targets-csv', write(tmp_path, 'ok.csv', (
+        f'x,y,z\n{",".join(map(repr, map(float, reached)))}\n')), '--json')
+    assert code == 0 and json_lines(out)[0]['reachable'] is True
+    code, _, _ = run(capsys, 'track', '--trajectory', 'planar_circle', '--radius-mm', '60',
+                     '--points', '2', '--quiet')
+    assert code == 1
+    # the contract is in --help
+    assert cli.main(['--help']) == 0
+    assert '1 a result asked for was not reached' in ' '.join(capsys.readouterr().out.split())
+
+
+def test_forward_batch_row_not_converged_is_exit_1(capsys, tmp_path, monkeypatch):
+    real = cli_solve.solve_forward
+
+    def second_fails(model, pressures, **kwargs):
+        fw = real(model, pressures, **kwargs)
+        if pressures[0] == 20e3:
+            fw.converged, fw.status, fw.message = False, 3, 'did not converge (test)'
+        return fw
+
+    monkeypatch.setattr(cli_solve, 'solve_forward', second_fails)
+    path = write(tmp_path, 'p.csv', 'a,b,c\n10,0,0\n20,0,0\n30,0,0\n')
+    code, out, err = run(capsys, 'forward', '--pressures-csv', path, '--json')
+    assert code == 1 and err == ''
+    assert [r['converged'] for r in json_lines(out)] == [True, False, True]
 
 
 def test_inverse_targets_csv_one_segment(capsys, tmp_path, one):

@@ -59,6 +59,7 @@ def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
     cfg = load_robot(out)
     text = out.read_text()
     assert str(csv_path) in text and 'RMSE' in text
+    assert cfg.name == 'cal'                             # named after the written file
     assert cfg.segments[0].pitch_radius * 1e3 == pytest.approx(
         d['parameters']['segments[0].pitch_radius_mm']['value'], rel=1e-12)
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
@@ -207,7 +208,7 @@ def test_values_in_place_keeps_layout_and_reads_back(one_cfg):
     """The calibrated file: the nominal text, its comments, the new values; else a plain dump."""
     import yaml
 
-    from bellow_ancf_ros.cli.calibrate import _values_in_place
+    from bellow_ancf_ros.cli.output import values_in_place as _values_in_place
 
     for name in ('one_segment', 'two_segment'):
         cfg = load_robot(name)

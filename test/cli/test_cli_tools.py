@@ -82,7 +82,7 @@ def test_identify_stiffness_recovers_the_paper_k(capsys, tmp_path):
     assert_png(png)
     # the written robot file loads and carries the fit
     cfg = load_robot(str(yml))
-    assert cfg.stiffness_coeffs == pytest.approx(tuple(d['k_coeffs']))
+    assert cfg.stiffness_coeffs == pytest.approx(tuple(d['k_coeffs']), rel=1e-5)  # 6 digits
     assert cfg.d_eff == load_robot('one_segment').d_eff
 
 
@@ -106,6 +106,67 @@ def test_identify_deff_recovers_8_087_mm(capsys, tmp_path):
     assert_png(png)
     code, out, _ = run(capsys, 'identify', 'deff', '--csv', DATA / 'pressure_force.csv')
     assert code == 0 and 'confidence interval' in out and 'D_eff' in out
+
+
+def _inline_comments(text):
+    """The inline comments (``key: value  # comment``) of a YAML text, in order."""
+    return [line.split('#', 1)[1].strip() for line in text.splitlines()
+            if '#' in line and ':' in line.split('#', 1)[0]]
+
+
+@pytest.mark.parametrize('robot', ['one_segment', 'two_segment'])
+def test_identify_yaml_out_keeps_the_comments_and_takes_the_file_name(capsys, tmp_path, robot):
+    """``identify stiffness`` then ``identify deff`` on its file: values in place, name = file."""
+    source = load_robot(robot).source
+    original = Path(source).read_text()
+    stiff, deff = tmp_path / 'my_robot.yaml', tmp_path / 'lab robot 2.yml'
+    code, out, err = run(capsys, 'identify', 'stiffness', '--config', robot,
+                         '--csv', DATA / 'tensile_test_segment.csv', '--yaml-out', stiff)
+    assert code == 0, err
+    assert "robot 'my_robot'" in out
+    text = stiff.read_text()
+    assert _inline_comments(text) == _inline_comments(original)    # every unit comment kept
+    assert text.startswith('# Robot description written by `bellow-ancf identify stiffness`')
+    cfg = load_robot(str(stiff))
+    assert cfg.name == 'my_robot'
+    assert cfg.stiffness_coeffs[1] == pytest.approx(576.94, rel=0.01)
+    assert cfg.to_dict() | {'name': None, 'actuator': None} == \
+        load_robot(robot).to_dict() | {'name': None, 'actuator': None}
+    # the deff step reads the stiffness step's file and writes the next one
+    code, out, err = run(capsys, 'identify', 'deff', '--config', stiff,
+                         '--csv', DATA / 'pressure_force.csv', '--yaml-out', deff, '--json')
+    assert code == 0, err
+    d = one_json(out)
+    assert d['yaml_out'] == str(deff) and d['stage1_ok'] is True
+    text = deff.read_text()
+    assert _inline_comments(text) == _inline_comments(original)
+    cfg2 = load_robot(str(deff))
+    assert cfg2.name == 'lab robot 2'
+    assert cfg2.d_eff == pytest.approx(d['d_eff_m'], rel=1e-5)
+    assert cfg2.d_eff != load_robot(robot).d_eff
+    assert cfg2.stiffness_coeffs == cfg.stiffness_coeffs          # the stiffness step's values
+    assert 'identify deff' in text.splitlines()[0]
+
+
+def test_identify_deff_yaml_out_in_place_and_refused(capsys, tmp_path, monkeypatch):
+    """Writing over the --config file works; a D_eff stage 1 refuses writes nothing, exit 1."""
+    target = tmp_path / 'robot.yaml'
+    target.write_text(Path(load_robot('one_segment').source).read_text())
+    code, _, err = run(capsys, 'identify', 'deff', '--config', target,
+                       '--csv', DATA / 'pressure_force.csv', '--yaml-out', target)
+    assert code == 0, err
+    assert load_robot(str(target)).d_eff == pytest.approx(8.087e-3, rel=0.005)
+    assert load_robot(str(target)).name == 'robot'
+    from bellow_ancf_ros.cli import identify
+
+    def refuse(*args, **kwargs):
+        raise ValueError('P -> lam not monotonic (test)')
+    monkeypatch.setattr(identify, 'Stage1', refuse)
+    out_file = tmp_path / 'never.yaml'
+    code, _, err = run(capsys, 'identify', 'deff', '--csv', DATA / 'pressure_force.csv',
+                       '--yaml-out', out_file)
+    assert code == 1 and not out_file.exists()
+    assert 'bellow-ancf: warning: --yaml-out not written' in err and 'test' in err
 
 
 def test_identify_da_gives_17_90_mm(capsys):
