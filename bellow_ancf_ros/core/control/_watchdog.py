@@ -91,15 +91,22 @@ class OscillationWatchdog:
         self._recent = deque(maxlen=3)
 
     def _fit(self, t: np.ndarray, e: np.ndarray, band=BAND):
-        """Largest sinusoid amplitude over the band, and its frequency, of one window."""
+        """Largest sinusoid amplitude over the band, and its frequency, of one window.
+
+        The trend's columns are scaled to the window (conditioning), and no
+        amplitude counts beyond the error's own largest deviation: a fit on
+        samples bunched in a corner of the window cannot invent a swing.
+        """
         t = t - t[0]
-        base = np.column_stack([np.ones_like(t), t, t * t])
+        u = t / max(t[-1], 1e-12)
+        base = np.column_stack([np.ones_like(u), u, u * u])
+        cap = float(np.max(np.linalg.norm(e - e.mean(axis=0), axis=1)))
         best = (0.0, self.frequency_hz)
         for factor in band:
             w = 2 * math.pi * factor * self.frequency_hz
             X = np.column_stack([base, np.cos(w * t), np.sin(w * t)])
-            coef, *_ = np.linalg.lstsq(X, e, rcond=None)
-            amp = float(np.sqrt((coef[3:] ** 2).sum()))   # all axes together
+            coef, *_ = np.linalg.lstsq(X, e, rcond=1e-8)
+            amp = min(float(np.sqrt((coef[3:] ** 2).sum())), cap)   # all axes together
             if amp > best[0]:
                 best = (amp, factor * self.frequency_hz)
         return best
@@ -115,7 +122,10 @@ class OscillationWatchdog:
         es = np.array([s[1] for s in self._samples])
         self._samples, self._start = [], float(t)
         self._recent.append((ts, es))
-        if len(ts) < 8:
+        # a window the samples do not cover (a dropout, a late burst) is not judged
+        gaps = np.diff(np.concatenate([[ts[0]], ts, [ts[0] + self.window_s]]))
+        if len(ts) < 8 or ts[-1] - ts[0] < 0.75 * self.window_s or gaps.max() > 0.25 * (
+                self.window_s):
             return None
         amp, freq = self._fit(ts, es)
         self.amplitudes.append((freq, amp))

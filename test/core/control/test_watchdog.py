@@ -80,3 +80,20 @@ def test_the_loop_cuts_its_gain_and_holds_on_a_trip():
     status = fb.status(t)
     assert status['oscillation_trips'] == 1 and 'Hz' in status['oscillation_seen']
     assert status['feedback_gain_per_s'] == '1.25'
+
+
+def test_bunched_or_sparse_samples_invent_no_swing():
+    """Samples bunched at the end of a window (a late burst), or a dropout inside it."""
+    wd = OscillationWatchdog(10.4)
+    rng = np.random.default_rng(1)
+    t, trips = 0.0, []
+    for k in range(200):   # windows of 0.19 s; every other one has its samples in a 20 ms burst
+        w0 = k * wd.window_s
+        times = (w0 + np.linspace(0, wd.window_s, 23) if k % 2 else
+                 w0 + wd.window_s - 0.02 + np.linspace(0, 0.02, 10))
+        for t in times:
+            trip = wd.feed(t, 0.15e-3 * rng.standard_normal(3))
+            if trip is not None:
+                trips.append(trip)
+    assert not trips
+    assert all(a < 1e-3 for _, a in wd.amplitudes)
