@@ -64,7 +64,7 @@ class _Pose:
 
 
 class SimulatedRobot:
-    """The simulated robot: regulators -> creep -> quasi-static equilibrium -> motion capture.
+    """The simulated robot: regulators -> creep -> motion (or equilibrium) -> motion capture.
 
     Parameters
     ----------
