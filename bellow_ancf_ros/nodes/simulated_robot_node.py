@@ -32,14 +32,16 @@ publishes
     rate: the exact pose of the newest physics step, stamped with that step's
     time: the simulator's ground truth (for evaluation, never for control).
     ``measured_pressure`` (std_msgs/Float64MultiArray, same layout and unit as
-    the commands) at ``physics_rate_hz``: the regulated pressures.
+    the commands) at ``physics_rate_hz``, at most 100 Hz (every n-th physics
+    step above it): the regulated pressures.
     ``/diagnostics``: 1 Hz status (solves, failed solves, refusals), WARN per
     refused input, ERROR when an equilibrium could not be computed (the last
     state is kept and published).
 
 The physics runs in its own thread at ``physics_rate_hz`` (default automatic:
-one integrator step per physics step with dynamics, 343 Hz for the
-mismatched one-segment robot and 103 Hz for the two-segment one; else 100 Hz),
+with dynamics 5 % above the slowest rate that resolves the first mode, at
+least 100 Hz: 181 Hz for the mismatched one-segment robot, 100 Hz for the
+two-segment one; else 100 Hz),
 each step advancing the regulators, the creep and the robot by the measured
 wall-clock time since the last one, so a slow machine gives coarser steps,
 never a wrong time scale.  With ``dynamics`` (default, realistic plant) the
@@ -83,7 +85,11 @@ from .ros_util import (
     pressure_message,
 )
 
-__all__ = ['EFFECT_PARAMETERS', 'SimulatedRobotNode', 'main', 'plant_effects']
+__all__ = ['EFFECT_PARAMETERS', 'MAX_PRESSURE_RATE_HZ', 'SimulatedRobotNode', 'main',
+           'plant_effects']
+
+#: Highest rate of measured_pressure [Hz] (a physics rate above it publishes every n-th step).
+MAX_PRESSURE_RATE_HZ = 100.0
 
 #: The hardware effects as node parameters: (name, PlantEffects field, scale to SI, default,
 #: description, lowest, highest).  Defaults: :class:`PlantEffects`' realistic figures.
@@ -204,10 +210,11 @@ PARAMETERS = (
         'swings and rings; false: it jumps from equilibrium to equilibrium.  Realistic '
         'plant only (the ideal plant is quasi-static).', ParameterType.PARAMETER_BOOL, **_RO)),
     Param('physics_rate_hz', 0.0, descriptor(
-        'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate.  '
-        '0 = automatic: with dynamics one integrator step per physics step (40 per period '
-        'of the first mode, at least 100 Hz), else 100 Hz.  With dynamics a rate must '
-        'resolve the first mode: at least 20 steps per period (checked at start).', D,
+        'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate (at '
+        'most 100 Hz).  0 = automatic: with dynamics 5 % above the slowest rate that '
+        'resolves the first mode (at least 100 Hz; the integrator steps inside), else '
+        '100 Hz.  With dynamics a rate must resolve the first mode: at least 20 steps per '
+        'period (checked at start).', D,
         lo=0.0, hi=1000.0, **_RO)),
     Param('command_timeout_s', 0.0, descriptor(
         'Vent (regulators to 0 Pa gauge) when no pressure_command arrived for this long [s], '
@@ -223,7 +230,7 @@ TOPICS = (
           'the motion capture: noise, latency, outliers, dropouts'),
     Topic('publishes', 'true_pose', 'geometry_msgs/PoseStamped', 'the exact pose (ground truth)'),
     Topic('publishes', 'measured_pressure', 'std_msgs/Float64MultiArray',
-          'the regulated pressures, at physics_rate_hz'),
+          'the regulated pressures, at physics_rate_hz (at most 100 Hz)'),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz status'),
 )
 
@@ -296,6 +303,8 @@ class SimulatedRobotNode(Node):
         self._stop = threading.Event()
         self._state_stamp = self.get_clock().now()   # when the robot reached its state
         self._physics_period = 1.0 / rate
+        # measured_pressure at most MAX_PRESSURE_RATE_HZ: a regulator's sensor, not every step
+        self._pressure_every = max(1, math.ceil(rate / MAX_PRESSURE_RATE_HZ - 1e-9))
         self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
         self._thread.start()
         e = self.robot.effects
@@ -350,6 +359,7 @@ class SimulatedRobotNode(Node):
     def _physics_loop(self) -> None:
         last = time.monotonic()
         next_t = last
+        tick = 0
         while not self._stop.is_set():
             next_t += self._physics_period
             wait = next_t - time.monotonic()
@@ -379,6 +389,9 @@ class SimulatedRobotNode(Node):
                        f'dynamics step failed ({self.robot.last_failure}); restarted at rest')
                 self.get_logger().error(msg, throttle_duration_sec=2.0)
                 self._publish_diag(DiagnosticStatus.ERROR, msg, {})
+            tick += 1
+            if tick % self._pressure_every:
+                continue
             try:
                 self._pub_p.publish(pressure_message(p, self._unit))
             except Exception:  # noqa: BLE001 - publisher gone at shutdown

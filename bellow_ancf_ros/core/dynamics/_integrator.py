@@ -363,10 +363,11 @@ class GeneralizedAlpha:
                 return self.state.load
             return as_tip_load(load(t) if callable(load) else load)
 
-        # equal steps of at most step_s: a span that repeats (a physics tick) repeats the
-        # step, and the factorisation made for it is reused
+        # equal steps of about step_s (up to 10 % longer rather than one more step: a physics
+        # tick of one step's length, with its jitter, stays one step); a span that repeats
+        # repeats the step, and the factorisation made for it is reused
         span = t_end - self.state.t
-        n = max(1, int(np.ceil(span / self.step_s - 1e-9)))
+        n = max(1, int(np.ceil(span / self.step_s - 0.1)))
         h = span / n
         start = self.state.t
         for k in range(n if span > 0 else 0):
