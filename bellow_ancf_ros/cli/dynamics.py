@@ -157,42 +157,26 @@ def _read_pressure_table(path, model):
     """``t_s, p1_kpa ... pN_kpa`` rows -> (times [s], pressures [Pa]); problems are UsageErrors."""
     label = f'--pressures-csv {path}'
     want = ['t_s'] + [f'p{i + 1}_kpa' for i in range(model.A)]
-    try:
-        fh = open(path, newline='', encoding='utf-8-sig')
-    except OSError as exc:
-        raise UsageError(f'{label}: cannot read file: {exc.strerror or exc}') from None
+
+    def check(header, line):
+        if header != want:
+            raise UsageError(f'{label}, line {line}: expected the header {",".join(want)}, '
+                             f'got {",".join(header)}')
+
+    header, records = fitting.numeric_csv_rows(path, check, UsageError, label)
     times, rows = [], []
-    with fh:
-        reader = csv.reader(fh)
-        header = None
+    for line, values in records:
+        where = f'{label}, line {line}'
+        if not all(math.isfinite(v) for v in values):
+            raise UsageError(f'{where}: not a finite number in '
+                             f'{",".join(f"{v:g}" for v in values)!r}')
         try:
-            for row in reader:
-                cells = [c.strip() for c in row]
-                if not any(cells) or cells[0].startswith('#'):
-                    continue
-                if header is None:
-                    header = [c.lower() for c in cells]
-                    if header != want:
-                        raise UsageError(f'{label}, line {reader.line_num}: expected the header '
-                                         f'{",".join(want)}, got {",".join(header)}')
-                    continue
-                where = f'{label}, line {reader.line_num}'
-                if len(cells) != len(want):
-                    raise UsageError(f'{where}: expected {len(want)} fields, got {len(cells)}')
-                try:
-                    values = [finite_float(c) for c in cells]
-                except Exception:  # noqa: BLE001 - argparse's error type: not a finite number
-                    raise UsageError(f'{where}: not a finite number in '
-                                     f'{",".join(cells)!r}') from None
-                try:
-                    rows.append(check_pressures_kpa(model, values[1:]))
-                except UsageError as exc:
-                    raise UsageError(f'{where}: {exc}') from None
-                if times and values[0] <= times[-1]:
-                    raise UsageError(f'{where}: t_s = {values[0]:g} does not increase')
-                times.append(values[0])
-        except csv.Error as exc:
-            raise UsageError(f'{label}, line {reader.line_num}: malformed CSV: {exc}') from None
+            rows.append(check_pressures_kpa(model, values[1:]))
+        except UsageError as exc:
+            raise UsageError(f'{where}: {exc}') from None
+        if times and values[0] <= times[-1]:
+            raise UsageError(f'{where}: t_s = {values[0]:g} does not increase')
+        times.append(values[0])
     if header is None or not rows:
         raise UsageError(f'{label}: no data rows (expected the header {",".join(want)})')
     return np.array(times), np.array(rows)

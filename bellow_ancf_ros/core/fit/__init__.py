@@ -20,7 +20,8 @@ from ._cantilever import Cantilever, CantileverResult
 from ._excitation import excitation_sequence, random_pressures, simulate_recording
 from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_STREAM_COLUMNS, POSE_TOPIC,
                           PRESSURE_TOPIC, BagWriter, PoseStream, Recording, RecordingError,
-                          csv_header, pressure_unit, read_bag, read_csv, read_pose_stream,
+                          csv_header, numeric_csv_rows, pressure_unit, read_bag, read_csv,
+                          read_pose_stream,
                           read_pose_stream_bag, read_pose_stream_csv, read_recording,
                           settled_samples, write_bag, write_csv)
 from ._sensitivities import RecordingModel
@@ -36,7 +37,8 @@ __all__ = [
     "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_STREAM_COLUMNS", "POSE_TOPIC",
     "PRESSURE_TOPIC", "PoseStream", "Recording", "read_pose_stream", "read_pose_stream_bag",
     "read_pose_stream_csv",
-    "RecordingError", "RecordingModel", "calibrate", "calibration", "csv_header",
+    "RecordingError", "RecordingModel", "numeric_csv_rows", "calibrate", "calibration",
+    "csv_header",
     "excitation_sequence", "identification", "pressure_unit", "random_pressures", "read_bag",
     "read_csv", "read_recording", "settled_samples", "simulate_recording", "write_bag",
     "write_csv",

@@ -55,6 +55,7 @@ __all__ = [
     'RecordingError', 'Recording', 'csv_header', 'read_csv', 'write_csv', 'settled_samples',
     'read_bag', 'write_bag', 'read_recording', 'PRESSURE_TOPIC', 'POSE_TOPIC',
     'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit', 'BagWriter', 'PoseStream',
+    'numeric_csv_rows',
     'read_pose_stream', 'read_pose_stream_csv', 'read_pose_stream_bag', 'POSE_STREAM_COLUMNS',
 ]
 
@@ -128,44 +129,60 @@ def _unit_quaternions(q: np.ndarray, where) -> np.ndarray:
     return q / norm[:, None]
 
 
-def read_csv(path, n_actuators: int | None = None) -> Recording:
-    """Read a CSV recording (see the module doc); ``n_actuators`` checks the header."""
-    label = str(path)
+def numeric_csv_rows(path, check_header, error=RecordingError, label: str | None = None):
+    """``(header, [(line number, values), ...])`` of a numeric CSV file.
+
+    Blank lines and ``#`` comment lines are skipped; the first other row is
+    the header (lower case, stripped), handed to ``check_header(header, line)``
+    (which raises for a bad one); every later row must have as many fields
+    and hold numbers (NaN and inf pass: the caller decides).  Every problem is
+    ``error`` with one line naming ``label`` (default the path) and the line.
+    The header is None for a file without one.
+    """
+    label = str(path) if label is None else label
     try:
         fh = open(path, newline='', encoding='utf-8-sig')
     except OSError as exc:
-        raise RecordingError(f'{label}: cannot read file: {exc.strerror or exc}') from None
-    rows, lines = [], []
+        raise error(f'{label}: cannot read file: {exc.strerror or exc}') from None
+    header, rows = None, []
     with fh:
         reader = csv.reader(fh)
-        header = None
         try:
             for row in reader:
                 cells = [c.strip() for c in row]
                 if not any(cells) or cells[0].startswith('#'):
                     continue
+                line = reader.line_num
                 if header is None:
                     header = [c.lower() for c in cells]
-                    _check_header(header, n_actuators, label, reader.line_num)
+                    check_header(header, line)
                     continue
-                line = reader.line_num
                 if len(cells) != len(header):
-                    raise RecordingError(f'{label}, line {line}: expected {len(header)} fields, '
-                                         f'got {len(cells)}')
+                    raise error(f'{label}, line {line}: expected {len(header)} fields, '
+                                f'got {len(cells)}')
                 try:
-                    values = [float(c) for c in cells]
+                    rows.append((line, [float(c) for c in cells]))
                 except ValueError:
-                    raise RecordingError(f'{label}, line {line}: not a number in '
-                                         f'{",".join(cells)!r}') from None
-                bad = [header[i] for i, v in enumerate(values) if not math.isfinite(v)]
-                if bad:
-                    raise RecordingError(f'{label}, line {line}: not a finite number in column '
-                                         f'{bad[0]} (NaN or inf)')
-                rows.append(values)
-                lines.append(line)
+                    raise error(f'{label}, line {line}: not a number in '
+                                f'{",".join(cells)!r}') from None
         except (csv.Error, UnicodeDecodeError) as exc:
-            raise RecordingError(f'{label}, line {reader.line_num}: malformed CSV: '
-                                 f'{exc}') from None
+            raise error(f'{label}, line {reader.line_num}: malformed CSV: {exc}') from None
+    return header, rows
+
+
+def read_csv(path, n_actuators: int | None = None) -> Recording:
+    """Read a CSV recording (see the module doc); ``n_actuators`` checks the header."""
+    label = str(path)
+    header, records = numeric_csv_rows(
+        path, lambda h, line: _check_header(h, n_actuators, label, line))
+    rows, lines = [], []
+    for line, values in records:
+        bad = [header[i] for i, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            raise RecordingError(f'{label}, line {line}: not a finite number in column '
+                                 f'{bad[0]} (NaN or inf)')
+        rows.append(values)
+        lines.append(line)
     if header is None:
         raise RecordingError(f'{label}: the file is empty (expected the header '
                              f'{",".join(csv_header(n_actuators or 3))})')
@@ -540,39 +557,16 @@ class PoseStream:
 def read_pose_stream_csv(path) -> PoseStream:
     """Read a pose-stream CSV file (module doc: ``t_s, x_m, y_m, z_m [, p1_kpa ...]``)."""
     label = str(path)
-    try:
-        fh = open(path, newline='', encoding='utf-8-sig')
-    except OSError as exc:
-        raise RecordingError(f'{label}: cannot read file: {exc.strerror or exc}') from None
-    header, rows = None, []
-    with fh:
-        reader = csv.reader(fh)
-        try:
-            for row in reader:
-                cells = [c.strip() for c in row]
-                if not any(cells) or cells[0].startswith('#'):
-                    continue
-                if header is None:
-                    header = [c.lower() for c in cells]
-                    missing = [c for c in POSE_STREAM_COLUMNS if c not in header]
-                    if missing:
-                        raise RecordingError(
-                            f'{label}, line {reader.line_num}: no column {missing[0]} (expected '
-                            f'{",".join(POSE_STREAM_COLUMNS)}[,p1_kpa,...]; got '
-                            f'{",".join(header)})')
-                    continue
-                if len(cells) != len(header):
-                    raise RecordingError(f'{label}, line {reader.line_num}: expected '
-                                         f'{len(header)} fields, got {len(cells)}')
-                try:
-                    values = [float(c) for c in cells]
-                except ValueError:
-                    raise RecordingError(f'{label}, line {reader.line_num}: not a number in '
-                                         f'{",".join(cells)!r}') from None
-                rows.append(values)
-        except (csv.Error, UnicodeDecodeError) as exc:
-            raise RecordingError(f'{label}, line {reader.line_num}: malformed CSV: '
-                                 f'{exc}') from None
+
+    def check(header, line):
+        missing = [c for c in POSE_STREAM_COLUMNS if c not in header]
+        if missing:
+            raise RecordingError(
+                f'{label}, line {line}: no column {missing[0]} (expected '
+                f'{",".join(POSE_STREAM_COLUMNS)}[,p1_kpa,...]; got {",".join(header)})')
+
+    header, records = numeric_csv_rows(path, check)
+    rows = [values for _, values in records]
     if header is None:
         raise RecordingError(f'{label}: the file is empty (expected the header '
                              f'{",".join(POSE_STREAM_COLUMNS)})')
