@@ -69,12 +69,17 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
 
 
 @pytest.mark.slow
-def test_loads_phase_short_run(tmp_path):
-    """The loads phase of make demo, on a shorter path: the estimator reads the loads."""
+def test_loads_phase(tmp_path):
+    """The loads phase of make demo (its 20 s circle): the estimator reads the loads.
+
+    On a 12 s circle the compensated run's push reading missed the 0.03 N
+    tolerance on a loaded CI machine (0.128 N, -0.035 N sideways): the
+    estimate lags the faster path.
+    """
     env = dict(os.environ)
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.forces', '--period', '12'],
+    res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.forces', '--period', '20'],
                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150,
                          stdin=subprocess.DEVNULL)
     out = res.stdout + res.stderr

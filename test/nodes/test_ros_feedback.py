@@ -180,8 +180,15 @@ def test_closed_loop_in_process_reaches_held_target(h, one):
         return np.linalg.norm(positions(h, 'true_pose', 20).mean(axis=0) - target) < 0.3e-3
 
     wait_for(converged, timeout=30.0, what='true pose within 0.3 mm of the target')
+
+    def integrating():
+        st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
+        return kv(st)['feedback_state'] == 'integrating' and st.level == DiagnosticStatus.OK
+
+    # a re-solve that used up its wall-clock budget on a loaded machine reports 'holding'
+    # until the next one converges (honest: its answer was the best so far, not a solution)
+    wait_for(integrating, timeout=10.0, what="diagnostics: feedback 'integrating', OK")
     st = [s for s in diag_statuses(h, 'inverse') if kv(s).get('feedback') == 'integral'][-1]
-    assert kv(st)['feedback_state'] == 'integrating' and st.level == DiagnosticStatus.OK
     # feedforward alone leaves the mismatched robot 2.5 mm off this target; the loop
     # got within 0.3 mm, so it learned a correction (its size varies from run to run,
     # 0.3 to 2 mm: see the closed-loop core tests for the converged value)
