@@ -38,8 +38,12 @@ demo-calibrate: $(STAMP)
 demo-offline: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demos.offline
 
+# the tests without ROS on two workers (pytest-xdist: CPU-bound, independent), then the ROS
+# tests one at a time (nodes, processes and their timing need the cores); fails if either fails
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest
+	@$(VENV)/bin/python -m pytest -m "not ros" -n 2; a=$$?; \
+	$(VENV)/bin/python -m pytest -m ros; b=$$?; \
+	[ $$a -eq 0 ] && [ $$b -eq 0 ] || { echo "make test: failed (without ROS: exit $$a, ROS: exit $$b)"; exit 1; }
 
 # prints every case (median, p99, ratio to today's figure, scaling table); writes bench/speed_table.md.
 # "today" = commit $(BASELINE_COMMIT) (before the real-time rewrite), run interleaved in the same

@@ -21,8 +21,9 @@ sys.path.insert(0, str(TEST_DIR / 'support'))
 limit_blas_threads()
 
 
-#: Test modules that start ROS 2 nodes, node processes or launch files (marker ``ros``).
-ROS_MODULES = ('test_launch.py', 'test_readme_examples.py')
+#: Test modules that start ROS 2 nodes, node processes or launch files, or use the colcon
+#: install (marker ``ros``: ``make test`` runs them one at a time, after the others).
+ROS_MODULES = ('test_launch.py', 'test_readme_examples.py', 'test_package_layout.py')
 
 
 def pytest_collection_modifyitems(config, items):

@@ -19,7 +19,11 @@ checked against a list verified by hand (December 2026):
   #37795, PyPI ``rosbags``).
 
 ``threadpoolctl`` is optional (the core limits BLAS threads with it when it is
-installed) and is not a rosdep dependency.
+installed) and is not a rosdep dependency.  ``pytest-xdist`` (and its
+``execnet``) is used only by ``make test`` in the venv, to run the tests
+without ROS on two workers; nothing imports it and rosdep has no key for it
+(``rosdep/python.yaml`` lists python3-pytest-asyncio, -benchmark, -cov, -mock
+and -timeout, not -xdist: read December 2026), so it is not in package.xml.
 
 A new dependency must be added here with how it was verified.
 """

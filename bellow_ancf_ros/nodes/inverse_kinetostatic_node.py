@@ -385,9 +385,13 @@ class InverseKinetostaticNode(LifecycleNode):
             cfg = load_robot(name)
             model = RobotModel(cfg)
             # straight robot at vent pressure: first warm start (also warms caches)
-            fw0 = solve_forward(model, contract.vent_pressures(model.A, cfg.p_min, cfg.p_max))
+            vent = contract.vent_pressures(model.A, cfg.p_min, cfg.p_max)
+            fw0 = solve_forward(model, vent)
+            payload = float(self.get_parameter('payload_kg').value)
+            # where the loop starts (its automatic gain): vented, carrying the payload
+            start = fw0 if payload == 0.0 else solve_forward(model, vent, payload_kg=payload)
             # the corners of the pressure box, needed by the first unreachable target
-            precompute_corners(model, float(self.get_parameter('payload_kg').value))
+            precompute_corners(model, payload)
             warm_up(model)  # the warm-started path's kernels compiled (or loaded) now
         except (ConfigError, ValueError, OSError) as exc:
             self._configure_error = f'robot_config {name!r}: {exc}'
@@ -416,7 +420,7 @@ class InverseKinetostaticNode(LifecycleNode):
         rate = float(self.get_parameter('command_rate_hz').value)
         self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
                                  if rate > 0 else None)
-        self._feedback.configure(cfg, self._worker.submit)
+        self._feedback.configure(cfg, self._worker.submit, start)
         self._configured = True
         self.get_logger().info(
             f'configured: robot {cfg.name!r} ({cfg.n_segments} segment(s), {model.A} actuators, '

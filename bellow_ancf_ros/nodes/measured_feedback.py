@@ -23,9 +23,14 @@ The loop's margins with the robot's own first mode at the held equilibrium
 (:class:`~bellow_ancf_ros.core.control.ModeCheck`: the controller's model,
 its payload and tip force) are computed off the control path, in a thread
 of their own, when the payload or the force changes and every two seconds
-while the robot moves; a gain that leaves less than the documented margins
-(gain margin 3, phase margin 45 deg) is logged once per change as a warning
-with the safe gain, and reported on ``/diagnostics`` (WARN) while it lasts.
+while the robot moves.  On ``feedback_gain_per_s: auto`` (the default) the
+gain is the safe one (gain margin 3, phase margin 45 deg): computed at
+configure for the vented robot with the configured payload, then again
+whenever the mode moves by more than 5 % or the margins would get thinner;
+each change is logged and shown on ``/diagnostics``.  A fixed gain that
+leaves less than the documented margins is logged once per change as a
+warning with the safe gain, and reported on ``/diagnostics`` (WARN) while it
+lasts.
 The first mode found there is watched for an oscillation
 (:class:`~bellow_ancf_ros.core.control.OscillationWatchdog`): a sustained or
 growing swing of the measured error near it halves the gain and holds the
@@ -45,7 +50,8 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..core.control import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback, ModeCheck
+from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, FeedbackSettings, IntegralFeedback,
+                            ModeCheck, gain_setting)
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
@@ -62,10 +68,17 @@ FEEDBACK_PARAMETER_TABLE = (
         "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
         "or 'integral' (integral action on the task-space error). Read on configure.", _S,
         constraints="one of: 'none', 'integral'")),
+) + (
+    Param('feedback_gain_per_s', AUTO_GAIN, descriptor(
+        "Integral gain [1/s]: an error decays with time constant 1/gain. 'auto': the largest "
+        'gain that keeps a gain margin of 3 and a phase margin of 45 deg with the robot\'s '
+        'first mode at the held equilibrium, the regulators\' lag and the loop\'s delay '
+        '(feedback_loop_lag_s, feedback_loop_delay_s), recomputed when the payload, the tip '
+        'force or the pose moves that mode by more than 5 %. A fixed gain is warned about '
+        'when its margins are thinner. Read on configure.', _S, dynamic=True,
+        constraints="'auto' or a number from 0.01 to 50")),
 ) + tuple(Param(name, float(default), descriptor(text + ' Read on configure.', _D, lo=lo, hi=hi))
           for name, default, text, lo, hi in (
-    ('feedback_gain_per_s', _DEF.gain_per_s,
-     'Integral gain [1/s]: an error decays with time constant 1/gain.', 0.01, 50.0),
     ('feedback_max_correction_mm', _DEF.max_correction_m * 1e3,
      'Clamp on the position correction [mm].', 0.01, 100.0),
     ('feedback_max_correction_deg', math.degrees(_DEF.max_correction_rad),
@@ -124,6 +137,7 @@ class FeedbackLink:
         if mode not in FEEDBACK_MODES:
             raise StartupParameterError('feedback', mode, "one of: 'none', 'integral'")
         self.node = node
+        self._gain_setting = self._read_gain()
         self._lock = threading.Lock()
         self._refusals = Refusals(node, 'measured poses', publish_diag)
         self._law: IntegralFeedback | None = None
@@ -148,14 +162,29 @@ class FeedbackLink:
         self._mode_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------ lifecycle
-    def configure(self, cfg, resubmit: Callable[[Any], None]) -> None:
-        """Read the parameters; with feedback on, subscribe and start the re-solve timer."""
+    def _read_gain(self) -> float | str:
+        """``feedback_gain_per_s``: ``'auto'`` or a fixed gain (a bad value: one line)."""
+        value = self.node.get_parameter('feedback_gain_per_s').value
+        try:
+            return gain_setting(value)
+        except ValueError:
+            raise StartupParameterError('feedback_gain_per_s', value,
+                                        "'auto' or a number from 0.01 to 50 [1/s]") from None
+
+    def configure(self, cfg, resubmit: Callable[[Any], None], start=None) -> None:
+        """Read the parameters; with feedback on, subscribe and start the re-solve timer.
+
+        ``start``: the equilibrium the robot starts from (vented, with the
+        configured payload); on ``feedback_gain_per_s: auto`` the first gain
+        is the safe gain there, computed now, before any command.
+        """
         g = self.node.get_parameter
         self.release()
         if g('feedback').value == 'none':
             return
+        self._gain_setting = gain = self._read_gain()
         s = FeedbackSettings(
-            gain_per_s=g('feedback_gain_per_s').value,
+            gain_per_s=_DEF.gain_per_s if gain == AUTO_GAIN else gain,
             max_correction_m=1e-3 * g('feedback_max_correction_mm').value,
             max_correction_rad=math.radians(g('feedback_max_correction_deg').value),
             measured_pose_timeout_s=g('measured_pose_timeout_s').value,
@@ -179,14 +208,22 @@ class FeedbackLink:
             if item is not None and time.monotonic() - item[3] >= period:
                 resubmit(item)
         self._timer = self.node.create_timer(period, tick)
-        self._mode_check = ModeCheck(s.gain_per_s, g('feedback_loop_lag_s').value,
+        self._mode_check = ModeCheck(gain, g('feedback_loop_lag_s').value,
                                      g('feedback_loop_delay_s').value)
+        if gain == AUTO_GAIN and start is not None and start.converged:
+            self._take(self._mode_check.update(start, time.monotonic()))
         self._mode_stop.clear()
         self._mode_thread = threading.Thread(target=self._mode_loop, name='loop-margins',
                                              daemon=True)
         self._mode_thread.start()
+        law = self._law
+        how = (f'automatic gain {law.gain_per_s:.3g} /s' if gain == AUTO_GAIN
+               else f'gain {law.gain_per_s:g} /s')
+        res = self._mode_result
+        at = '' if res is None else (f' (first mode {res.frequency_hz:.3g} Hz, damping ratio '
+                                     f'{res.damping_ratio:.3f}, payload {res.payload_kg:g} kg)')
         self.node.get_logger().info(
-            f'feedback: integral on measured_pose (gain {s.gain_per_s:g} /s, clamp '
+            f'feedback: integral on measured_pose ({how}{at}, clamp '
             f'{s.max_correction_m * 1e3:g} mm, timeout {s.measured_pose_timeout_s:g} s)')
 
     def release(self) -> None:
@@ -334,12 +371,24 @@ class FeedbackLink:
                 continue
             if res is None:
                 continue
-            self._mode_result = res
-            with self._lock:   # the watchdog watches the first mode where the robot is held
-                if self._law is not None:
-                    self._law.watch(res.frequency_hz)
-            if before is None or before.ok != res.ok or (res.moved and not res.ok):
+            old_gain = None if before is None else before.gain_per_s
+            self._take(res)
+            if res.auto and res.gain_per_s != old_gain:
+                log.info(f'feedback: automatic gain {res.gain_per_s:.3g} /s (was '
+                         f'{"-" if old_gain is None else f"{old_gain:.3g}"}): {res.message}')
+            elif before is None or before.ok != res.ok or (res.moved and not res.ok):
                 (log.info if res.ok else log.warning)(f'loop margins: {res.message}')
+
+    def _take(self, res) -> None:
+        """A margin answer: the watchdog's band, and on ``auto`` the gain integrated with."""
+        if res is None:
+            return
+        self._mode_result = res
+        with self._lock:   # the watchdog watches the first mode where the robot is held
+            if self._law is not None:
+                self._law.watch(res.frequency_hz)
+                if res.auto:
+                    self._law.set_gain(res.gain_per_s)
 
     def trips(self) -> int:
         """How often the oscillation watchdog tripped since configure."""
@@ -385,7 +434,9 @@ class FeedbackLink:
                 values.update(res.values())
             # one count of the measured poses that did not reach the integrator: bad input
             # (frame, NaN, quaternion) and outliers; the latter also on their own
-            return dict(values, feedback='integral', measured_poses_refused=(
+            return dict(values, feedback='integral', feedback_gain_setting=(
+                AUTO_GAIN if self._gain_setting == AUTO_GAIN else 'fixed'),
+                measured_poses_refused=(
                 self.refused + values['measured_poses_outliers']),
                 feedback_dropouts=self.dropouts,
                 feedback_longest_dropout_s=round(self.longest_dropout_s, 3))

@@ -113,14 +113,17 @@ class StartupEnvironmentError(StartupParameterError):
 
 def descriptor(description: str, ptype: int, *, lo: float | None = None,
                hi: float | None = None, read_only: bool = False,
-               constraints: str = '') -> ParameterDescriptor:
+               constraints: str = '', dynamic: bool = False) -> ParameterDescriptor:
     """Build a ParameterDescriptor with description, optional range and constraints text.
 
     ``lo``/``hi`` give a floating-point range for doubles and an integer range
-    for integers.
+    for integers.  ``dynamic``: the value may change type (e.g. ``'auto'`` or a
+    number); the node checks it itself and ``constraints`` says what is allowed.
     """
     d = ParameterDescriptor(description=description, type=ptype, read_only=read_only,
-                            additional_constraints=constraints)
+                            additional_constraints=constraints, dynamic_typing=dynamic)
+    if dynamic:
+        d.type = ParameterType.PARAMETER_NOT_SET
     if lo is not None and hi is not None:
         if ptype == ParameterType.PARAMETER_INTEGER:
             d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
@@ -132,7 +135,7 @@ def descriptor(description: str, ptype: int, *, lo: float | None = None,
 
 def allowed_values(d: ParameterDescriptor) -> str:
     """What a descriptor allows, in words: type, range and constraints."""
-    parts = [_TYPE_NAMES.get(d.type, 'a value')]
+    parts = [] if d.dynamic_typing else [_TYPE_NAMES.get(d.type, 'a value')]
     if d.floating_point_range:
         r = d.floating_point_range[0]
         parts.append(f'from {r.from_value:g} to {r.to_value:g}')

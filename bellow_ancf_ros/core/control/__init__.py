@@ -29,7 +29,8 @@ from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, 
                             loop_margins, safe_gain)
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
-from ._mode_check import RETUNE_FRACTION, ModeCheck, ModeCheckResult
+from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeCheck,
+                          ModeCheckResult, gain_setting)
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
@@ -41,7 +42,8 @@ __all__ = [
     "EFFECTS", "ESTIMATOR_MODES", "FEEDBACK_MODES", "BellowCreep", "FeedbackSettings",
     "ForceEstimate", "IntegralFeedback", "LoopMargins", "LoopRecord", "LoopSimulation",
     "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
-    "ModeCheck", "ModeCheckResult", "RETUNE_FRACTION",
+    "ModeCheck", "ModeCheckResult", "RETUNE_FRACTION", "AUTO_GAIN", "GAIN_RANGE_PER_S",
+    "gain_setting",
     "MotionCapture", "PlantEffects", "PressureRegulators", "SHAPERS", "SimulatedRobot",
     "TargetShaper", "shaped", "shaper_impulses", "OscillationWatchdog", "WatchdogTrip",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",

@@ -13,6 +13,12 @@ moves, and says whether the first mode moved by more than
 ``retune_fraction`` since the last answer (what a gain that follows the
 mode needs).
 
+With ``gain_per_s='auto'`` (:data:`AUTO_GAIN`) the gain *is* the safe gain
+at the held equilibrium: every answer whose mode moved by more than
+``retune_fraction`` carries a new gain to integrate with (the margins are
+then the documented ones by construction); the watchdog's cuts still apply
+on top of it (``IntegralFeedback.set_gain``).
+
 Only the first mode enters the loop (a unit-gain second-order factor): it
 carries most of the lateral compliance (the second pair lies 4-5 times
 higher and is twice as damped), and a product of several factors would add
@@ -29,10 +35,30 @@ from ..dynamics import ModalError, natural_modes
 from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, loop_margins,
                             safe_gain)
 
-__all__ = ['ModeCheck', 'ModeCheckResult', 'RETUNE_FRACTION']
+__all__ = ['AUTO_GAIN', 'GAIN_RANGE_PER_S', 'ModeCheck', 'ModeCheckResult', 'RETUNE_FRACTION',
+           'gain_setting']
 
 #: The first mode moved by more than this fraction: a new answer (and a new automatic gain).
 RETUNE_FRACTION = 0.05
+#: The gain setting that follows the robot's first mode.
+AUTO_GAIN = 'auto'
+#: The integral gains allowed [1/s], fixed or automatic (an automatic gain is clipped to it).
+GAIN_RANGE_PER_S = (0.01, 50.0)
+
+
+def gain_setting(value) -> float | str:
+    """A gain setting: :data:`AUTO_GAIN`, or a fixed gain in :data:`GAIN_RANGE_PER_S` [1/s].
+
+    Raises ValueError naming the value and what is allowed.
+    """
+    lo, hi = GAIN_RANGE_PER_S
+    if isinstance(value, str) and value.strip().lower() == AUTO_GAIN:
+        return AUTO_GAIN
+    if not isinstance(value, bool) and isinstance(value, (int, float)) and (
+            math.isfinite(value) and lo <= value <= hi):
+        return float(value)
+    raise ValueError(f'{value!r} is not allowed; allowed: {AUTO_GAIN!r} or a number from '
+                     f'{lo:g} to {hi:g} [1/s]')
 
 
 @dataclass(frozen=True)
@@ -47,6 +73,7 @@ class ModeCheckResult:
     payload_kg: float
     moved: bool            #: the mode moved by more than the retune fraction since the last
     computed_s: float      #: how long the modal analysis and the margins took [s]
+    auto: bool = False     #: the gain is the safe gain (``gain_per_s='auto'``)
 
     @property
     def ok(self) -> bool:
@@ -58,7 +85,8 @@ class ModeCheckResult:
     def message(self) -> str:
         """One line: the gain, its margins with the mode, the safe gain."""
         m = self.margins
-        head = (f'feedback gain {self.gain_per_s:g} /s with the robot\'s first mode '
+        auto = ' (auto)' if self.auto else ''
+        head = (f'feedback gain {self.gain_per_s:.3g} /s{auto} with the robot\'s first mode '
                 f'({self.frequency_hz:.3g} Hz, damping ratio {self.damping_ratio:.3f}, payload '
                 f'{self.payload_kg:g} kg): gain margin {m.gain_margin:.2f}, phase margin '
                 f'{m.phase_margin_deg:.0f} deg')
@@ -85,7 +113,8 @@ class ModeCheck:
 
     Parameters
     ----------
-    gain_per_s : the integral gain to check.
+    gain_per_s : the integral gain to check, or :data:`AUTO_GAIN`: the safe
+        gain at each answer's equilibrium (``result.gain_per_s``).
     lag_s, delay_s : the regulators' time constant and the loop's delay
         (:func:`~._loop_margins.loop_delay_s`).
     period_s : recompute at most this often while the equilibrium moves.
@@ -95,8 +124,9 @@ class ModeCheck:
 
     def __init__(self, gain_per_s: float, lag_s: float, delay_s: float, period_s: float = 2.0,
                  retune_fraction: float = RETUNE_FRACTION) -> None:
-        loop_margins(gain_per_s, lag_s, delay_s)   # checks the numbers (ValueError)
-        self.gain_per_s = float(gain_per_s)
+        self.auto = gain_setting(gain_per_s) == AUTO_GAIN
+        self.gain_per_s = GAIN_RANGE_PER_S[0] if self.auto else float(gain_per_s)
+        loop_margins(self.gain_per_s, lag_s, delay_s)   # checks the numbers (ValueError)
         self.lag_s, self.delay_s = float(lag_s), float(delay_s)
         self.period_s = float(period_s)
         self.retune_fraction = float(retune_fraction)
@@ -123,12 +153,18 @@ class ModeCheck:
         except ModalError:
             return None
         modes = [(mode.frequency_hz, mode.damping_ratio)]
-        margins = loop_margins(self.gain_per_s, self.lag_s, self.delay_s, modes)
         safe = safe_gain(self.lag_s, self.delay_s, modes)
         prev = self.last
         moved = prev is None or abs(mode.frequency_hz - prev.frequency_hz) > (
             self.retune_fraction * prev.frequency_hz)
-        self.last = ModeCheckResult(mode.frequency_hz, mode.damping_ratio, self.gain_per_s,
-                                    margins, safe, float(fw.load.payload_kg), moved,
-                                    time.perf_counter() - t0)
+        gain = self.gain_per_s
+        if self.auto:   # a new gain when the mode moved or the margins would be thin;
+            lo, hi = GAIN_RANGE_PER_S   # not for every small move (no dither)
+            gain = min(max(safe, lo), hi)
+            if not moved and prev is not None and prev.gain_per_s <= gain:
+                gain = prev.gain_per_s
+        margins = loop_margins(gain, self.lag_s, self.delay_s, modes)
+        self.last = ModeCheckResult(mode.frequency_hz, mode.damping_ratio, gain, margins, safe,
+                                    float(fw.load.payload_kg), moved,
+                                    time.perf_counter() - t0, self.auto)
         return self.last

@@ -119,3 +119,34 @@ def test_mode_check_follows_the_payload(two):
     assert set(r1.values()) >= {'loop_first_mode_hz', 'loop_gain_margin', 'loop_safe_gain_per_s'}
     fine = ModeCheck(r1.safe_gain_per_s, TAU, T).update(fw1, 0.0)
     assert fine.ok and 'safe gain' not in fine.message
+
+
+def test_automatic_gain_is_the_safe_gain_and_follows_the_mode(two):
+    """``'auto'``: the safe gain at each equilibrium; kept for small moves, never thin."""
+    from bellow_ancf_ros.core.control import (AUTO_GAIN, MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG,
+                                              ModeCheck, gain_setting)
+    chk = ModeCheck(AUTO_GAIN, TAU, T, period_s=0.0)
+    fw0 = solve_forward(two, np.zeros(two.A))
+    r0 = chk.update(fw0, 0.0)
+    assert r0.auto and r0.ok and r0.gain_per_s == pytest.approx(r0.safe_gain_per_s)
+    assert 1.5 < r0.gain_per_s < 1.7 and '(auto)' in r0.message
+    # margins at the documented ones: one of them is met with equality, none is thinner
+    m = r0.margins
+    assert m.gain_margin >= MIN_GAIN_MARGIN - 1e-6
+    assert m.phase_margin_deg >= MIN_PHASE_MARGIN_DEG - 1e-6
+    assert min(m.gain_margin / MIN_GAIN_MARGIN, m.phase_margin_deg / MIN_PHASE_MARGIN_DEG) \
+        == pytest.approx(1.0, abs=1e-3)
+    r1 = chk.update(solve_forward(two, np.zeros(two.A), payload_kg=0.05), 1.0)
+    assert r1.moved and 0.35 < r1.gain_per_s < 0.45 and r1.ok   # 50 g: a quarter of it
+    # a small move that raises the safe gain keeps the gain (no dither)...
+    fw_small = solve_forward(two, np.zeros(two.A), payload_kg=0.048)
+    r2 = chk.update(fw_small, 2.0)
+    assert not r2.moved and r2.safe_gain_per_s > r1.gain_per_s and r2.gain_per_s == r1.gain_per_s
+    # ...and one that lowers it takes the lower gain at once: the margins never get thin
+    r3 = chk.update(solve_forward(two, np.zeros(two.A), payload_kg=0.052), 3.0)
+    assert not r3.moved and r3.gain_per_s == pytest.approx(r3.safe_gain_per_s) and r3.ok
+    assert gain_setting('auto') == gain_setting(' Auto ') == AUTO_GAIN
+    assert gain_setting(2) == 2.0
+    for bad in ('fast', 0.0, 51.0, float('nan'), True):
+        with pytest.raises(ValueError, match="allowed: 'auto' or a number from 0.01 to 50"):
+            gain_setting(bad)

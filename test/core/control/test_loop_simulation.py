@@ -149,7 +149,7 @@ def test_two_segments_carrying_50_g_on_the_automatic_gain_hold_the_target():
     robot = SimulatedRobot('two_segment_mismatched', seed=1, payload_kg=0.05)
     sim = LoopSimulation(model, robot, FeedbackSettings(), preview_s=PREVIEW_S,
                          physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=0.05,
-                         mode_check=ModeCheck(2.5, 0.06, 0.05), auto_gain=True)
+                         mode_check=ModeCheck('auto', 0.06, 0.05))
     fw = solve_forward(model, [40e3, 0, 0, 0, 0, 0], payload_kg=0.05)
 
     def target(t):
