@@ -14,6 +14,10 @@
   outliers and dropouts);
 * :class:`TargetShaper`, :func:`shaped`: ZV/ZVD input shaping of the target
   stream at the first mode (a step leaves no residual swing);
+* :class:`DynamicFeedforward`, :func:`dynamic_path`,
+  :class:`StreamFeedforward`: the target shifted by the inertial and damping
+  loads of its motion through the first mode and the regulators' lag
+  (dynamic feedforward of a planned path);
 * :class:`OscillationWatchdog`: a sustained or growing swing of the measured
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
   its gain and holds its correction);
@@ -27,6 +31,7 @@ The ROS nodes only feed these.
 from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, loop_delay_s,
                             loop_margins, safe_gain)
+from ._dynamic_feedforward import DynamicFeedforward, StreamFeedforward, dynamic_path
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
 from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeCheck,
@@ -47,4 +52,5 @@ __all__ = [
     "MotionCapture", "PlantEffects", "PressureRegulators", "SHAPERS", "SimulatedRobot",
     "TargetShaper", "shaped", "shaper_impulses", "OscillationWatchdog", "WatchdogTrip",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
+    "DynamicFeedforward", "StreamFeedforward", "dynamic_path",
 ]

@@ -113,17 +113,19 @@ class LoopSimulation:
     payload_kg : the payload the controller is told (default: the model's).
     mode_check : a :class:`~._mode_check.ModeCheck` run on the inverse's
         equilibria in simulated time (every ``period_s`` and on a new load):
-        the feedback's watchdog watches the first mode it finds, and with
-        ``auto_gain`` the feedback's gain is its safe gain.
-    auto_gain : set the feedback's gain from ``mode_check`` (the gain of the
-        feedback settings is then only the start value).
+        the feedback's watchdog watches the first mode it finds, and a
+        ``ModeCheck('auto', ...)`` sets the feedback's gain (the gain of the
+        feedback settings is then only the start value), as the inverse node
+        does with ``feedback_gain_per_s: auto``.
+    feedforward : a :class:`~._dynamic_feedforward.StreamFeedforward`: the
+        (previewed) target is shifted for the robot's first mode before the
+        inverse (dynamic feedforward); its mode follows ``mode_check``.
     """
 
     def __init__(self, model: RobotModel, robot: SimulatedRobot,
                  feedback: FeedbackSettings | None = None, control_rate_hz: float = 50.0,
                  physics_rate_hz: float = 200.0, preview_s: float = 0.0,
-                 payload_kg: float | None = None, mode_check=None,
-                 auto_gain: bool = False) -> None:
+                 payload_kg: float | None = None, mode_check=None, feedforward=None) -> None:
         """Set up the loop at the robot's current time; nothing is commanded yet."""
         for name, v in (('control_rate_hz', control_rate_hz),
                         ('physics_rate_hz', physics_rate_hz)):
@@ -144,7 +146,8 @@ class LoopSimulation:
         self.command = None
         self.corrupt: Callable | None = None  # corrupt(sample) -> sample, for tests
         self._outlier_since = False
-        self.mode_check, self.auto_gain = mode_check, bool(auto_gain)
+        self.mode_check = mode_check
+        self.feedforward = feedforward
         self.gains: list = []                 # (time, gain) whenever the automatic gain changed
         t = robot.time_s
         self._next = {'physics': t + self.physics_dt, 'mocap': t, 'control': t}
@@ -154,6 +157,9 @@ class LoopSimulation:
         p, z = target(t + self.preview_s)
         p = np.asarray(p, dtype=float)
         z = None if (z is None or not self.use_orientation) else np.asarray(z, dtype=float)
+        if self.feedforward is not None:
+            self.feedforward.push(t + self.preview_s, p, z)
+            p, z = self.feedforward.target()
         fb = self.feedback
         if fb is not None:
             p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s)
@@ -195,15 +201,19 @@ class LoopSimulation:
     def _check_modes(self, t: float, fw) -> None:
         """The first mode at the newest equilibrium: the watchdog's band, the automatic gain."""
         chk, fb = self.mode_check, self.feedback
-        if chk is None or fb is None or not chk.due(fw, t):
+        if chk is None or (fb is None and self.feedforward is None) or not chk.due(fw, t):
             return
         res = chk.update(fw, t)
         if res is None:
             return
+        if self.feedforward is not None:
+            self.feedforward.set_mode(res.frequency_hz, res.damping_ratio)
+        if fb is None:
+            return
         fb.watch(res.frequency_hz)
-        if self.auto_gain and (res.moved or not self.gains):
-            fb.set_gain(res.safe_gain_per_s)
-            self.gains.append((t, res.safe_gain_per_s))
+        if res.auto and (not self.gains or res.gain_per_s != self.gains[-1][1]):
+            fb.set_gain(res.gain_per_s)
+            self.gains.append((t, res.gain_per_s))
 
     def _mocap(self, t: float) -> None:
         sample = self.robot.capture(t)
