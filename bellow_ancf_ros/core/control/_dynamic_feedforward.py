@@ -79,7 +79,7 @@ class DynamicFeedforward:
 
     def shift(self, velocity, acceleration, jerk=None, max_shift: float | None = None
               ) -> np.ndarray:
-        """``c1 v + c2 a + c3 j``, clipped in length to ``max_shift`` (default: ``max_shift_m``)."""
+        """``c1 v + c2 a + c3 j``, clipped in length to ``max_shift`` (default ``max_shift_m``)."""
         s = self.c1 * np.asarray(velocity, float) + self.c2 * np.asarray(acceleration, float)
         if jerk is not None:
             s = s + self.c3 * np.asarray(jerk, float)
