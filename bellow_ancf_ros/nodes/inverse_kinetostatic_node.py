@@ -135,6 +135,8 @@ from ..core import geometry
 from . import contract, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
+from .mode_watch import ModeWatch
+from .target_link import TARGET_PARAMETER_TABLE, TargetLink
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .ros_util import (
@@ -148,6 +150,7 @@ from .ros_util import (
     diagnostics_qos,
     guard_parameters,
     main_for,
+    monotonic_of,
     pose_message,
     pressure_message,
     publish_and_wait_acked,
@@ -157,7 +160,8 @@ __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_
 
 #: Parameters read on configure, or that change what a command means: a change needs
 #: cleanup + configure (refused while configured, with the way out)
-CONFIGURE_PARAMETERS = ('robot_config', 'pressure_unit', 'base_frame') + FEEDBACK_PARAMETERS
+CONFIGURE_PARAMETERS = (('robot_config', 'pressure_unit', 'base_frame') + FEEDBACK_PARAMETERS
+                        + tuple(p.name for p in TARGET_PARAMETER_TABLE))
 BUDGET_PERIODS = 5.0   # wall-clock budget of one solve, in periods of max_rate_hz
 PAYLOAD_CHECK_BUDGET_S = 1.0  # wall-clock budget of the buckling check of a new payload_kg
 BUDGET_STATUSES = (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET)
@@ -233,7 +237,8 @@ class InverseKinetostaticNode(LifecycleNode):
     """Managed feedforward controller: target poses -> actuator pressures."""
 
     NODE_NAME = 'inverse_kinetostatic_node'
-    PARAMETERS = PARAMETERS + FEEDBACK_PARAMETER_TABLE   # (the feedback ones: FeedbackLink)
+    # (the feedback ones: FeedbackLink; shaping and dynamic feedforward: TargetLink)
+    PARAMETERS = PARAMETERS + FEEDBACK_PARAMETER_TABLE + TARGET_PARAMETER_TABLE
     TOPICS = TOPICS
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
@@ -242,6 +247,8 @@ class InverseKinetostaticNode(LifecycleNode):
         guard_parameters(self, ('payload_kg', 'pressure_unit', 'max_rate_hz', 'base_frame'),
                          extra_check=self._configure_time_check)
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
+        self._targets = TargetLink(self)   # target_shaping, dynamic_feedforward
+        self._modes: ModeWatch | None = None   # the first mode, when something needs it
         self.add_post_set_parameters_callback(self._after_set)
 
         self._lock = threading.RLock()    # active flag + publishing + warm start
@@ -365,7 +372,7 @@ class InverseKinetostaticNode(LifecycleNode):
 
     def _feedback_heartbeat(self):
         """Feedback state for the heartbeat; WARN while no fresh measured pose arrives."""
-        values = self._feedback.status()
+        values = dict(self._feedback.status(), **self._targets.status())
         margin = self._feedback.margin_warning
         ringing = self._feedback.oscillation_error
         if ringing is not None and self._active:
@@ -420,7 +427,12 @@ class InverseKinetostaticNode(LifecycleNode):
         rate = float(self.get_parameter('command_rate_hz').value)
         self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
                                  if rate > 0 else None)
-        self._feedback.configure(cfg, self._worker.submit, start)
+        if self._feedback.wanted or self._targets.wanted:
+            self._modes = ModeWatch(self, self._feedback.mode_check())
+            self._modes.start(start)   # the first answer now, at the start equilibrium
+        self._feedback.configure(cfg, self._worker.submit, self._modes)
+        self._targets.configure(self._modes, self._worker.submit,
+                                float(self.get_parameter('feedback_loop_lag_s').value))
         self._configured = True
         self.get_logger().info(
             f'configured: robot {cfg.name!r} ({cfg.n_segments} segment(s), {model.A} actuators, '
@@ -441,6 +453,7 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._active = True
         self._feedback.reset()
+        self._targets.reset()
         self.get_logger().info('active: pressure commands enabled')
         return super().on_activate(state)
 
@@ -495,7 +508,11 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._active = False
             self._configured = False
+        if self._modes is not None:
+            self._modes.stop()
+            self._modes = None
         self._feedback.release()
+        self._targets.release()
         for attr in ('_republish_timer', '_owner_timer'):
             if getattr(self, attr, None) is not None:
                 self.destroy_timer(getattr(self, attr))
@@ -683,7 +700,9 @@ class InverseKinetostaticNode(LifecycleNode):
         force = None if self._force is None else self._force.current()
         t0 = time.perf_counter()
         try:
-            pos, z = self._feedback.correct(pos, z, stamp)   # closed loop: the shifted target
+            # shaped and shifted for the robot's mode, then corrected by the closed loop
+            pos, z = self._targets.target(item, monotonic_of(self, stamp, future=True))
+            pos, z = self._feedback.correct(pos, z, stamp)
             with self._solve_lock:
                 inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
                                     time_budget_s=self._time_budget(), tip_force_n=force)
@@ -742,9 +761,12 @@ class InverseKinetostaticNode(LifecycleNode):
         values = inverse_values(inv, dt, payload, unit)
         if usable:
             self._feedback.after_solve(inv)
+            if self._modes is not None:
+                self._modes.offer(inv.forward)
         else:
             self._feedback.no_command()   # nothing goes out: the integrator freezes
         values.update(self._feedback.status())
+        values.update(self._targets.status())
         if not usable and inv.status in BUDGET_STATUSES:
             # no usable answer yet: the next slice goes on from the progress it made, so that
             # the solve ends with its cause (e.g. an unstable equilibrium) instead of a budget

@@ -55,7 +55,8 @@ from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, FeedbackSettings, Integra
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
-from .ros_util import QOS_DEPTH, Param, StartupParameterError, declare_all, descriptor
+from .ros_util import (QOS_DEPTH, Param, StartupParameterError, declare_all, descriptor,
+                       monotonic_of)
 
 __all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'measured_pose_qos']
 
@@ -113,8 +114,6 @@ FEEDBACK_PARAMETERS = tuple(p.name for p in FEEDBACK_PARAMETER_TABLE)
 DROPOUT_WARN_S = 2.0
 #: How long /diagnostics reports an oscillation watchdog's trip as an ERROR [s].
 TRIP_REPORT_S = 10.0
-#: How often the margin thread looks for a new equilibrium [s].
-_MODE_POLL_S = 0.2
 
 
 def measured_pose_qos() -> QoSProfile:
@@ -152,14 +151,9 @@ class FeedbackLink:
         self.longest_dropout_s = 0.0
         self.refused = 0
         self.received = 0
-        self._mode_check: ModeCheck | None = None
         self._trips_logged = 0
         self._trip_t = -math.inf
-        self._mode_fw = None
         self._mode_result = None
-        self._mode_wake = threading.Event()
-        self._mode_stop = threading.Event()
-        self._mode_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------ lifecycle
     def _read_gain(self) -> float | str:
@@ -171,12 +165,24 @@ class FeedbackLink:
             raise StartupParameterError('feedback_gain_per_s', value,
                                         "'auto' or a number from 0.01 to 50 [1/s]") from None
 
-    def configure(self, cfg, resubmit: Callable[[Any], None], start=None) -> None:
+    @property
+    def wanted(self) -> bool:
+        """True when ``feedback`` asks for the closed loop (it needs the first mode)."""
+        return self.node.get_parameter('feedback').value != 'none'
+
+    def mode_check(self) -> ModeCheck:
+        """The margin check of this loop's gain setting, lag and delay (``'auto'``: no loop)."""
+        g = self.node.get_parameter
+        gain = self._read_gain() if self.wanted else AUTO_GAIN
+        return ModeCheck(gain, g('feedback_loop_lag_s').value, g('feedback_loop_delay_s').value)
+
+    def configure(self, cfg, resubmit: Callable[[Any], None], modes=None) -> None:
         """Read the parameters; with feedback on, subscribe and start the re-solve timer.
 
-        ``start``: the equilibrium the robot starts from (vented, with the
-        configured payload); on ``feedback_gain_per_s: auto`` the first gain
-        is the safe gain there, computed now, before any command.
+        ``modes``: the node's :class:`~.mode_watch.ModeWatch` (its check is
+        :meth:`mode_check`); on ``feedback_gain_per_s: auto`` the gain is its
+        answer's, the first one computed at start for the vented robot with
+        the configured payload, before any command.
         """
         g = self.node.get_parameter
         self.release()
@@ -208,14 +214,10 @@ class FeedbackLink:
             if item is not None and time.monotonic() - item[3] >= period:
                 resubmit(item)
         self._timer = self.node.create_timer(period, tick)
-        self._mode_check = ModeCheck(gain, g('feedback_loop_lag_s').value,
-                                     g('feedback_loop_delay_s').value)
-        if gain == AUTO_GAIN and start is not None and start.converged:
-            self._take(self._mode_check.update(start, time.monotonic()))
-        self._mode_stop.clear()
-        self._mode_thread = threading.Thread(target=self._mode_loop, name='loop-margins',
-                                             daemon=True)
-        self._mode_thread.start()
+        if modes is not None:
+            modes.listen(self._on_mode)
+            if modes.result is not None:
+                self._take(modes.result)
         law = self._law
         how = (f'automatic gain {law.gain_per_s:.3g} /s' if gain == AUTO_GAIN
                else f'gain {law.gain_per_s:g} /s')
@@ -227,13 +229,8 @@ class FeedbackLink:
             f'{s.max_correction_m * 1e3:g} mm, timeout {s.measured_pose_timeout_s:g} s)')
 
     def release(self) -> None:
-        """Drop the subscription, the timer, the margin thread and the integrator."""
-        self._mode_stop.set()
-        self._mode_wake.set()
-        if self._mode_thread is not None:
-            self._mode_thread.join(5.0)
-        self._mode_thread = self._mode_check = self._mode_fw = self._mode_result = None
-        self._mode_wake.clear()
+        """Drop the subscription, the timer and the integrator."""
+        self._mode_result = None
         if self._timer is not None:
             self.node.destroy_timer(self._timer)
         if self._sub is not None:
@@ -280,13 +277,8 @@ class FeedbackLink:
                 self._law.measurement(self._taken_at(msg.header.stamp), pos, z)
 
     def _monotonic(self, stamp, future: bool) -> float:
-        """A stamp as monotonic time (zero stamp: now; a future one: now unless ``future``)."""
-        now = time.monotonic()
-        if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
-            return now
-        age = 1e-9 * (self.node.get_clock().now().nanoseconds
-                      - (stamp.sec * 1_000_000_000 + stamp.nanosec))
-        return now - age if (age >= 0.0 or future) else now
+        """A stamp as monotonic time (:func:`~.ros_util.monotonic_of`)."""
+        return monotonic_of(self.node, stamp, future)
 
     def _taken_at(self, stamp) -> float:
         """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
@@ -348,36 +340,20 @@ class FeedbackLink:
             if self._law is not None and fw is not None:
                 self._law.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
                                  fw.position, fw.z_axis)
-        if fw is not None and fw.success and self._mode_check is not None:
-            self._mode_fw = fw   # the margin thread takes the newest
-            self._mode_wake.set()
 
     # ------------------------------------------------------------ margins
-    def _mode_loop(self) -> None:
-        """Margins with the first mode of the newest equilibrium, off the control path."""
+    def _on_mode(self, before, res) -> None:
+        """A new first mode (ModeWatch's thread): take it; log a new gain or margin verdict."""
+        if self._law is None:
+            return
         log = self.node.get_logger()
-        while not self._mode_stop.is_set():
-            self._mode_wake.wait(_MODE_POLL_S)
-            self._mode_wake.clear()
-            check, fw = self._mode_check, self._mode_fw
-            if check is None or fw is None or not check.due(fw, time.monotonic()):
-                continue
-            before = self._mode_result
-            try:
-                res = check.update(fw, time.monotonic())
-            except Exception as exc:  # noqa: BLE001 - a margin check never stops the loop
-                log.error(f'loop margins not computed: {type(exc).__name__}: {exc}',
-                          throttle_duration_sec=10.0)
-                continue
-            if res is None:
-                continue
-            old_gain = None if before is None else before.gain_per_s
-            self._take(res)
-            if res.auto and res.gain_per_s != old_gain:
-                log.info(f'feedback: automatic gain {res.gain_per_s:.3g} /s (was '
-                         f'{"-" if old_gain is None else f"{old_gain:.3g}"}): {res.message}')
-            elif before is None or before.ok != res.ok or (res.moved and not res.ok):
-                (log.info if res.ok else log.warning)(f'loop margins: {res.message}')
+        old_gain = None if before is None else before.gain_per_s
+        self._take(res)
+        if res.auto and res.gain_per_s != old_gain:
+            log.info(f'feedback: automatic gain {res.gain_per_s:.3g} /s (was '
+                     f'{"-" if old_gain is None else f"{old_gain:.3g}"}): {res.message}')
+        elif before is None or before.ok != res.ok or (res.moved and not res.ok):
+            (log.info if res.ok else log.warning)(f'loop margins: {res.message}')
 
     def _take(self, res) -> None:
         """A margin answer: the watchdog's band, and on ``auto`` the gain integrated with."""

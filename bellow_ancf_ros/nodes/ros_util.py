@@ -49,7 +49,8 @@ __all__ = [
     'WARN_THROTTLE_S', 'Param', 'StartupEnvironmentError', 'StartupParameterError', 'Topic',
     'allowed_values', 'asks_for_help', 'command_qos', 'declare', 'declare_all', 'descriptor',
     'diagnostics_qos', 'executor_choice', 'guard_parameters', 'init_rclpy', 'main_for',
-    'make_executor', 'node_help', 'pose_message', 'pressure_message', 'publish_and_wait_acked',
+    'make_executor', 'monotonic_of', 'node_help', 'pose_message', 'pressure_message',
+    'publish_and_wait_acked',
     'request_stop', 'run_node',
 ]
 
@@ -166,6 +167,20 @@ def declare(node, name: str, default: Any, d: ParameterDescriptor) -> Any:
         value = _override_value(node, name)
         reason = 'wrong type' if isinstance(exc, InvalidParameterTypeException) else ''
         raise StartupParameterError(name, value, allowed_values(d), reason) from None
+
+
+def monotonic_of(node, stamp, future: bool = False) -> float:
+    """A message stamp as ``time.monotonic()`` time, by its age on ``node``'s clock.
+
+    A zero stamp (or none) is now; a stamp in the future is now unless
+    ``future`` (a target wanted later, e.g. a previewed trajectory).
+    """
+    now = time.monotonic()
+    if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
+        return now
+    age = 1e-9 * (node.get_clock().now().nanoseconds
+                  - (stamp.sec * 1_000_000_000 + stamp.nanosec))
+    return now - age if (age >= 0.0 or future) else now
 
 
 class Param(NamedTuple):

@@ -17,7 +17,8 @@
 * :class:`DynamicFeedforward`, :func:`dynamic_path`,
   :class:`StreamFeedforward`: the target shifted by the inertial and damping
   loads of its motion through the first mode and the regulators' lag
-  (dynamic feedforward of a planned path);
+  (dynamic feedforward of a planned path); :class:`TargetFilter`: both on a
+  target stream, as the inverse node applies them;
 * :class:`OscillationWatchdog`: a sustained or growing swing of the measured
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
   its gain and holds its correction);
@@ -41,6 +42,7 @@ from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._simulated_robot import SimulatedRobot
+from ._target_filter import TargetFilter
 from ._watchdog import OscillationWatchdog, WatchdogTrip
 
 __all__ = [
@@ -52,5 +54,5 @@ __all__ = [
     "MotionCapture", "PlantEffects", "PressureRegulators", "SHAPERS", "SimulatedRobot",
     "TargetShaper", "shaped", "shaper_impulses", "OscillationWatchdog", "WatchdogTrip",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
-    "DynamicFeedforward", "StreamFeedforward", "dynamic_path",
+    "DynamicFeedforward", "StreamFeedforward", "dynamic_path", "TargetFilter",
 ]

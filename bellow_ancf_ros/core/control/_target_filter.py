@@ -1,0 +1,110 @@
+"""A target stream made for a robot with a mode: input shaping and dynamic feedforward together.
+
+What the inverse node does to each target before its (optional) closed-loop
+correction and the static inverse (eq. 28):
+
+* ``shaping`` (``none``, ``zv``, ``zvd``: :class:`~._shaping.TargetShaper`):
+  a step target is replaced by the shaper's staircase, so that it leaves no
+  residual swing at the first mode; the output moves for the shaper's
+  duration after each new target, so the caller re-solves while
+  :meth:`TargetFilter.busy`;
+* ``dynamic_feedforward`` (:class:`~._dynamic_feedforward.StreamFeedforward`):
+  a moving target is shifted by the inertial and damping loads of its motion
+  through the first mode, and by the regulators' lag (``lag_s``); a step is
+  passed as it is.
+
+Both follow :meth:`TargetFilter.set_mode` (the first mode at the held
+equilibrium; until the first mode is known the targets pass unchanged).
+Targets carry the time they are wanted at; the output is for time
+``max(now, newest wanted time)``: a previewed stream is shaped at its newest
+target's time, a held target as time goes on.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._dynamic_feedforward import StreamFeedforward
+from ._shaping import SHAPERS, TargetShaper
+
+__all__ = ['TargetFilter']
+
+
+class TargetFilter:
+    """Input shaping and dynamic feedforward of one target stream (module docstring)."""
+
+    def __init__(self, shaping: str = 'none', dynamic_feedforward: bool = False,
+                 lag_s: float = 0.0) -> None:
+        if shaping not in SHAPERS:
+            raise ValueError(f'target_shaping = {shaping!r} is not allowed; allowed: '
+                             f'{list(SHAPERS)}')
+        self.shaping = shaping
+        self.shaper = None if shaping == 'none' else TargetShaper(shaping)
+        self.feedforward = (StreamFeedforward(1.0, 0.0, lag_s=lag_s, window_s=0.1)
+                            if dynamic_feedforward else None)
+        self.mode: tuple[float, float] | None = None
+        self._newest: tuple | None = None
+        self._arrived = True   # the shaped target reached the newest target (was solved for)
+
+    @property
+    def enabled(self) -> bool:
+        """True when shaping or dynamic feedforward is on."""
+        return self.shaper is not None or self.feedforward is not None
+
+    def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
+        """Shape and shift for this first mode from now on."""
+        if self.shaper is not None:
+            self.shaper.set_mode(frequency_hz, damping_ratio)
+        if self.feedforward is not None:
+            self.feedforward.set_mode(frequency_hz, damping_ratio)
+        self.mode = (float(frequency_hz), float(damping_ratio))
+
+    @property
+    def delay_s(self) -> float:
+        """The shaper's added delay (the centroid of its impulses) [s]; 0 without one."""
+        return 0.0 if self.shaper is None or self.mode is None else self.shaper.delay_s
+
+    def reset(self) -> None:
+        """Forget the stream (the next target is taken as it is)."""
+        if self.shaper is not None:
+            self.shaper.reset()
+        if self.feedforward is not None:
+            self.feedforward.reset()
+        self._newest = None
+
+    def push(self, t: float, position, z_axis=None) -> None:
+        """A new target, wanted at time ``t`` (times must not decrease)."""
+        p = np.asarray(position, float).reshape(3)
+        z = None if z_axis is None else np.asarray(z_axis, float).reshape(3)
+        if self._newest is not None and t < self._newest[0]:
+            self.reset()   # a stream that goes back in time starts again
+        if self.shaper is not None:   # (the first target is taken as it is: a stream's start)
+            self.shaper.push(t, p, z)
+        if self.feedforward is not None:
+            self.feedforward.push(t, p, z)
+        self._newest = (float(t), p, z)
+        self._arrived = False
+
+    def busy(self, now: float) -> bool:
+        """True until a :meth:`target` for a time past the shaper's last impulse (re-solve)."""
+        return self.shaper is not None and self.mode is not None and not self._arrived
+
+    def target(self, now: float):
+        """The target to solve for now: ``(position, z_axis or None)``."""
+        if self._newest is None:
+            raise ValueError('no target pushed yet')
+        t_new, p, z = self._newest
+        if self.mode is None:
+            return p, z
+        out_p, out_z = p, z
+        if self.shaper is not None:
+            t = max(now, t_new)
+            out_p, out_z = self.shaper.at(t)
+            self._arrived = t >= t_new + self.shaper.duration_s
+        if self.feedforward is not None:
+            fp, fz = self.feedforward.target()
+            out_p = out_p + (fp - p)
+            if out_z is not None and fz is not None:
+                zz = out_z + (fz - z)
+                out_z = zz / np.linalg.norm(zz)
+        return out_p, out_z

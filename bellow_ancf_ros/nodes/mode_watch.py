@@ -1,0 +1,87 @@
+"""The robot's first mode where it is held, computed off the control path for the inverse node.
+
+The closed loop (its margins, automatic gain and watchdog band), the target
+shaper and the dynamic feedforward all need the first lateral mode of the
+controller's model at the equilibrium of its newest solve (a payload, a tip
+force or a bent pose move it).  :class:`ModeWatch` runs the core
+:class:`~bellow_ancf_ros.core.control.ModeCheck` (a modal analysis: tens to
+hundreds of milliseconds) in one thread of its own, when the payload or the
+force changes and every two seconds while the robot moves, and hands each
+answer to its listeners.  The first answer is computed at start, before any
+command, at the equilibrium the node starts from.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+from ..core.control import ModeCheck, ModeCheckResult
+
+__all__ = ['ModeWatch']
+
+#: How often the thread looks for a new equilibrium [s].
+_POLL_S = 0.2
+
+
+class ModeWatch:
+    """First mode and loop margins at the newest equilibrium, in a thread (module docstring)."""
+
+    def __init__(self, node, check: ModeCheck) -> None:
+        self.node, self.check = node, check
+        self.result: ModeCheckResult | None = None
+        self._listeners: list[Callable] = []
+        self._fw = None
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def listen(self, fn: Callable[[ModeCheckResult | None, ModeCheckResult], None]) -> None:
+        """Call ``fn(before, result)`` with every new answer (in the watch's thread)."""
+        self._listeners.append(fn)
+
+    def start(self, start_fw=None) -> None:
+        """Answer for ``start_fw`` now (if given and converged), then watch in the thread."""
+        if start_fw is not None and start_fw.converged:
+            self._answer(start_fw)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._loop, name='first-mode', daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """End the thread (joined)."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self._thread = None
+
+    def offer(self, fw) -> None:
+        """The newest usable equilibrium (the thread takes the newest when it wakes)."""
+        if fw is not None and fw.success:
+            self._fw = fw
+            self._wake.set()
+
+    def _answer(self, fw) -> None:
+        before = self.result
+        res = self.check.update(fw, time.monotonic())
+        if res is None:
+            return
+        self.result = res
+        for fn in self._listeners:
+            fn(before, res)
+
+    def _loop(self) -> None:
+        log = self.node.get_logger()
+        while not self._stop.is_set():
+            self._wake.wait(_POLL_S)
+            self._wake.clear()
+            fw = self._fw
+            if self._stop.is_set() or fw is None or not self.check.due(fw, time.monotonic()):
+                continue
+            try:
+                self._answer(fw)
+            except Exception as exc:  # noqa: BLE001 - a modal analysis never stops the node
+                log.error(f'first mode not computed: {type(exc).__name__}: {exc}',
+                          throttle_duration_sec=10.0)

@@ -1,0 +1,150 @@
+"""The inverse node's target stream made for a robot with a mode: shaping, dynamic feedforward.
+
+:class:`TargetLink` declares parameters ``target_shaping`` (``none``, the
+default, ``zv`` or ``zvd``) and ``dynamic_feedforward`` (false by default),
+and feeds the core :class:`~bellow_ancf_ros.core.control.TargetFilter` with
+each new target (at the time it is wanted at: its stamp, or its arrival for
+a zero stamp) and with the robot's first mode at the held equilibrium
+(:class:`~.mode_watch.ModeWatch`).  The node solves for what it returns.
+While a shaped target still moves after a step, the newest target is
+re-solved at ``SHAPING_RATE_HZ`` so that the staircase reaches the robot.
+
+Defaults: no shaping (a shaper delays every target by its centroid, a
+quarter to half of the first period: 0.1-0.2 s for the two-segment robot,
+which a streamed path pays as lag) and no dynamic feedforward (it needs a
+smooth previewed stream, e.g. ``trajectory_publisher``; its lag inversion
+replaces the regulators' time constant in the preview).  Turn shaping on for
+step targets (teleoperation, pick and place), dynamic feedforward for fast
+planned paths.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+from rcl_interfaces.msg import ParameterType
+
+from ..core.control import SHAPERS, TargetFilter
+from .ros_util import Param, StartupParameterError, declare_all, descriptor
+
+__all__ = ['SHAPING_RATE_HZ', 'TARGET_PARAMETER_TABLE', 'TargetLink']
+
+#: Re-solve rate of a shaped target while it moves [Hz].
+SHAPING_RATE_HZ = 50.0
+#: The parameters TargetLink declares (read on configure).
+TARGET_PARAMETER_TABLE = (
+    Param('target_shaping', 'none', descriptor(
+        "Input shaping of the targets at the robot's first mode (Singer & Seering): 'zv' or "
+        "'zvd' (robust to a mode known to +-20 %, twice the delay); a step target then "
+        "leaves no residual swing. 'none': targets as they come. Read on configure.",
+        ParameterType.PARAMETER_STRING, constraints="one of: 'none', 'zv', 'zvd'")),
+    Param('dynamic_feedforward', False, descriptor(
+        "Shift each moving target by the inertial and damping loads of its motion through "
+        "the first mode and by the regulators' lag (feedback_loop_lag_s): a fast planned "
+        'path is tracked without waiting for feedback. Needs a smooth stamped stream; a '
+        'step passes unshifted. Read on configure.', ParameterType.PARAMETER_BOOL)),
+)
+
+
+class TargetLink:
+    """Shaping and dynamic feedforward of the inverse node's targets (module docstring)."""
+
+    def __init__(self, node) -> None:
+        """Declare the parameters on ``node`` (refuses a bad ``target_shaping``)."""
+        declare_all(node, TARGET_PARAMETER_TABLE)
+        self.node = node
+        self._kind = self._read_kind()
+        self._lock = threading.Lock()
+        self._filter: TargetFilter | None = None
+        self._timer = None
+        self._last_item = None
+
+    def _read_kind(self) -> str:
+        kind = self.node.get_parameter('target_shaping').value
+        if kind not in SHAPERS:
+            raise StartupParameterError('target_shaping', kind, "one of: 'none', 'zv', 'zvd'")
+        return kind
+
+    @property
+    def wanted(self) -> bool:
+        """True when shaping or dynamic feedforward is asked for (needs the first mode)."""
+        g = self.node.get_parameter
+        return g('target_shaping').value != 'none' or bool(g('dynamic_feedforward').value)
+
+    def configure(self, modes, resubmit: Callable[[Any], None], lag_s: float) -> None:
+        """Build the filter; listen to ``modes`` (a ModeWatch); re-solve while shaping."""
+        self.release()
+        g = self.node.get_parameter
+        self._kind = self._read_kind()
+        filt = TargetFilter(self._kind, bool(g('dynamic_feedforward').value), lag_s)
+        if not filt.enabled or modes is None:
+            return
+        with self._lock:
+            self._filter = filt
+        modes.listen(self._on_mode)
+        if modes.result is not None:
+            self._on_mode(None, modes.result)
+        if filt.shaper is not None:
+            def tick():
+                item = self._last_item
+                with self._lock:
+                    busy = self._filter is not None and self._filter.busy(time.monotonic())
+                if item is not None and busy:
+                    resubmit(item)
+            self._timer = self.node.create_timer(1.0 / SHAPING_RATE_HZ, tick)
+        self.node.get_logger().info(
+            f'targets: shaping {self._kind}, dynamic feedforward '
+            f'{"on" if filt.feedforward is not None else "off"} (lag {lag_s:g} s)')
+
+    def _on_mode(self, before, res) -> None:
+        with self._lock:
+            filt = self._filter
+            if filt is None or not (before is None or res.moved or filt.mode is None):
+                return
+            filt.set_mode(res.frequency_hz, res.damping_ratio)
+            delay = filt.delay_s
+        if filt.shaper is not None:
+            self.node.get_logger().info(
+                f'targets: {self._kind} shaper at {res.frequency_hz:.3g} Hz (damping ratio '
+                f'{res.damping_ratio:.3f}): adds {delay * 1e3:.0f} ms of delay, '
+                f'{filt.shaper.duration_s * 1e3:.0f} ms to arrive')
+
+    def release(self) -> None:
+        """Drop the filter and the re-solve timer."""
+        if self._timer is not None:
+            self.node.destroy_timer(self._timer)
+        self._timer = self._last_item = None
+        with self._lock:
+            self._filter = None
+
+    def reset(self) -> None:
+        """Forget the stream (on activate)."""
+        self._last_item = None
+        with self._lock:
+            if self._filter is not None:
+                self._filter.reset()
+
+    def target(self, item, wanted_at: float):
+        """The target to solve for ``item`` (new or re-solved) wanted at ``wanted_at``."""
+        pos, z = item[0], item[1]
+        with self._lock:
+            filt = self._filter
+            if filt is None:
+                return pos, z
+            if item is not self._last_item:
+                self._last_item = item
+                filt.push(wanted_at, pos, z)
+            return filt.target(time.monotonic())
+
+    def status(self) -> dict:
+        """Diagnostics values."""
+        with self._lock:
+            filt = self._filter
+            if filt is None:
+                return {'target_shaping': self._kind, 'dynamic_feedforward': 'false'}
+            return {'target_shaping': self._kind,
+                    'target_shaping_delay_s': f'{filt.delay_s:.3f}',
+                    'dynamic_feedforward': str(filt.feedforward is not None).lower(),
+                    'target_mode_hz': 'none' if filt.mode is None else f'{filt.mode[0]:.4g}'}

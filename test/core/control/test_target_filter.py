@@ -1,0 +1,71 @@
+"""TargetFilter: shaping and dynamic feedforward of a target stream, as the inverse node does."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core.control import (StreamFeedforward, TargetFilter, TargetShaper,
+                                          shaper_impulses)
+
+F, ZETA = 2.4, 0.05
+
+
+def test_a_step_is_shaped_after_the_mode_is_known_and_busy_meanwhile():
+    tf = TargetFilter('zvd')
+    a, b = np.array([0.0, 0.0, 0.2]), np.array([0.01, 0.0, 0.2])
+    tf.push(0.0, a)
+    tf.push(1.0, b)
+    np.testing.assert_array_equal(tf.target(1.0)[0], b)   # no mode yet: as it is
+    assert tf.delay_s == 0.0 and not tf.busy(1.0)
+    tf.set_mode(F, ZETA)
+    times, amps = shaper_impulses('zvd', F, ZETA)
+    assert tf.delay_s == pytest.approx(float(amps @ times))
+    for k, tk in enumerate(times):   # the staircase: the impulses that have arrived
+        assert tf.busy(1.0 + tk - 1e-6)
+        got = tf.target(1.0 + tk + 1e-6)[0]
+        np.testing.assert_allclose(got, a + amps[:k + 1].sum() * (b - a), atol=1e-12)
+    assert not tf.busy(1.0 + times[-1] + 1e-6)   # the last level was solved for
+    np.testing.assert_allclose(tf.target(5.0)[0], b)
+
+
+def test_a_previewed_stream_is_shaped_at_its_newest_time():
+    """A target wanted in the future is shaped for that time, not for now."""
+    tf = TargetFilter('zv')
+    tf.set_mode(F, ZETA)
+    ref = TargetShaper('zv', F, ZETA)
+    for k in range(50):
+        t, p = 0.02 * k, np.array([0.001 * k, 0.0, 0.2])
+        tf.push(t + 0.09, p)
+        ref.push(t + 0.09, p)
+        np.testing.assert_allclose(tf.target(t)[0], ref.at(t + 0.09)[0])
+
+
+def test_dynamic_feedforward_adds_the_streams_shift_and_keeps_the_axis_a_unit_vector():
+    tf = TargetFilter('none', dynamic_feedforward=True, lag_s=0.06)
+    ff = StreamFeedforward(F, ZETA, lag_s=0.06, window_s=0.1)
+    tf.set_mode(F, ZETA)
+    w = 2 * math.pi / 2.0
+    for k in range(60):
+        t = 0.02 * k
+        p = np.array([0.01 * math.sin(w * t), 0.0, 0.2])
+        z = np.array([0.2 * math.sin(w * t), 0.0, 1.0])
+        z /= np.linalg.norm(z)
+        tf.push(t, p, z)
+        ff.push(t, p, z)
+        got_p, got_z = tf.target(t)
+        np.testing.assert_allclose(got_p, ff.target()[0], atol=1e-15)
+        assert np.linalg.norm(got_z) == pytest.approx(1.0)
+    assert np.linalg.norm(got_p - p) > 1e-4   # moving: shifted
+    assert not tf.busy(t)                      # no shaper: nothing to re-solve
+
+
+def test_bad_shaping_and_a_stream_going_back():
+    with pytest.raises(ValueError, match="target_shaping = 'zvdd' is not allowed"):
+        TargetFilter('zvdd')
+    tf = TargetFilter('zv')
+    tf.set_mode(F, ZETA)
+    tf.push(5.0, [0.0, 0.0, 0.2])
+    tf.push(1.0, [0.01, 0.0, 0.2])   # time went back (a new stream): taken as it is
+    np.testing.assert_allclose(tf.target(1.0)[0], [0.01, 0.0, 0.2], atol=1e-15)
+    assert not TargetFilter().enabled and TargetFilter('zv').enabled

@@ -1,0 +1,91 @@
+"""The inverse node's target shaping and dynamic feedforward (parameters of TargetLink)."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+
+from bellow_ancf_ros.core import solve_forward  # noqa: E402
+from bellow_ancf_ros.core.control import shaper_impulses  # noqa: E402
+from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+import test_ros_nodes as _rn  # noqa: E402
+from test_ros_nodes import diag_statuses, kv, pose_of, target_msg, wait_for  # noqa: E402
+
+h = _rn.h   # the harness fixture (the isolated ROS context comes from conftest)
+
+
+def test_a_zvd_shaped_step_reaches_the_robot_as_the_shapers_staircase(h, one):
+    """10 mm step: the commanded poses sit on the ZVD levels, then on the target.
+
+    The one-segment robot's first mode at the start (vented, computed at
+    configure) sets the shaper; it is re-solved at 50 Hz while it moves.
+    """
+    h.record(PoseStamped, 'commanded_pose')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, target_shaping='zvd', name='shaped')
+    st = node._targets.status()
+    f = float(st['target_mode_hz'])
+    assert 9.0 < f < 11.0 and st['target_shaping'] == 'zvd'   # 10.6 Hz vented
+    a = solve_forward(one, [40e3, 20e3, 0.0]).position
+    b = a + np.array([0.01, 0.0, 0.0])
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    pub.publish(target_msg(a))
+    wait_for(lambda: h.count('commanded_pose') > 0
+             and np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - a) < 1e-6,
+             what='at the first target')
+    n0 = h.count('commanded_pose')
+    pub.publish(target_msg(b))
+    wait_for(lambda: np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - b) < 1e-6,
+             what='at the step target')
+    with h.lock:
+        got = [pose_of(m)[0] for _, m in h.msgs['commanded_pose'][n0:]]
+    frac = sorted({round(float((p - a) @ (b - a) / ((b - a) @ (b - a))), 3) for p in got})
+    times, amps = shaper_impulses('zvd', *node._targets._filter.mode)
+    levels = np.round(np.cumsum(amps), 3)
+    # (a republished command for the first target may come first)
+    assert [x for x in frac if x > 0] == levels.tolist(), (frac, levels)   # 0.40, 0.87, 1
+    st = [s for s in diag_statuses(h, 'shaped') if 'target_shaping' in kv(s)][-1]
+    assert kv(st)['target_shaping'] == 'zvd' and float(kv(st)['target_mode_hz']) == f
+    delay = float(node._targets.status()['target_shaping_delay_s'])
+    assert delay == pytest.approx(float(amps @ times), abs=1e-3)
+
+
+def test_dynamic_feedforward_shifts_a_moving_stream_not_a_held_target(h, one):
+    """A 2 s circle streamed at 50 Hz: commanded = target + the modal and lag shift."""
+    h.record(PoseStamped, 'commanded_pose')
+    node = h.add(InverseKinetostaticNode, dynamic_feedforward=True, name='dynff')
+    assert node._targets.status()['dynamic_feedforward'] == 'true'
+    c = solve_forward(one, [30e3, 30e3, 30e3]).position
+    r, w = 0.008, 2 * math.pi / 2.0
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    t0 = time.monotonic()
+    shifts = []
+    while time.monotonic() - t0 < 1.5:
+        t = time.monotonic() - t0
+        p = c + r * np.array([math.cos(w * t), math.sin(w * t), 0.0])
+        pub.publish(target_msg(p))
+        time.sleep(0.02)
+        if h.count('commanded_pose'):
+            shifts.append(np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - p))
+    # lag 0.06 s at 3.1 rad/s on 8 mm: about 1.5 mm ahead (the mode adds little at 10 Hz)
+    assert 0.8e-3 < np.median(shifts[10:]) < 2.5e-3, np.median(shifts[10:])
+    pub.publish(target_msg(c))   # a jump to a held target: passed as it is
+    time.sleep(0.3)
+    pub.publish(target_msg(c))
+    wait_for(lambda: np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - c) < 1e-6,
+             what='the held target unshifted')
+
+
+def test_bad_target_shaping_refused(h):
+    with pytest.raises(ValueError, match="parameter target_shaping = 'zvdd' is not allowed; "
+                       "allowed: one of: 'none', 'zv', 'zvd'"):
+        h.add(InverseKinetostaticNode, target_shaping='zvdd')
