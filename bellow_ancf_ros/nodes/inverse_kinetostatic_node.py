@@ -73,7 +73,18 @@ model's pose for the shifted target.  A target's stamp is the time it is
 wanted at (a stamp in the future: a source that previews the regulators'
 lag); each measured pose is compared with the target wanted when it was
 captured.  Outliers are never integrated; through a dropout the correction
-is held (integrator frozen, diagnostics WARN).
+is held (integrator frozen, diagnostics WARN).  The integral gain follows
+the robot's first mode (``feedback_gain_per_s: auto``, the default).
+
+Targets for a robot that swings
+-------------------------------
+Parameters ``target_shaping`` (``none``, ``zv``, ``zvd``) and
+``dynamic_feedforward`` (:class:`~bellow_ancf_ros.nodes.target_link.TargetLink`):
+each target is shaped at the first mode, or shifted by the inertial,
+damping and lag loads of its motion, before the closed loop's correction.
+The first mode at the held equilibrium comes from one thread
+(:class:`~bellow_ancf_ros.nodes.mode_watch.ModeWatch`), computed at
+configure for the vented robot with its payload and again as it moves.
 
 Lifecycle and safety
 --------------------
