@@ -64,6 +64,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/stream_latency.py one_segment
 	$(VENV)/bin/python bench/stream_latency.py two_segment
 	$(VENV)/bin/python bench/dynamics_bench.py
+	$(VENV)/bin/python bench/remedies_bench.py
 
 # puts bench/speed_table.md (from the last `make bench`) into README.md between its markers
 readme-speed:

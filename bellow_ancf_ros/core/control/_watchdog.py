@@ -13,7 +13,9 @@ trips when that amplitude
 
 * stays above ``sustained_m`` (1 mm: seven times the motion capture's noise
   of 0.15 mm, above what a loop that tracks leaves) for ``sustained_windows``
-  windows in a row (3: six periods), or
+  windows in a row (3: six periods) without dying out (the last at least
+  0.8 of the first: the free swing after a step decays, a limit cycle
+  does not), or
 * grows by ``growth`` (1.4) from window to window ``growing_windows`` times
   in a row (3) and is above ``floor_m`` (0.3 mm).
 
@@ -34,6 +36,11 @@ __all__ = ['OscillationWatchdog', 'WatchdogTrip']
 
 #: The band searched around the watched mode, as factors of its frequency.
 BAND = np.linspace(0.75, 1.5, 16)
+#: A new watched frequency within this fraction of the old one keeps the windows.
+SAME_MODE = 0.05
+#: A sustained swing keeps at least this share of its amplitude over its windows: a free
+#: swing after a step dies out (damping ratio 0.04: to 0.36 over two windows) and is no trip.
+SUSTAINED_RATIO = 0.8
 
 
 class WatchdogTrip:
@@ -75,13 +82,21 @@ class OscillationWatchdog:
         self.set_mode(frequency_hz)
 
     def set_mode(self, frequency_hz: float) -> None:
-        """Watch another mode (a payload moved it); the windows start again."""
+        """Watch another mode (a payload moved it); the windows start again.
+
+        A move within :data:`SAME_MODE` of the watched frequency (the
+        equilibrium drifting as the loop corrects; recomputed every two
+        seconds) keeps the windows: a reset on every such move kept a
+        ringing loop's windows from ever adding up to a trip.
+        """
         f = float(frequency_hz)
         if not (math.isfinite(f) and f > 0):
             raise ValueError(f'watched frequency must be > 0, got {frequency_hz!r}')
+        old = getattr(self, 'frequency_hz', None)
         self.frequency_hz = f
         self.window_s = 2.0 / f
-        self.reset()
+        if old is None or abs(f - old) > SAME_MODE * old:
+            self.reset()
 
     def reset(self) -> None:
         """Forget the samples and the windows (after a trip, or a new target)."""
@@ -132,7 +147,8 @@ class OscillationWatchdog:
         a = [x[1] for x in self.amplitudes]
         reason = None
         n = self.sustained_windows
-        if len(a) >= n and min(a[-n:]) > self.sustained_m:
+        if (len(a) >= n and min(a[-n:]) > self.sustained_m
+                and a[-1] >= SUSTAINED_RATIO * a[-n]):   # not a free swing dying out
             reason = f'above {self.sustained_m * 1e3:g} mm for {2 * n} periods'
         g = self.growing_windows
         if len(a) > g and a[-1] > self.floor_m and all(

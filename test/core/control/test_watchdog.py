@@ -97,3 +97,30 @@ def test_bunched_or_sparse_samples_invent_no_swing():
                 trips.append(trip)
     assert not trips
     assert all(a < 1e-3 for _, a in wd.amplitudes)
+
+
+def test_a_small_move_of_the_mode_keeps_the_windows():
+    """The mode recomputed every 2 s drifts a little: the windows must still add up to a trip."""
+    wd = OscillationWatchdog(1.45)
+    trip, t = None, 0.0
+    while trip is None and t < 10.0:
+        if int(t / 2.0) != int((t - 1 / 120) / 2.0):   # a new answer every 2 s, 1 % off
+            wd.set_mode(1.45 * (1.01 if int(t / 2.0) % 2 else 0.99))
+        trip = wd.feed(t, [3e-3 * math.sin(2 * math.pi * 1.5 * t), 0.0, 0.0])
+        t += 1 / 120
+    assert trip is not None and t < 6.0   # three windows of 1.4 s, and a little
+    wd.set_mode(2.0)                      # a real move: the windows start again
+    assert not wd.amplitudes
+
+
+def test_a_free_swing_dying_out_is_no_trip_a_limit_cycle_is():
+    """After a step the two-segment robot rings (damping ratio 0.04) for seconds: no trip."""
+    f, zeta = 1.6, 0.04
+    for decay, tripped in ((zeta * 2 * math.pi * f, False), (0.0, True)):
+        wd = OscillationWatchdog(1.45)
+        trips = []
+        for k in range(int(10 * 120)):
+            t = k / 120
+            e = 0.02 * math.exp(-decay * t) * math.sin(2 * math.pi * f * t)
+            trips.append(wd.feed(t, [e, 0.0, 0.0]))
+        assert any(trips) == tripped

@@ -1,0 +1,145 @@
+"""What the robot's swing costs, and what each remedy buys (`make bench`).
+
+In simulated time (:class:`~bellow_ancf_ros.core.control.LoopSimulation`,
+the dynamic simulated robot at its documented damping), one row per
+remedy against the case it is for:
+
+* **gain**: the two-segment robot carrying 50 g (declared), mismatched
+  robot file, realistic plant, a held target: a fixed 2.5 /s (what the loop
+  had before the robot's mode was known; no watchdog) against
+  ``feedback_gain_per_s: auto`` (the safe gain with the mode).  Printed: the
+  largest error over 4-8 s and over the last 4 s of 20 s, and the gain;
+* **watchdog**: the same fixed 2.5 /s with the oscillation watchdog watching
+  the mode: when it trips and what it leaves;
+* **shaping**: the matched two-segment robot (only its dynamics and the
+  regulators' lag), a 10 mm step target: the residual swing from 1 s after
+  the step (largest distance from the final pose over the next second) with
+  no shaping, ZV and ZVD, and the shaper's delay;
+* **dynamic feedforward**: the matched robots (no creep, no play) on the
+  paper's circle at 10 times its speed (2 s period), fourth period: RMSE of
+  the quasi-static feedforward (lag previewed as a delay) against the
+  dynamic one (lag and mode inverted).
+
+Every figure is measured by this run; the rows run in parallel on the
+machine's cores.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from multiprocessing import Pool
+
+import numpy as np
+
+from bellow_ancf_ros.core import (RobotModel, limit_blas_threads, load_robot, solve_forward,
+                                  solve_inverse)
+from bellow_ancf_ros.core.control import (AUTO_GAIN, FeedbackSettings, LoopSimulation, ModeCheck,
+                                          PlantEffects, SimulatedRobot, StreamFeedforward,
+                                          shaped, shaper_impulses)
+from bellow_ancf_ros.core.dynamics import natural_modes
+from bellow_ancf_ros.core.experiments import trajectory_target
+
+LAG_S, DELAY_S = 0.06, 0.05
+PREVIEW_S = 0.09
+
+
+def _held_50g(gain):
+    """Two segments, 50 g, held target: largest error over the last 4 s of 20 s."""
+    model = RobotModel(load_robot('two_segment'))
+    robot = SimulatedRobot('two_segment_mismatched', seed=1, payload_kg=0.05)
+    watch = gain != 'fixed, no watchdog'
+    k = AUTO_GAIN if gain == 'auto' else 2.5
+    sim = LoopSimulation(model, robot, FeedbackSettings(gain_per_s=2.5), preview_s=PREVIEW_S,
+                         physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=0.05,
+                         mode_check=ModeCheck(k, LAG_S, DELAY_S) if watch else None)
+    fw = solve_forward(model, [40e3, 0, 0, 0, 0, 0], payload_kg=0.05)
+    rec = sim.run(20.0, lambda t: (fw.position, fw.z_axis))
+    s = rec.summary(start_s=16.0)
+    early = rec.summary(start_s=4.0, end_s=8.0)
+    wd = sim.feedback.watchdog
+    trips = 0 if wd is None else wd.trips
+    first = '' if wd is None or wd.last_trip is None else f'; {wd.last_trip.message}'
+    return (f'gain {gain:<18s} held 50 g: max {early["max_mm"]:6.3f} mm over 4-8 s, '
+            f'{s["max_mm"]:6.3f} mm {s["max_deg"]:6.3f} deg over 16-20 s; gain in use '
+            f'{sim.feedback.gain_per_s:.3g} /s; watchdog trips {trips}{first}')
+
+
+def _step(kind):
+    """Matched two-segment robot, 10 mm step at 8 s: residual swing from 9 s to 10 s."""
+    model = RobotModel(load_robot('two_segment'))
+    fw0 = solve_forward(model, [30e3, 0, 0, 0, 0, 0])
+    goal = fw0.position + np.array([0.0, 0.010, 0.0])
+    mode = natural_modes(solve_inverse(model, goal, fw0.z_axis, warm_start=fw0).forward,
+                         1).first
+
+    def step(t):
+        return (fw0.position if t < 8.0 else goal), fw0.z_axis
+    e = PlantEffects.ideal(dynamics=True, regulator_time_constant_s=0.06,
+                           regulator_dead_time_s=0.015, position_noise_m=0.0,
+                           angle_noise_rad=0.0)
+    robot = SimulatedRobot('two_segment', seed=0, effects=e)
+    sim = LoopSimulation(model, robot, None, physics_rate_hz=robot.auto_physics_rate_hz)
+    tgt = step if kind == 'none' else shaped(step, kind, mode.frequency_hz, mode.damping_ratio)
+    rec = sim.run(11.0, tgt)
+    a = rec.arrays()
+    final = a['true_p'][a['t'] > 10.5].mean(axis=0)
+    w = (a['t'] >= 9.0) & (a['t'] <= 10.0)
+    swing = np.linalg.norm(a['true_p'][w] - final, axis=1).max()
+    times, amps = shaper_impulses(kind, mode.frequency_hz, mode.damping_ratio)
+    return (f'shaping {kind:<4s} 10 mm step (mode {mode.frequency_hz:.3g} Hz, zeta '
+            f'{mode.damping_ratio:.3f}): residual swing 1-2 s after it {swing * 1e3:7.4f} mm; '
+            f'delay {float(amps @ times) * 1e3:4.0f} ms')
+
+
+def _circle_10x(args):
+    """Matched robot, 2 s circle, fourth period: quasi-static vs dynamic feedforward."""
+    name, dynamic = args
+    period = 2.0
+    model = RobotModel(load_robot(name))
+    cfg = model.cfg
+    circ = (trajectory_target('planar_circle', cfg, period=period) if cfg.n_segments == 1
+            else trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0))
+    p0, z0 = circ(0.0)
+    mode = natural_modes(solve_inverse(model, p0, z0 if cfg.n_segments > 1 else None).forward,
+                         1).first
+    eff = PlantEffects(creep_fraction=0.0, regulator_hysteresis_pa=0.0)
+    tau = eff.regulator_time_constant_s
+    robot = SimulatedRobot(name, seed=1, effects=eff)
+    ff = StreamFeedforward(mode.frequency_hz, mode.damping_ratio, lag_s=tau, window_s=0.1)
+    sim = LoopSimulation(model, robot, None, physics_rate_hz=robot.auto_physics_rate_hz,
+                         preview_s=eff.preview_s(50.0) - (tau if dynamic else 0.0),
+                         feedforward=ff if dynamic else None)
+    start = circ(0.0)
+    sim.run(1.0, lambda t: start)
+    t0 = sim.robot.time_s
+    rec = sim.run(4 * period, lambda t: circ(t - t0))
+    s = rec.summary(t0 + 3 * period, t0 + 4 * period)
+    ang = f' {s["rmse_deg"]:6.3f} deg' if 'rmse_deg' in s else ''
+    label = 'dynamic' if dynamic else 'quasi-static'
+    return (f'feedforward {label:<12s} {name:<12s} circle at 10x: RMSE {s["rmse_mm"]:6.3f} mm'
+            f'{ang} (max {s["max_mm"]:.3f} mm)')
+
+
+def _run(job):
+    limit_blas_threads()
+    fn, arg = job
+    t0 = time.perf_counter()
+    out = fn(arg)
+    return f'{out}   [{time.perf_counter() - t0:.0f} s]'
+
+
+def main() -> None:
+    jobs = ([(_held_50g, g) for g in ('fixed, no watchdog', 'fixed, watchdog', 'auto')]
+            + [(_step, k) for k in ('none', 'zv', 'zvd')]
+            + [(_circle_10x, (n, d)) for n in ('one_segment', 'two_segment')
+               for d in (False, True)])
+    print('remedies bench: what the swing costs and what each remedy buys (LoopSimulation, '
+          f'dynamic robot; {os.cpu_count()} CPUs)', flush=True)
+    with Pool(min(len(jobs), os.cpu_count() or 1)) as pool:
+        for line in pool.imap(_run, jobs):
+            print('  ' + line, flush=True)
+
+
+if __name__ == '__main__':
+    main()
