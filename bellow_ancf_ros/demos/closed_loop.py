@@ -313,8 +313,22 @@ def preview_s(plant: str) -> float:
 
 
 def run_column(col: Column, args, domains: list, log_dir: Path) -> dict:
-    """Feedforward and closed loop of one case at one speed, side by side (two domains)."""
-    runs = [Run(col, mode, args, domains.pop(), log_dir) for mode in MODES]
+    """Feedforward and closed loop of one case at one speed, side by side (two domains).
+
+    ``args.sequential``: one after the other (each pipeline has the cores to
+    itself: the dynamic simulated robot's physics and the recorder share
+    two cores with eight node processes otherwise).
+    """
+    if getattr(args, 'sequential', False):
+        out = {}
+        for mode in MODES:
+            out.update(_run_modes(col, args, domains, log_dir, (mode,)))
+        return out
+    return _run_modes(col, args, domains, log_dir, MODES)
+
+
+def _run_modes(col: Column, args, domains: list, log_dir: Path, modes) -> dict:
+    runs = [Run(col, mode, args, domains.pop(), log_dir) for mode in modes]
     out = {}
     try:
         for r in runs:
@@ -476,6 +490,9 @@ def _parse(argv):
     ap.add_argument('--startup-timeout', type=float, default=40.0, help='[s]')
     ap.add_argument('--cases', default='one_segment,two_segment',
                     help='comma-separated robots to run (default: %(default)s)')
+    ap.add_argument('--sequential', action='store_true',
+                    help='run feedforward and closed loop one after the other instead of side '
+                         'by side (twice as long; each pipeline gets the cores)')
     ap.add_argument('--no-goals', action='store_true',
                     help='exit 0 without checking the closed-loop goals (short test runs)')
     return ap.parse_args(argv)
