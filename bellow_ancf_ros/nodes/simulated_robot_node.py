@@ -378,7 +378,9 @@ class SimulatedRobotNode(Node):
                                           f'{self._timeout_s:g} s (controller dead or stopped)')
             failures = self.robot.failures
             self.robot.step(now - last)   # only this thread steps the robot
-            self._state_stamp = self.get_clock().now()
+            # the state is the robot's at `now` (the tick), not when its computation ended
+            self._state_stamp = self.get_clock().now() - Duration(
+                nanoseconds=int((time.monotonic() - now) * 1e9))
             failed = self.robot.failures > failures
             p = self.robot.pressures_pa
             last = now
