@@ -42,7 +42,7 @@ import scipy.sparse.linalg as spla
 from ..model import RobotModel, TipLoad, as_tip_load
 from ..status import DynamicsStatus
 from ._inertia import Inertia
-from ._kernels import dynamic_rhs
+from ._kernels import chord_iterations, split_factors
 
 __all__ = ["DynamicState", "GeneralizedAlpha", "StepReport", "DynamicsError",
            "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step",
@@ -158,6 +158,18 @@ class GeneralizedAlpha:
         self._build_pattern()
         self._lu = None
         self._lu_key = None
+        self._lu_dummy = split_factors(spla.splu(sp.identity(model.N, format="csc")))
+        self._work = tuple(np.empty(model.N) for _ in range(4))
+        st1, cfg = model.stage1, model.cfg
+        ia = self.inertia
+        self._stage1_args = (
+            np.where(ia.slope_dof, ia.slope_act, -1).astype(np.int64),
+            np.ascontiguousarray(st1.k_coefficients, dtype=float),
+            np.ascontiguousarray(st1.dk_coefficients, dtype=float), float(cfg.l0),
+            float(model.n), float(cfg.d_a), float(cfg.rho0),
+            np.asarray(model.gravity, dtype=float) * 1.0)
+        self._mass_cache, self._load_cache = {}, {}
+        self._hist = None   # (state, step, (acc, mu) before it): the predictor's history
         self.counters = {"steps": 0, "iterations": 0, "factorizations": 0}
 
     # ------------------------------------------------------------ pattern
@@ -243,18 +255,41 @@ class GeneralizedAlpha:
         return st
 
     # ---------------------------------------------------------------- step
-    def _factor(self, st: DynamicState, h: float, x_static):
+    def _mass_arrays(self, payload_kg: float):
+        """CSR arrays of the mass matrix and its map into the chord pattern, per payload."""
+        got = self._mass_cache.get(payload_kg)
+        if got is None:
+            M = self.inertia.mass_matrix_csr(payload_kg)
+            got = ((M.indptr, M.indices, M.data), self._mass_map(self.inertia.mass_matrix(
+                payload_kg)))
+            if len(self._mass_cache) > 16:
+                self._mass_cache.clear()
+            self._mass_cache[payload_kg] = got
+        return got
+
+    def _inputs(self, lam: np.ndarray, load: TipLoad):
+        """The kernel's inputs at stretch ``lam`` and ``load`` (point forces kept per load)."""
+        q_point = self._load_cache.get(load)
+        if q_point is None:
+            q_point = np.ascontiguousarray(self.model.point_forces(load), dtype=float)
+            if len(self._load_cache) > 16:
+                self._load_cache.clear()
+            self._load_cache[load] = q_point
+        return (lam,) + self._stage1_args + (q_point,)
+
+    def _factor(self, st: DynamicState, h: float):
+        """Factorise the chord matrix at the state ``st`` (its stretch, load and step ``h``)."""
         m = self.model
         bp = (1 - self.alpha_m) / ((1 - self.alpha_f) * h * h * self.beta)
         gp = self.gamma / (h * self.beta)
-        s = self.inertia.scale(st.stretch)
-        Ti = 1.0 / s
+        Ti = 1.0 / self.inertia.scale(st.stretch)
+        x_static = np.concatenate([st.q * Ti, st.mu])
         ev = m.evaluate(x_static, st.stretch, 1.0, st.load, jacobian=True)
         rs = np.concatenate([Ti / bp, np.ones(m.nc)])
         cs = np.concatenate([Ti, np.full(m.nc, bp)])
         data = np.zeros(self._nnz)
         data[self._map_static] = ev.jacobian.data * rs[self._static_rows] * cs[self._static_cols]
-        Mmap, Mdata = self._mass_map(self.inertia.mass_matrix(st.load))
+        Mmap, Mdata = self._mass_arrays(float(st.load.payload_kg))[1]
         c = gp / bp
         data += np.bincount(Mmap, Mdata * (1.0 + c * self.inertia.mass_damping),
                             minlength=self._nnz)
@@ -264,70 +299,70 @@ class GeneralizedAlpha:
             data += np.bincount(self._map_elem, blocks, minlength=self._nnz)
         A = sp.csc_matrix((data, self._indices, self._indptr), shape=(m.N, m.N))
         try:
-            self._lu = spla.splu(A, permc_spec="COLAMD")
+            lu = spla.splu(A, permc_spec="COLAMD")
         except RuntimeError as exc:
             raise DynamicsError(DynamicsStatus.SINGULAR, str(exc)) from exc
+        self._lu = split_factors(lu)
         self._lu_key = (h, float(st.load.payload_kg))
         self.counters["factorizations"] += 1
-        return ev
 
     def _try_step(self, h: float, lam_next, load_next) -> DynamicState | None:
-        """One step of length ``h`` from ``self.state``; None if Newton does not converge."""
+        """One step of length ``h`` from ``self.state``; None if Newton does not converge.
+
+        The iterations run compiled (:func:`chord_iterations`); Python only
+        refactors when they ask for it.  Predictor: the accelerations and
+        multipliers extrapolated linearly from the last two steps (constant
+        after a start), which follows a smoothly changing input (a pressure
+        ramp or sine) that a constant acceleration misses.
+        """
         m = self.model
-        nq = m.nq
+        nq, nc = m.nq, m.nc
         st0 = self.state
-        am, af, be, ga = self.alpha_m, self.alpha_f, self.beta, self.gamma
-        bp = (1 - am) / ((1 - af) * h * h * be)
-        gp = ga / (h * be)
-        # predictor: constant acceleration
-        acc = st0.acc.copy()
-        aux = (af * st0.acc - am * st0.aux + (1 - af) * acc) / (1 - am)
-        v = st0.v + h * ((1 - ga) * st0.aux + ga * aux)
-        q = st0.q + h * st0.v + h * h * ((0.5 - be) * st0.aux + be * aux)
-        st = DynamicState(st0.t + h, q, v, acc, aux, st0.mu.copy(),
-                          np.asarray(lam_next, dtype=float), as_tip_load(load_next))
-        M = self.inertia.mass_matrix_csr(st.load)
+        lam = np.ascontiguousarray(lam_next, dtype=float)
+        load = as_tip_load(load_next)
+        payload = float(load.payload_kg)
+        inputs = self._inputs(lam, load)
+        mass = self._mass_arrays(payload)[0]
+        st = DynamicState(st0.t + h, np.empty(nq), np.empty(nq), np.empty(nq), np.empty(nq),
+                          np.empty(nc), lam, load)
         key = self._lu_key
-        if (self._lu is None or key[1] != float(st.load.payload_kg)
-                or abs(key[0] - h) > 0.25 * h):   # the chord matrix of a near step is kept
-            self._lu = None
-        refreshed = False
-        last = np.inf
-        s = self.inertia.scale(st.stretch)
-        par = m.element_parameters(st.stretch)
-        xs = np.empty(m.N)
-        rhs = np.empty(m.N)
-        kv, air = self.inertia.damping_time, self.inertia.mass_damping
-        for it in range(self.max_iter):
-            np.divide(st.q, s, out=xs[:nq])
-            xs[nq:] = st.mu
+        if self._lu is None or key[1] != payload or abs(key[0] - h) > 0.25 * h:
+            self._lu = None   # the chord matrix of a near step is kept
+        hist = self._hist
+        if hist is not None and hist[0] is st0:
+            prev, ratio = hist[2], h / hist[1]
+        else:
+            prev, ratio = (st0.acc, st0.mu), 0.0
+        ia = self.inertia
+        coef = (float(h), self.alpha_m, self.alpha_f, self.beta, self.gamma,
+                ia.damping_time, ia.mass_damping)
+        s0 = (st0.q, st0.v, st0.acc, st0.aux, st0.mu)
+        s1 = (st.q, st.v, st.acc, st.aux, st.mu)
+        kargs = self.model.kernel_args
+        predict, refreshed, it, last = True, False, 0, np.inf
+        while True:
             if self._lu is None:
-                self._factor(st, h, xs)
+                if predict:   # the predictor alone (no iteration): the point to factor at
+                    chord_iterations(s0, prev, ratio, True, s1, coef, inputs, kargs, mass,
+                                     self._lu_dummy, (self._inv_scale, self.tol, 0, 0, last,
+                                                      refreshed), self._work)
+                    predict = False
+                self._factor(st, h)
                 refreshed = True
-            r = m.evaluate(xs, st.stretch, 1.0, st.load, jacobian=False).residual
-            dynamic_rhs(st.q, st.v, st.acc, s, r, nq, M.indptr, M.indices, M.data,
-                        self._elem_dofs, self._elem_act, par["le"], par["kt"], par["kb"],
-                        self._h1, self._h2, self._gw, kv, air, bp, rhs)
-            if not np.isfinite(rhs.sum()):
-                return None
-            d = self._lu.solve(rhs)
-            self.counters["iterations"] += 1
-            dq = d[:nq]
-            st.q += dq
-            st.v += gp * dq
-            st.acc += bp * dq
-            st.mu += bp * d[nq:]
-            size = float(np.max(np.abs(dq * self._inv_scale)))
-            if size <= self.tol:
-                st.aux = (af * st0.acc - am * st0.aux + (1 - af) * st.acc) / (1 - am)
+            code, n, last = chord_iterations(
+                s0, prev, ratio, predict, s1, coef, inputs, kargs, mass, self._lu,
+                (self._inv_scale, self.tol, it, self.max_iter, last, refreshed), self._work)
+            predict = False
+            it += n
+            self.counters["iterations"] += n
+            if code == 0:
+                self._hist = (st, h, (st0.acc, st0.mu))
                 return st
-            # slow or diverging chord iterations: refactor at the current iterate
-            if it >= 1 and size > 0.25 * last and not (refreshed and size < 0.9 * last):
-                if refreshed and size > last:
-                    return None
-                self._lu = None
-            last = size
-        return None
+            if code == 5:
+                raise DynamicsError(DynamicsStatus.NONFINITE, "a converged step is not finite")
+            if code != 1 or it >= self.max_iter:
+                return None
+            self._lu = None   # slow chord iterations: refactor at the current iterate
 
     def advance(self, t_end: float, stretch=None, load=None, pressures_pa=None,
                 time_budget_s: float | None = None) -> StepReport:
@@ -396,9 +431,7 @@ class GeneralizedAlpha:
             new = self._try_step(h, stretch_at(t + h), load_at(t + h))
         except DynamicsError as exc:
             return exc.status
-        if new is not None:
-            if not (np.all(np.isfinite(new.q)) and np.all(np.isfinite(new.v))):
-                return DynamicsStatus.NONFINITE
+        if new is not None:   # finite: _try_step checked
             self.state = new
             self.counters["steps"] += 1
             return DynamicsStatus.COMPLETED

@@ -12,13 +12,22 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["dynamic_rhs"]
+from ..model import element_parameters, evaluate_kernel
+
+__all__ = ["chord_iterations", "dynamic_rhs", "lu_solve", "split_factors"]
 
 
 @njit(cache=True, nogil=True)
 def dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, elem_dofs, elem_act, le, kt,
                 kb, h1, h2, gw, beta_kv, alpha_air, bp, out):  # pragma: no cover - compiled
     """Fill ``out`` (length N) with the Newton right-hand side; returns nothing."""
+    si = np.empty(nq)  # T^-1 and the static coordinates and velocities, once per call
+    qs = np.empty(nq)
+    us = np.empty(nq)
+    for i in range(nq):
+        si[i] = 1.0 / s[i]
+        qs[i] = q[i] * si[i]
+        us[i] = v[i] * si[i]
     for i in range(nq):
         acc_i = 0.0
         vel_i = 0.0
@@ -45,15 +54,12 @@ def dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, elem_dofs, ele
                     nx = h1[g, a] * f1[a]
                     nc = h2[g, a] * f2[a]
                     d0 = elem_dofs[e, 3 * a]
-                    sq0 = 1.0 / s[d0]
-                    sq1 = 1.0 / s[d0 + 1]
-                    sq2 = 1.0 / s[d0 + 2]
-                    qs0 = q[d0] * sq0
-                    qs1 = q[d0 + 1] * sq1
-                    qs2 = q[d0 + 2] * sq2
-                    us0 = v[d0] * sq0
-                    us1 = v[d0 + 1] * sq1
-                    us2 = v[d0 + 2] * sq2
+                    qs0 = qs[d0]
+                    qs1 = qs[d0 + 1]
+                    qs2 = qs[d0 + 2]
+                    us0 = us[d0]
+                    us1 = us[d0 + 1]
+                    us2 = us[d0 + 2]
                     rx0 += nx * qs0
                     rx1 += nx * qs1
                     rx2 += nx * qs2
@@ -75,8 +81,182 @@ def dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, elem_dofs, ele
             for a in range(4):
                 for i in range(3):
                     d = elem_dofs[e, 3 * a + i]
-                    out[d] += beta_kv * fe[a, i] / s[d]
+                    out[d] += beta_kv * fe[a, i] * si[d]
     for i in range(nq):
         out[i] = -out[i] / bp
     for i in range(nq, out.shape[0]):
         out[i] = -r[i]
+
+
+@njit(cache=True, nogil=True)
+def lu_solve(lu, b, work, out):  # pragma: no cover - compiled
+    """Solve ``A out = b`` with SuperLU's factors of ``A``: ``Pr A Pc = L U``.
+
+    ``lu``: ``(l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices,
+    u_data, u_diag, perm_r, perm_c)``, the off-diagonal entries of ``L`` and
+    ``U`` by columns and their diagonals (:func:`split_factors`).  Two
+    triangular sweeps over the stored entries, no allocation: SuperLU's own
+    ``solve`` costs several times more at these sizes (a few hundred
+    unknowns), most of it call overhead.
+    """
+    l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices, u_data, u_diag, perm_r, perm_c = lu
+    n = b.shape[0]
+    for i in range(n):
+        work[perm_r[i]] = b[i]
+    for j in range(n):
+        xj = work[j] / l_diag[j]
+        work[j] = xj
+        if xj != 0.0:
+            for k in range(l_indptr[j], l_indptr[j + 1]):
+                work[l_indices[k]] -= l_data[k] * xj
+    for j in range(n - 1, -1, -1):
+        xj = work[j] / u_diag[j]
+        work[j] = xj
+        if xj != 0.0:
+            for k in range(u_indptr[j], u_indptr[j + 1]):
+                work[u_indices[k]] -= u_data[k] * xj
+    for i in range(n):
+        out[i] = work[perm_c[i]]
+
+
+def split_factors(superlu):
+    """The arrays :func:`lu_solve` takes, from a ``scipy.sparse.linalg.SuperLU`` object."""
+    out = []
+    for T in (superlu.L.tocsc(), superlu.U.tocsc()):
+        n = T.shape[0]
+        col = np.repeat(np.arange(n), np.diff(T.indptr))
+        off = T.indices != col
+        diag = np.zeros(n)
+        diag[col[~off]] = T.data[~off]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(col[off], minlength=n))])
+        out += [indptr.astype(np.int64), T.indices[off].astype(np.int64),
+                np.ascontiguousarray(T.data[off]), diag]
+    out += [np.asarray(superlu.perm_r, dtype=np.int64), np.asarray(superlu.perm_c, dtype=np.int64)]
+    return tuple(out)
+
+
+#: Contraction rate of the chord iterations above which the matrix is refactorised: a
+#: factorisation costs as much as some 50 iterations, so a rate that only ties up a
+#: few more iterations per step is kept (the rate of two updates is noisy).
+SLOW_RATE = 0.5
+
+
+@njit(cache=True, nogil=True)
+def _iterations_left(left, c, tol):  # pragma: no cover - compiled
+    """Iterations still needed at contraction rate ``c`` to bring the error ``left`` to ``tol``."""
+    if left <= tol:
+        return 0
+    if tol <= 0.0 or c <= 0.0:
+        return 1 << 30
+    return int(np.ceil(np.log(tol / left) / np.log(c)))
+
+
+@njit(cache=True, nogil=True)
+def chord_iterations(st0, prev, ratio, predict, st, coef, inputs, kargs, mass, lu, ctl,
+                     work):  # pragma: no cover - compiled
+    """Chord-Newton iterations of one generalized-alpha step (module ``_integrator``).
+
+    Arguments, grouped in tuples:
+
+    * ``st0 = (q, v, acc, aux, mu)`` at ``t_n``; ``prev = (acc, mu)`` at
+      ``t_{n-1}``;
+    * ``st = (q, v, acc, aux, mu)``: the step's unknowns, set by the predictor
+      when ``predict`` (accelerations and multipliers extrapolated linearly,
+      ``x_n + ratio (x_n - x_{n-1})``; ``ratio = 0``: constant), then updated
+      in place;
+    * ``coef = (h, alpha_m, alpha_f, beta, gamma, beta_kv, alpha_air)``;
+    * ``inputs = (lam, slope_act, k_coefficients, dk_coefficients, l0,
+      n_elements, d_a, rho0, g, Qpoint)``: the stretches at ``t_{n+1}``
+      (``slope_act``: the actuator of each slope coordinate, -1 elsewhere)
+      and the loads; ``kargs``: the model's kernel arguments;
+    * ``mass``: the CSR mass matrix; ``lu``: the chord matrix (:func:`lu_solve`);
+    * ``ctl = (inv_scale, tol, it0, max_iter, last, refreshed)``: iterations
+      ``it0`` to ``max_iter``, the last update's size, whether the matrix
+      was made in this step; ``work``: four arrays of length N.
+
+    Each iteration: the static residual (the model's ``evaluate_kernel``),
+    the dynamic right-hand side (:func:`dynamic_rhs`), the solve with the
+    chord matrix, the update.  Converged when the update, or the error it
+    leaves (``size c / (1 - c)`` at contraction rate ``c``), is within
+    ``tol``.  Returns ``(code, iterations done, last update size)``: ``0``
+    converged (``st[3]`` set), ``1`` slow iterations: refactor at the
+    current iterate and call again, ``2`` diverging after a refactorisation,
+    ``3`` a non-finite right-hand side, ``4`` the budget spent, ``5``
+    converged to a non-finite state.
+    """
+    q0, v0, acc0, aux0, mu0 = st0
+    q, v, acc, aux, mu = st
+    h, am, af, be, ga, beta_kv, alpha_air = coef
+    lam, slope_act, kcoef, dkcoef, l0, n_el, d_a, rho0, g, qpoint = inputs
+    m_indptr, m_indices, m_data = mass
+    inv_scale, tol, it0, max_iter, last, refreshed = ctl
+    xs, rhs, d, s = work
+    nq = q.shape[0]
+    nc = mu.shape[0]
+    for i in range(nq):  # T(lam) (Inertia.scale) and the element parameters (RobotModel's)
+        a = slope_act[i]
+        s[i] = lam[a] if a >= 0 else 1.0
+    le, kt, kb, dle, dkt, dkb = element_parameters(lam, kcoef, dkcoef, l0, n_el, d_a)
+    bp = (1.0 - am) / ((1.0 - af) * h * h * be)
+    gp = ga / (h * be)
+    if predict:
+        acc_p, mu_p = prev
+        for i in range(nq):
+            a = acc0[i] + ratio * (acc0[i] - acc_p[i])
+            x = (af * acc0[i] - am * aux0[i] + (1.0 - af) * a) / (1.0 - am)
+            acc[i] = a
+            v[i] = v0[i] + h * ((1.0 - ga) * aux0[i] + ga * x)
+            q[i] = q0[i] + h * v0[i] + h * h * ((0.5 - be) * aux0[i] + be * x)
+        for i in range(nc):
+            mu[i] = mu0[i] + ratio * (mu0[i] - mu_p[i])
+    xq = xs[:nq]
+    for it in range(it0, max_iter):
+        for i in range(nq):
+            xq[i] = q[i] / s[i]
+        r, _, _ = evaluate_kernel(xq, mu, lam, le, kt, kb, dle, dkt, dkb, rho0, g, qpoint,
+                                  *kargs, False, False)
+        dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, kargs[0], kargs[1], le,
+                    kt, kb, kargs[2], kargs[3], kargs[4], beta_kv, alpha_air, bp, rhs)
+        total = 0.0
+        for i in range(rhs.shape[0]):
+            total += rhs[i]
+        if not np.isfinite(total):
+            return 3, it - it0, last
+        lu_solve(lu, rhs, xs, d)
+        size = 0.0
+        for i in range(nq):
+            dq = d[i]
+            q[i] += dq
+            v[i] += gp * dq
+            acc[i] += bp * dq
+            a = abs(dq * inv_scale[i])
+            if a > size:
+                size = a
+        for i in range(nc):
+            mu[i] += bp * d[nq + i]
+        # the error left after this update: about size * c / (1 - c) for a contraction
+        # rate c = size / last of the chord iterations (at least size * 1e-3: roundoff)
+        left = size
+        if it >= 1:
+            c = size / last
+            left = size * max(c / (1.0 - c), 1e-3) if c < 1.0 else np.inf
+        if size <= tol or left <= tol:
+            finite = True
+            for i in range(nq):
+                aux[i] = (af * acc0[i] - am * aux0[i] + (1.0 - af) * acc[i]) / (1.0 - am)
+                if not (np.isfinite(q[i]) and np.isfinite(v[i])):
+                    finite = False
+            return (0 if finite else 5), it + 1 - it0, size
+        # slow or diverging chord iterations: refactor at the current iterate, unless the
+        # matrix is fresh (then a rate of 0.9 still converges, a rate above 1 fails)
+        if it >= 1:
+            c = size / last
+            if refreshed:
+                if c > 1.0:
+                    return 2, it + 1 - it0, size
+                if c >= 0.9:
+                    return 1, it + 1 - it0, size
+            elif c > SLOW_RATE or it + 1 + _iterations_left(left, c, tol) > max_iter:
+                return 1, it + 1 - it0, size
+        last = size
+    return 4, max_iter - it0, last
