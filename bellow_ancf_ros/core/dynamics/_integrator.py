@@ -169,6 +169,7 @@ class GeneralizedAlpha:
             float(model.n), float(cfg.d_a), float(cfg.rho0),
             np.asarray(model.gravity, dtype=float) * 1.0)
         self._mass_cache, self._load_cache = {}, {}
+        self._mass_values = (None, None)
         self._hist = None   # (state, step, (acc, mu) before it): the predictor's history
         self.counters = {"steps": 0, "iterations": 0, "factorizations": 0}
 
@@ -289,10 +290,13 @@ class GeneralizedAlpha:
         cs = np.concatenate([Ti, np.full(m.nc, bp)])
         data = np.zeros(self._nnz)
         data[self._map_static] = ev.jacobian.data * rs[self._static_rows] * cs[self._static_cols]
-        Mmap, Mdata = self._mass_arrays(float(st.load.payload_kg))[1]
         c = gp / bp
-        data += np.bincount(Mmap, Mdata * (1.0 + c * self.inertia.mass_damping),
-                            minlength=self._nnz)
+        key = (float(st.load.payload_kg), c)
+        if self._mass_values[0] != key:   # the mass's entries, per payload and step
+            Mmap, Mdata = self._mass_arrays(key[0])[1]
+            self._mass_values = (key, np.bincount(
+                Mmap, Mdata * (1.0 + c * self.inertia.mass_damping), minlength=self._nnz))
+        data += self._mass_values[1]
         if self.inertia.damping_time:
             blocks = self.inertia.damping_blocks(st.q, st.stretch).ravel()
             blocks = blocks * Ti[self._elem_rows] * Ti[self._elem_cols] * c

@@ -121,18 +121,33 @@ def lu_solve(lu, b, work, out):  # pragma: no cover - compiled
 
 def split_factors(superlu):
     """The arrays :func:`lu_solve` takes, from a ``scipy.sparse.linalg.SuperLU`` object."""
-    out = []
-    for T in (superlu.L.tocsc(), superlu.U.tocsc()):
-        n = T.shape[0]
-        col = np.repeat(np.arange(n), np.diff(T.indptr))
-        off = T.indices != col
-        diag = np.zeros(n)
-        diag[col[~off]] = T.data[~off]
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(col[off], minlength=n))])
-        out += [indptr.astype(np.int64), T.indices[off].astype(np.int64),
-                np.ascontiguousarray(T.data[off]), diag]
-    out += [np.asarray(superlu.perm_r, dtype=np.int64), np.asarray(superlu.perm_c, dtype=np.int64)]
-    return tuple(out)
+    L, U = superlu.L, superlu.U
+    return (_split_triangular(L.indptr, L.indices, L.data)
+            + _split_triangular(U.indptr, U.indices, U.data)
+            + (np.asarray(superlu.perm_r, dtype=np.int64),
+               np.asarray(superlu.perm_c, dtype=np.int64)))
+
+
+@njit(cache=True, nogil=True)
+def _split_triangular(indptr, indices, data):  # pragma: no cover - compiled
+    """A CSC triangle as (indptr, indices, data) of its off-diagonal entries and its diagonal."""
+    n = indptr.shape[0] - 1
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    idx = np.empty(indices.shape[0], dtype=np.int64)
+    val = np.empty(indices.shape[0])
+    diag = np.zeros(n)
+    k = 0
+    for j in range(n):
+        for p in range(indptr[j], indptr[j + 1]):
+            i = indices[p]
+            if i == j:
+                diag[j] = data[p]
+            else:
+                idx[k] = i
+                val[k] = data[p]
+                k += 1
+        ptr[j + 1] = k
+    return ptr, idx[:k].copy(), val[:k].copy(), diag
 
 
 #: Contraction rate of the chord iterations above which the matrix is refactorised: a
