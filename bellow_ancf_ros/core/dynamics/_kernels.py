@@ -14,7 +14,8 @@ from numba import njit
 
 from ..model import element_parameters, evaluate_kernel
 
-__all__ = ["chord_iterations", "dynamic_rhs", "lu_solve", "split_factors"]
+__all__ = ["chord_iterations", "compact_factors", "dynamic_rhs", "lu_solve", "refactor",
+           "split_factors", "symbolic_factors"]
 
 
 @njit(cache=True, nogil=True)
@@ -142,12 +143,151 @@ def _split_triangular(indptr, indices, data):  # pragma: no cover - compiled
             i = indices[p]
             if i == j:
                 diag[j] = data[p]
-            else:
-                idx[k] = i
-                val[k] = data[p]
+            else:  # sorted by row within the column (insertion): refactor's order
+                m = k
+                while m > ptr[j] and idx[m - 1] > i:
+                    idx[m] = idx[m - 1]
+                    val[m] = val[m - 1]
+                    m -= 1
+                idx[m] = i
+                val[m] = data[p]
                 k += 1
         ptr[j + 1] = k
     return ptr, idx[:k].copy(), val[:k].copy(), diag
+
+
+@njit(cache=True, nogil=True)
+def compact_factors(lu):  # pragma: no cover - compiled
+    """``lu`` without its off-diagonal entries that are exactly zero (fewer to sweep)."""
+    l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices, u_data, u_diag, perm_r, perm_c = lu
+    out = []
+    for indptr, indices, data in ((l_indptr, l_indices, l_data), (u_indptr, u_indices, u_data)):
+        n = indptr.shape[0] - 1
+        ptr = np.zeros(n + 1, dtype=np.int64)
+        idx = np.empty(indices.shape[0], dtype=np.int64)
+        val = np.empty(indices.shape[0])
+        k = 0
+        for j in range(n):
+            for p in range(indptr[j], indptr[j + 1]):
+                if data[p] != 0.0:
+                    idx[k] = indices[p]
+                    val[k] = data[p]
+                    k += 1
+            ptr[j + 1] = k
+        out.append((ptr, idx[:k].copy(), val[:k].copy()))
+    return (out[0][0], out[0][1], out[0][2], l_diag, out[1][0], out[1][1], out[1][2], u_diag,
+            perm_r, perm_c)
+
+
+@njit(cache=True, nogil=True)
+def symbolic_factors(indptr, indices, perm_r, perm_c):  # pragma: no cover - compiled
+    """The pattern of the LU factors of a CSC pattern for fixed row and column permutations.
+
+    Every entry that can be non-zero (no cancellation assumed), as the
+    tuple of :func:`lu_solve` with zero values: the pattern :func:`refactor`
+    fills.  SuperLU's own factors leave out the entries that happened to be
+    zero in the matrix it factorised (a robot's pattern holds exact zeros),
+    which a later matrix of the same pattern may need.  ``O(n^2)``, once
+    per pivot order.
+    """
+    n = indptr.shape[0] - 1
+    inv_c = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        inv_c[perm_c[i]] = i
+    flag = np.zeros(n, dtype=np.bool_)
+    l_ptr = np.zeros(n + 1, dtype=np.int64)
+    u_ptr = np.zeros(n + 1, dtype=np.int64)
+    l_idx = np.empty(4 * indices.shape[0] + n, dtype=np.int64)
+    u_idx = np.empty(4 * indices.shape[0] + n, dtype=np.int64)
+    nl = 0
+    nu = 0
+    for j in range(n):
+        c = inv_c[j]
+        for p in range(indptr[c], indptr[c + 1]):
+            flag[perm_r[indices[p]]] = True
+        for k in range(j):  # ascending: the fill of every earlier column reaches the later
+            if flag[k]:
+                for q in range(l_ptr[k], l_ptr[k + 1]):
+                    flag[l_idx[q]] = True
+        for k in range(n):
+            if flag[k]:
+                flag[k] = False
+                if k < j:
+                    if nu == u_idx.shape[0]:
+                        u_idx = np.concatenate((u_idx, np.empty(u_idx.shape[0], np.int64)))
+                    u_idx[nu] = k
+                    nu += 1
+                elif k > j:
+                    if nl == l_idx.shape[0]:
+                        l_idx = np.concatenate((l_idx, np.empty(l_idx.shape[0], np.int64)))
+                    l_idx[nl] = k
+                    nl += 1
+        l_ptr[j + 1] = nl
+        u_ptr[j + 1] = nu
+    return (l_ptr, l_idx[:nl].copy(), np.zeros(nl), np.ones(n), u_ptr, u_idx[:nu].copy(),
+            np.zeros(nu), np.ones(n), perm_r.astype(np.int64), perm_c.astype(np.int64))
+
+
+@njit(cache=True, nogil=True)
+def refactor(indptr, indices, data, lu, b, work):  # pragma: no cover - compiled
+    """LU factors of the CSC matrix ``A`` with the pivots and the pattern of ``lu``.
+
+    The numeric part of a sparse LU (left-looking, Gilbert & Peierls) along
+    the row and column permutations an earlier SuperLU factorisation of the
+    same pattern chose, as KLU refactors: no ordering, no pivot search, no
+    symbolic analysis, so a fraction of a full factorisation.  Returns the
+    new factors (the tuple of :func:`lu_solve`) and the backward error of a
+    solve with them, ``|A x - b| / (|A| |x| + |b|)`` (maximum norms): pivots
+    that no longer suit the matrix show there, and the caller then
+    factorises afresh.
+    """
+    l_indptr, l_indices, l_data0, l_diag0, u_indptr, u_indices, u_data0, u_diag0, perm_r, \
+        perm_c = lu
+    n = indptr.shape[0] - 1
+    l_data = np.empty_like(l_data0)
+    u_data = np.empty_like(u_data0)
+    l_diag = np.ones(n)
+    u_diag = np.empty(n)
+    inv_c = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        inv_c[perm_c[i]] = i
+    x = work
+    x[:] = 0.0
+    for j in range(n):
+        c = inv_c[j]
+        for p in range(indptr[c], indptr[c + 1]):
+            x[perm_r[indices[p]]] = data[p]
+        for p in range(u_indptr[j], u_indptr[j + 1]):  # rows k < j, ascending
+            k = u_indices[p]
+            xk = x[k]
+            u_data[p] = xk
+            x[k] = 0.0
+            if xk != 0.0:
+                for q in range(l_indptr[k], l_indptr[k + 1]):
+                    x[l_indices[q]] -= l_data[q] * xk
+        piv = x[j]
+        u_diag[j] = piv
+        x[j] = 0.0
+        for q in range(l_indptr[j], l_indptr[j + 1]):
+            i = l_indices[q]
+            l_data[q] = x[i] / piv
+            x[i] = 0.0
+    out = (l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices, u_data, u_diag, perm_r,
+           perm_c)
+    sol = np.empty(n)
+    lu_solve(out, b, x, sol)
+    r = -b.copy()
+    a_norm = 0.0
+    for c in range(n):
+        col = 0.0
+        for p in range(indptr[c], indptr[c + 1]):
+            r[indices[p]] += data[p] * sol[c]
+            col += abs(data[p])
+        a_norm = max(a_norm, col)   # the 1-norm: a bound of the same size
+    err = np.max(np.abs(r)) / (a_norm * np.max(np.abs(sol)) + np.max(np.abs(b)))
+    if not np.isfinite(err):
+        err = np.inf
+    return out, err
 
 
 #: Contraction rate of the chord iterations above which the matrix is refactorised: a
