@@ -237,9 +237,9 @@ def refactor(indptr, indices, data, lu, b, work):  # pragma: no cover - compiled
     same pattern chose, as KLU refactors: no ordering, no pivot search, no
     symbolic analysis, so a fraction of a full factorisation.  Returns the
     new factors (the tuple of :func:`lu_solve`) and the backward error of a
-    solve with them, ``|A x - b| / (|A| |x| + |b|)`` (maximum norms): pivots
-    that no longer suit the matrix show there, and the caller then
-    factorises afresh.
+    solve with them, ``|A x - b| / (|A| |x| + |b|)`` (maximum norms; infinite
+    for a zero pivot): pivots that no longer suit the matrix show there, and
+    the caller then factorises afresh.
     """
     l_indptr, l_indices, l_data0, l_diag0, u_indptr, u_indices, u_data0, u_diag0, perm_r, \
         perm_c = lu
@@ -253,6 +253,7 @@ def refactor(indptr, indices, data, lu, b, work):  # pragma: no cover - compiled
         inv_c[perm_c[i]] = i
     x = work
     x[:] = 0.0
+    singular = False
     for j in range(n):
         c = inv_c[j]
         for p in range(indptr[c], indptr[c + 1]):
@@ -266,6 +267,9 @@ def refactor(indptr, indices, data, lu, b, work):  # pragma: no cover - compiled
                 for q in range(l_indptr[k], l_indptr[k + 1]):
                     x[l_indices[q]] -= l_data[q] * xk
         piv = x[j]
+        if piv == 0.0 or not np.isfinite(piv):  # these pivots cannot factorise this matrix
+            singular = True
+            piv = 1.0
         u_diag[j] = piv
         x[j] = 0.0
         for q in range(l_indptr[j], l_indptr[j + 1]):
@@ -285,7 +289,7 @@ def refactor(indptr, indices, data, lu, b, work):  # pragma: no cover - compiled
             col += abs(data[p])
         a_norm = max(a_norm, col)   # the 1-norm: a bound of the same size
     err = np.max(np.abs(r)) / (a_norm * np.max(np.abs(sol)) + np.max(np.abs(b)))
-    if not np.isfinite(err):
+    if singular or not np.isfinite(err):
         err = np.inf
     return out, err
 
