@@ -1,10 +1,18 @@
-"""Compiled right-hand side of a generalized-alpha Newton iteration (module ``_integrator``).
+"""Compiled parts of a generalized-alpha step (module ``_integrator``).
 
-One call forms ``-[(M q'' + alpha M q' + beta T^-1 K_m T^-1 q' + T^-1 R_q) / beta' ; R_c]``
-from the static residual ``R`` of eq. (25) (the compiled kernel of
-``model/_kernels.py``): the Kelvin-Voigt force of module ``_inertia``
-(the strain rates of eq. 17 at fixed stretch) summed element by element,
-and a CSR product with the mass matrix, without temporary arrays.
+* :func:`dynamic_rhs` forms
+  ``-[(M q'' + alpha M q' + beta T^-1 K_m T^-1 q' + T^-1 R_q) / beta' ; R_c]``
+  from the static residual ``R`` of eq. (25) (the compiled kernel of
+  ``model/_kernels.py``): the Kelvin-Voigt force of module ``_inertia``
+  (the strain rates of eq. 17 at fixed stretch) summed element by element,
+  and a CSR product with the mass matrix, without temporary arrays;
+* :func:`chord_iterations` runs a step's predictor and chord-Newton
+  iterations in one call (residual, right-hand side, :func:`lu_solve`,
+  update, convergence and refactorisation tests): at a few hundred
+  unknowns the Python around separate calls cost more than the arithmetic;
+* :func:`lu_solve`, :func:`symbolic_factors`, :func:`refactor`: triangular
+  solves with LU factors, and their numeric refactorisation along the
+  pivots of an earlier SuperLU factorisation.
 """
 
 from __future__ import annotations
