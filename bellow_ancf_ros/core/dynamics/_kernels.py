@@ -319,18 +319,18 @@ def _iterations_left(left, c, tol):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def chord_iterations(st0, prev, ratio, predict, st, coef, inputs, kargs, mass, lu, ctl,
+def chord_iterations(st0, prev, weights, predict, st, coef, inputs, kargs, mass, lu, ctl,
                      work):  # pragma: no cover - compiled
     """Chord-Newton iterations of one generalized-alpha step (module ``_integrator``).
 
     Arguments, grouped in tuples:
 
-    * ``st0 = (q, v, acc, aux, mu)`` at ``t_n``; ``prev = (acc, mu)`` at
-      ``t_{n-1}``;
+    * ``st0 = (q, v, acc, aux, mu)`` at ``t_n``; ``prev = (acc, mu, acc,
+      mu)`` at ``t_{n-1}`` and ``t_{n-2}``;
     * ``st = (q, v, acc, aux, mu)``: the step's unknowns, set by the predictor
-      when ``predict`` (accelerations and multipliers extrapolated linearly,
-      ``x_n + ratio (x_n - x_{n-1})``; ``ratio = 0``: constant), then updated
-      in place;
+      when ``predict`` (accelerations and multipliers extrapolated,
+      ``w0 x_n + w1 x_{n-1} + w2 x_{n-2}`` with ``weights = (w0, w1, w2)``;
+      ``(1, 0, 0)``: constant), then updated in place;
     * ``coef = (h, alpha_m, alpha_f, beta, gamma, beta_kv, alpha_air)``;
     * ``inputs = (lam, slope_act, k_coefficients, dk_coefficients, l0,
       n_elements, d_a, rho0, g, Qpoint)``: the stretches at ``t_{n+1}``
@@ -367,15 +367,16 @@ def chord_iterations(st0, prev, ratio, predict, st, coef, inputs, kargs, mass, l
     bp = (1.0 - am) / ((1.0 - af) * h * h * be)
     gp = ga / (h * be)
     if predict:
-        acc_p, mu_p = prev
+        acc_1, mu_1, acc_2, mu_2 = prev
+        w0, w1, w2 = weights
         for i in range(nq):
-            a = acc0[i] + ratio * (acc0[i] - acc_p[i])
+            a = w0 * acc0[i] + w1 * acc_1[i] + w2 * acc_2[i]
             x = (af * acc0[i] - am * aux0[i] + (1.0 - af) * a) / (1.0 - am)
             acc[i] = a
             v[i] = v0[i] + h * ((1.0 - ga) * aux0[i] + ga * x)
             q[i] = q0[i] + h * v0[i] + h * h * ((0.5 - be) * aux0[i] + be * x)
         for i in range(nc):
-            mu[i] = mu0[i] + ratio * (mu0[i] - mu_p[i])
+            mu[i] = w0 * mu0[i] + w1 * mu_1[i] + w2 * mu_2[i]
     xq = xs[:nq]
     for it in range(it0, max_iter):
         for i in range(nq):
