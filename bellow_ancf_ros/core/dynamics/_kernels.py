@@ -1,10 +1,18 @@
-"""Compiled right-hand side of a generalized-alpha Newton iteration (module ``_integrator``).
+"""Compiled parts of a generalized-alpha step (module ``_integrator``).
 
-One call forms ``-[(M q'' + alpha M q' + beta T^-1 K_m T^-1 q' + T^-1 R_q) / beta' ; R_c]``
-from the static residual ``R`` of eq. (25) (the compiled kernel of
-``model/_kernels.py``): the Kelvin-Voigt force of module ``_inertia``
-(the strain rates of eq. 17 at fixed stretch) summed element by element,
-and a CSR product with the mass matrix, without temporary arrays.
+* :func:`dynamic_rhs` forms
+  ``-[(M q'' + alpha M q' + beta T^-1 K_m T^-1 q' + T^-1 R_q) / beta' ; R_c]``
+  from the static residual ``R`` of eq. (25) (the compiled kernel of
+  ``model/_kernels.py``): the Kelvin-Voigt force of module ``_inertia``
+  (the strain rates of eq. 17 at fixed stretch) summed element by element,
+  and a CSR product with the mass matrix, without temporary arrays;
+* :func:`chord_iterations` runs a step's predictor and chord-Newton
+  iterations in one call (residual, right-hand side, :func:`lu_solve`,
+  update, convergence and refactorisation tests): at a few hundred
+  unknowns the Python around separate calls cost more than the arithmetic;
+* :func:`lu_solve`, :func:`symbolic_factors`, :func:`refactor`: triangular
+  solves with LU factors, and their numeric refactorisation along the
+  pivots of an earlier SuperLU factorisation.
 """
 
 from __future__ import annotations
@@ -12,13 +20,23 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["dynamic_rhs"]
+from ..model import element_parameters, evaluate_kernel
+
+__all__ = ["chord_iterations", "compact_factors", "dynamic_rhs", "lu_solve", "refactor",
+           "split_factors", "symbolic_factors"]
 
 
 @njit(cache=True, nogil=True)
 def dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, elem_dofs, elem_act, le, kt,
                 kb, h1, h2, gw, beta_kv, alpha_air, bp, out):  # pragma: no cover - compiled
     """Fill ``out`` (length N) with the Newton right-hand side; returns nothing."""
+    si = np.empty(nq)  # T^-1 and the static coordinates and velocities, once per call
+    qs = np.empty(nq)
+    us = np.empty(nq)
+    for i in range(nq):
+        si[i] = 1.0 / s[i]
+        qs[i] = q[i] * si[i]
+        us[i] = v[i] * si[i]
     for i in range(nq):
         acc_i = 0.0
         vel_i = 0.0
@@ -45,15 +63,12 @@ def dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, elem_dofs, ele
                     nx = h1[g, a] * f1[a]
                     nc = h2[g, a] * f2[a]
                     d0 = elem_dofs[e, 3 * a]
-                    sq0 = 1.0 / s[d0]
-                    sq1 = 1.0 / s[d0 + 1]
-                    sq2 = 1.0 / s[d0 + 2]
-                    qs0 = q[d0] * sq0
-                    qs1 = q[d0 + 1] * sq1
-                    qs2 = q[d0 + 2] * sq2
-                    us0 = v[d0] * sq0
-                    us1 = v[d0 + 1] * sq1
-                    us2 = v[d0 + 2] * sq2
+                    qs0 = qs[d0]
+                    qs1 = qs[d0 + 1]
+                    qs2 = qs[d0 + 2]
+                    us0 = us[d0]
+                    us1 = us[d0 + 1]
+                    us2 = us[d0 + 2]
                     rx0 += nx * qs0
                     rx1 += nx * qs1
                     rx2 += nx * qs2
@@ -75,8 +90,341 @@ def dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, elem_dofs, ele
             for a in range(4):
                 for i in range(3):
                     d = elem_dofs[e, 3 * a + i]
-                    out[d] += beta_kv * fe[a, i] / s[d]
+                    out[d] += beta_kv * fe[a, i] * si[d]
     for i in range(nq):
         out[i] = -out[i] / bp
     for i in range(nq, out.shape[0]):
         out[i] = -r[i]
+
+
+@njit(cache=True, nogil=True)
+def lu_solve(lu, b, work, out):  # pragma: no cover - compiled
+    """Solve ``A out = b`` with SuperLU's factors of ``A``: ``Pr A Pc = L U``.
+
+    ``lu``: ``(l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices,
+    u_data, u_diag, perm_r, perm_c)``, the off-diagonal entries of ``L`` and
+    ``U`` by columns and their diagonals (:func:`split_factors`).  Two
+    triangular sweeps over the stored entries, no allocation: SuperLU's own
+    ``solve`` costs several times more at these sizes (a few hundred
+    unknowns), most of it call overhead.
+    """
+    l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices, u_data, u_diag, perm_r, perm_c = lu
+    n = b.shape[0]
+    for i in range(n):
+        work[perm_r[i]] = b[i]
+    for j in range(n):
+        xj = work[j] / l_diag[j]
+        work[j] = xj
+        if xj != 0.0:
+            for k in range(l_indptr[j], l_indptr[j + 1]):
+                work[l_indices[k]] -= l_data[k] * xj
+    for j in range(n - 1, -1, -1):
+        xj = work[j] / u_diag[j]
+        work[j] = xj
+        if xj != 0.0:
+            for k in range(u_indptr[j], u_indptr[j + 1]):
+                work[u_indices[k]] -= u_data[k] * xj
+    for i in range(n):
+        out[i] = work[perm_c[i]]
+
+
+def split_factors(superlu):
+    """The arrays :func:`lu_solve` takes, from a ``scipy.sparse.linalg.SuperLU`` object."""
+    L, U = superlu.L, superlu.U
+    return (_split_triangular(L.indptr, L.indices, L.data)
+            + _split_triangular(U.indptr, U.indices, U.data)
+            + (np.asarray(superlu.perm_r, dtype=np.int64),
+               np.asarray(superlu.perm_c, dtype=np.int64)))
+
+
+@njit(cache=True, nogil=True)
+def _split_triangular(indptr, indices, data):  # pragma: no cover - compiled
+    """A CSC triangle as (indptr, indices, data) of its off-diagonal entries and its diagonal."""
+    n = indptr.shape[0] - 1
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    idx = np.empty(indices.shape[0], dtype=np.int64)
+    val = np.empty(indices.shape[0])
+    diag = np.zeros(n)
+    k = 0
+    for j in range(n):
+        for p in range(indptr[j], indptr[j + 1]):
+            i = indices[p]
+            if i == j:
+                diag[j] = data[p]
+            else:  # sorted by row within the column (insertion): refactor's order
+                m = k
+                while m > ptr[j] and idx[m - 1] > i:
+                    idx[m] = idx[m - 1]
+                    val[m] = val[m - 1]
+                    m -= 1
+                idx[m] = i
+                val[m] = data[p]
+                k += 1
+        ptr[j + 1] = k
+    return ptr, idx[:k].copy(), val[:k].copy(), diag
+
+
+@njit(cache=True, nogil=True)
+def compact_factors(lu):  # pragma: no cover - compiled
+    """``lu`` without its off-diagonal entries that are exactly zero (fewer to sweep)."""
+    l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices, u_data, u_diag, perm_r, perm_c = lu
+    out = []
+    for indptr, indices, data in ((l_indptr, l_indices, l_data), (u_indptr, u_indices, u_data)):
+        n = indptr.shape[0] - 1
+        ptr = np.zeros(n + 1, dtype=np.int64)
+        idx = np.empty(indices.shape[0], dtype=np.int64)
+        val = np.empty(indices.shape[0])
+        k = 0
+        for j in range(n):
+            for p in range(indptr[j], indptr[j + 1]):
+                if data[p] != 0.0:
+                    idx[k] = indices[p]
+                    val[k] = data[p]
+                    k += 1
+            ptr[j + 1] = k
+        out.append((ptr, idx[:k].copy(), val[:k].copy()))
+    return (out[0][0], out[0][1], out[0][2], l_diag, out[1][0], out[1][1], out[1][2], u_diag,
+            perm_r, perm_c)
+
+
+@njit(cache=True, nogil=True)
+def symbolic_factors(indptr, indices, perm_r, perm_c):  # pragma: no cover - compiled
+    """The pattern of the LU factors of a CSC pattern for fixed row and column permutations.
+
+    Every entry that can be non-zero (no cancellation assumed), as the
+    tuple of :func:`lu_solve` with zero values: the pattern :func:`refactor`
+    fills.  SuperLU's own factors leave out the entries that happened to be
+    zero in the matrix it factorised (a robot's pattern holds exact zeros),
+    which a later matrix of the same pattern may need.  ``O(n^2)``, once
+    per pivot order.
+    """
+    n = indptr.shape[0] - 1
+    inv_c = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        inv_c[perm_c[i]] = i
+    flag = np.zeros(n, dtype=np.bool_)
+    l_ptr = np.zeros(n + 1, dtype=np.int64)
+    u_ptr = np.zeros(n + 1, dtype=np.int64)
+    l_idx = np.empty(4 * indices.shape[0] + n, dtype=np.int64)
+    u_idx = np.empty(4 * indices.shape[0] + n, dtype=np.int64)
+    nl = 0
+    nu = 0
+    for j in range(n):
+        c = inv_c[j]
+        for p in range(indptr[c], indptr[c + 1]):
+            flag[perm_r[indices[p]]] = True
+        for k in range(j):  # ascending: the fill of every earlier column reaches the later
+            if flag[k]:
+                for q in range(l_ptr[k], l_ptr[k + 1]):
+                    flag[l_idx[q]] = True
+        for k in range(n):
+            if flag[k]:
+                flag[k] = False
+                if k < j:
+                    if nu == u_idx.shape[0]:
+                        u_idx = np.concatenate((u_idx, np.empty(u_idx.shape[0], np.int64)))
+                    u_idx[nu] = k
+                    nu += 1
+                elif k > j:
+                    if nl == l_idx.shape[0]:
+                        l_idx = np.concatenate((l_idx, np.empty(l_idx.shape[0], np.int64)))
+                    l_idx[nl] = k
+                    nl += 1
+        l_ptr[j + 1] = nl
+        u_ptr[j + 1] = nu
+    return (l_ptr, l_idx[:nl].copy(), np.zeros(nl), np.ones(n), u_ptr, u_idx[:nu].copy(),
+            np.zeros(nu), np.ones(n), perm_r.astype(np.int64), perm_c.astype(np.int64))
+
+
+@njit(cache=True, nogil=True)
+def refactor(indptr, indices, data, lu, b, work):  # pragma: no cover - compiled
+    """LU factors of the CSC matrix ``A`` with the pivots and the pattern of ``lu``.
+
+    The numeric part of a sparse LU (left-looking, Gilbert & Peierls) along
+    the row and column permutations an earlier SuperLU factorisation of the
+    same pattern chose, as KLU refactors: no ordering, no pivot search, no
+    symbolic analysis, so a fraction of a full factorisation.  Returns the
+    new factors (the tuple of :func:`lu_solve`) and the backward error of a
+    solve with them, ``|A x - b| / (|A| |x| + |b|)`` (maximum norms; infinite
+    for a zero pivot): pivots that no longer suit the matrix show there, and
+    the caller then factorises afresh.
+    """
+    l_indptr, l_indices, l_data0, l_diag0, u_indptr, u_indices, u_data0, u_diag0, perm_r, \
+        perm_c = lu
+    n = indptr.shape[0] - 1
+    l_data = np.empty_like(l_data0)
+    u_data = np.empty_like(u_data0)
+    l_diag = np.ones(n)
+    u_diag = np.empty(n)
+    inv_c = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        inv_c[perm_c[i]] = i
+    x = work
+    x[:] = 0.0
+    singular = False
+    for j in range(n):
+        c = inv_c[j]
+        for p in range(indptr[c], indptr[c + 1]):
+            x[perm_r[indices[p]]] = data[p]
+        for p in range(u_indptr[j], u_indptr[j + 1]):  # rows k < j, ascending
+            k = u_indices[p]
+            xk = x[k]
+            u_data[p] = xk
+            x[k] = 0.0
+            if xk != 0.0:
+                for q in range(l_indptr[k], l_indptr[k + 1]):
+                    x[l_indices[q]] -= l_data[q] * xk
+        piv = x[j]
+        if piv == 0.0 or not np.isfinite(piv):  # these pivots cannot factorise this matrix
+            singular = True
+            piv = 1.0
+        u_diag[j] = piv
+        x[j] = 0.0
+        for q in range(l_indptr[j], l_indptr[j + 1]):
+            i = l_indices[q]
+            l_data[q] = x[i] / piv
+            x[i] = 0.0
+    out = (l_indptr, l_indices, l_data, l_diag, u_indptr, u_indices, u_data, u_diag, perm_r,
+           perm_c)
+    sol = np.empty(n)
+    lu_solve(out, b, x, sol)
+    r = -b.copy()
+    a_norm = 0.0
+    for c in range(n):
+        col = 0.0
+        for p in range(indptr[c], indptr[c + 1]):
+            r[indices[p]] += data[p] * sol[c]
+            col += abs(data[p])
+        a_norm = max(a_norm, col)   # the 1-norm: a bound of the same size
+    err = np.max(np.abs(r)) / (a_norm * np.max(np.abs(sol)) + np.max(np.abs(b)))
+    if singular or not np.isfinite(err):
+        err = np.inf
+    return out, err
+
+
+#: Contraction rate of the chord iterations above which the matrix is refactorised: a
+#: factorisation costs as much as some 50 iterations, so a rate that only ties up a
+#: few more iterations per step is kept (the rate of two updates is noisy).
+SLOW_RATE = 0.5
+
+
+@njit(cache=True, nogil=True)
+def _iterations_left(left, c, tol):  # pragma: no cover - compiled
+    """Iterations still needed at contraction rate ``c`` to bring the error ``left`` to ``tol``."""
+    if left <= tol:
+        return 0
+    if tol <= 0.0 or c <= 0.0:
+        return 1 << 30
+    return int(np.ceil(np.log(tol / left) / np.log(c)))
+
+
+@njit(cache=True, nogil=True)
+def chord_iterations(st0, prev, weights, predict, st, coef, inputs, kargs, mass, lu, ctl,
+                     work):  # pragma: no cover - compiled
+    """Chord-Newton iterations of one generalized-alpha step (module ``_integrator``).
+
+    Arguments, grouped in tuples:
+
+    * ``st0 = (q, v, acc, aux, mu)`` at ``t_n``; ``prev = (acc, mu, acc,
+      mu)`` at ``t_{n-1}`` and ``t_{n-2}``;
+    * ``st = (q, v, acc, aux, mu)``: the step's unknowns, set by the predictor
+      when ``predict`` (accelerations and multipliers extrapolated,
+      ``w0 x_n + w1 x_{n-1} + w2 x_{n-2}`` with ``weights = (w0, w1, w2)``;
+      ``(1, 0, 0)``: constant), then updated in place;
+    * ``coef = (h, alpha_m, alpha_f, beta, gamma, beta_kv, alpha_air)``;
+    * ``inputs = (lam, slope_act, k_coefficients, dk_coefficients, l0,
+      n_elements, d_a, rho0, g, Qpoint)``: the stretches at ``t_{n+1}``
+      (``slope_act``: the actuator of each slope coordinate, -1 elsewhere)
+      and the loads; ``kargs``: the model's kernel arguments;
+    * ``mass``: the CSR mass matrix; ``lu``: the chord matrix (:func:`lu_solve`);
+    * ``ctl = (inv_scale, tol, it0, max_iter, last, refreshed)``: iterations
+      ``it0`` to ``max_iter``, the last update's size, whether the matrix
+      was made in this step; ``work``: four arrays of length N.
+
+    Each iteration: the static residual (the model's ``evaluate_kernel``),
+    the dynamic right-hand side (:func:`dynamic_rhs`), the solve with the
+    chord matrix, the update.  Converged when the update, or the error it
+    leaves (``size c / (1 - c)`` at contraction rate ``c``), is within
+    ``tol``.  Returns ``(code, iterations done, last update size)``: ``0``
+    converged (``st[3]`` set), ``1`` slow iterations: refactor at the
+    current iterate and call again, ``2`` diverging after a refactorisation,
+    ``3`` a non-finite right-hand side, ``4`` the budget spent, ``5``
+    converged to a non-finite state.
+    """
+    q0, v0, acc0, aux0, mu0 = st0
+    q, v, acc, aux, mu = st
+    h, am, af, be, ga, beta_kv, alpha_air = coef
+    lam, slope_act, kcoef, dkcoef, l0, n_el, d_a, rho0, g, qpoint = inputs
+    m_indptr, m_indices, m_data = mass
+    inv_scale, tol, it0, max_iter, last, refreshed = ctl
+    xs, rhs, d, s = work
+    nq = q.shape[0]
+    nc = mu.shape[0]
+    for i in range(nq):  # T(lam) (Inertia.scale) and the element parameters (RobotModel's)
+        a = slope_act[i]
+        s[i] = lam[a] if a >= 0 else 1.0
+    le, kt, kb, dle, dkt, dkb = element_parameters(lam, kcoef, dkcoef, l0, n_el, d_a)
+    bp = (1.0 - am) / ((1.0 - af) * h * h * be)
+    gp = ga / (h * be)
+    if predict:
+        acc_1, mu_1, acc_2, mu_2 = prev
+        w0, w1, w2 = weights
+        for i in range(nq):
+            a = w0 * acc0[i] + w1 * acc_1[i] + w2 * acc_2[i]
+            x = (af * acc0[i] - am * aux0[i] + (1.0 - af) * a) / (1.0 - am)
+            acc[i] = a
+            v[i] = v0[i] + h * ((1.0 - ga) * aux0[i] + ga * x)
+            q[i] = q0[i] + h * v0[i] + h * h * ((0.5 - be) * aux0[i] + be * x)
+        for i in range(nc):
+            mu[i] = w0 * mu0[i] + w1 * mu_1[i] + w2 * mu_2[i]
+    xq = xs[:nq]
+    for it in range(it0, max_iter):
+        for i in range(nq):
+            xq[i] = q[i] / s[i]
+        r, _, _ = evaluate_kernel(xq, mu, lam, le, kt, kb, dle, dkt, dkb, rho0, g, qpoint,
+                                  *kargs, False, False)
+        dynamic_rhs(q, v, acc, s, r, nq, m_indptr, m_indices, m_data, kargs[0], kargs[1], le,
+                    kt, kb, kargs[2], kargs[3], kargs[4], beta_kv, alpha_air, bp, rhs)
+        total = 0.0
+        for i in range(rhs.shape[0]):
+            total += rhs[i]
+        if not np.isfinite(total):
+            return 3, it - it0, last
+        lu_solve(lu, rhs, xs, d)
+        size = 0.0
+        for i in range(nq):
+            dq = d[i]
+            q[i] += dq
+            v[i] += gp * dq
+            acc[i] += bp * dq
+            a = abs(dq * inv_scale[i])
+            if a > size:
+                size = a
+        for i in range(nc):
+            mu[i] += bp * d[nq + i]
+        # the error left after this update: about size * c / (1 - c) for a contraction
+        # rate c = size / last of the chord iterations (at least size * 1e-3: roundoff)
+        left = size
+        if it >= 1:
+            c = size / last
+            left = size * max(c / (1.0 - c), 1e-3) if c < 1.0 else np.inf
+        if size <= tol or left <= tol:
+            finite = True
+            for i in range(nq):
+                aux[i] = (af * acc0[i] - am * aux0[i] + (1.0 - af) * acc[i]) / (1.0 - am)
+                if not (np.isfinite(q[i]) and np.isfinite(v[i])):
+                    finite = False
+            return (0 if finite else 5), it + 1 - it0, size
+        # slow or diverging chord iterations: refactor at the current iterate, unless the
+        # matrix is fresh (then a rate of 0.9 still converges, a rate above 1 fails)
+        if it >= 1:
+            c = size / last
+            if refreshed:
+                if c > 1.0:
+                    return 2, it + 1 - it0, size
+                if c >= 0.9:
+                    return 1, it + 1 - it0, size
+            elif c > SLOW_RATE or it + 1 + _iterations_left(left, c, tol) > max_iter:
+                return 1, it + 1 - it0, size
+        last = size
+    return 4, max_iter - it0, last

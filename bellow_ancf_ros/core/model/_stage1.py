@@ -61,6 +61,10 @@ def _horner(a: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Pressure arrays up to this size take the plain-float path of :meth:`Stage1.stretch`.
+_SMALL = 16
+
+
 def _as_output(values: np.ndarray, scalar: bool) -> Any:
     """Return a Python float for scalar input, the array otherwise."""
     return float(values) if scalar else values
@@ -327,6 +331,10 @@ class Stage1:
             For NaN or infinite pressures, or pressures beyond the branch.
         """
         a = np.asarray(p, dtype=float)
+        if self._quadratic and a.ndim == 1 and a.size <= _SMALL:
+            lam = self._stretch_small(a)
+            if lam is not None:
+                return lam
         if not np.all(np.isfinite(a)):
             raise ValueError(f'pressure must be finite (got NaN or inf): {a!r}')
         target = a / self._p_per_h                       # h(x) = target
@@ -340,6 +348,25 @@ class Stage1:
         return _as_output(1.0 + x, a.ndim == 0)
 
     # ---------------------------------------------------------------- solvers
+    def _stretch_small(self, a: np.ndarray) -> np.ndarray | None:
+        """:meth:`stretch` of a few pressures on the branch with plain floats, else None.
+
+        The same operations as :meth:`_solve_quadratic` in the same order
+        (the same result to the bit) without the overhead of a dozen numpy
+        calls on a robot's handful of actuators: a simulation asks at every
+        step.  None (a pressure not finite or beyond the branch) leaves the
+        checks and their messages to :meth:`stretch`.
+        """
+        c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0
+        k1, pph, lo, hi = self._k1, self._p_per_h, self._h_lo, self._h_hi
+        out = []
+        for v in a.tolist():
+            t = v / pph
+            if not lo < t < hi:
+                return None
+            out.append(1.0 + 2.0 * t / (k1 + math.sqrt(max(k1 ** 2 + 4.0 * c1 * t, 0.0))))
+        return np.array(out)
+
     def _solve_quadratic(self, t: np.ndarray) -> np.ndarray:
         """Root of ``k1*x + c1*x**2 = t`` on the branch (dh/dx = sqrt(disc) > 0).
 
