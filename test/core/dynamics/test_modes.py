@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import solve_forward
+from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
 from bellow_ancf_ros.core.dynamics import ModalError, natural_modes, reduced_system
 
 # An independent linearisation of the same model (shipped robot files, n = 6, plates as thin
@@ -92,3 +92,15 @@ def test_unconverged_equilibrium_refused(one):
         pytest.skip("converged in one iteration")
     with pytest.raises(ModalError, match="did not converge"):
         natural_modes(fw)
+
+
+@pytest.mark.parametrize('name, payload', [('one_segment', 0.0), ('two_segment', 0.05)])
+def test_newton_damped_modes_equal_the_pencils(name, payload):
+    """A few modes: Newton on the quadratic eigenproblem; many: the dense pencil. Same answer."""
+    from bellow_ancf_ros.core.dynamics import _modes
+    model = RobotModel(load_robot(name))
+    fw = solve_forward(model, np.zeros(model.A), payload_kg=payload)
+    few, many = natural_modes(fw, _modes._NEWTON_MODES).modes, natural_modes(fw, 6).modes
+    for a, b in zip(few, many):
+        assert a.damping_ratio == pytest.approx(b.damping_ratio, rel=1e-9)
+        assert a.damped_frequency_hz == pytest.approx(b.damped_frequency_hz, rel=1e-9)
