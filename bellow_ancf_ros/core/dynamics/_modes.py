@@ -223,7 +223,6 @@ def natural_modes(fw, n_modes: int = 6, inertia: Inertia | None = None,
             V[:, i:j] = V[:, i:j] @ R
         i = j
     # damped modes: (s^2 Mr + s Dr + Kr) x = 0; a few: Newton from each undamped one
-    n = Kr.shape[0]
     damped = [_damped_newton(Kr, Mr, Dr, w[m], V[:, m]) for m in range(k)] \
         if k <= _NEWTON_MODES else None
     if damped is None or any(d is None for d in damped):
