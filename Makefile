@@ -24,7 +24,7 @@ $(STAMP): requirements.txt setup.py
 	touch $@
 
 # main job: model vs a mismatched simulated robot, feedforward then closed loop, then the loads
-# phase (an unannounced payload and a push, sensed and compensated; ROS processes, ~2.5 min)
+# phase (an unannounced payload and a push, sensed and compensated; ROS processes, ~7 min)
 demo: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demos.closed_loop
 	$(VENV)/bin/python -m bellow_ancf_ros.demos.forces
