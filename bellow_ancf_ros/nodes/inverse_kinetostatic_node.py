@@ -712,8 +712,9 @@ class InverseKinetostaticNode(LifecycleNode):
         t0 = time.perf_counter()
         try:
             # shaped and shifted for the robot's mode, then corrected by the closed loop
-            pos, z = self._targets.target(item, monotonic_of(self, stamp, future=True))
-            pos, z = self._feedback.correct(pos, z, stamp)
+            # (which measures against the shaped pose wanted, not the shifted command)
+            cmd, ref = self._targets.targets(item, monotonic_of(self, stamp, future=True))
+            pos, z = self._feedback.correct(ref[0], ref[1], stamp, command=cmd)
             with self._solve_lock:
                 inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
                                     time_budget_s=self._time_budget(), tip_force_n=force)

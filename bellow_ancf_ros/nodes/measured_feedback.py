@@ -284,19 +284,23 @@ class FeedbackLink:
         """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
         return self._monotonic(stamp, future=False)
 
-    def correct(self, position: np.ndarray, z_axis: np.ndarray | None, stamp=None):
-        """The target to hand to the inverse (unchanged when feedback is off).
+    def correct(self, position: np.ndarray, z_axis: np.ndarray | None, stamp=None,
+                command: tuple | None = None):
+        """The target to hand to the inverse (``command``, or the target, when feedback is off).
 
         ``stamp``: the target's stamp, the time it is wanted at (zero: now; in
-        the future: a target that previews the robot's lag).  A change
-        between integrating and holding the correction through a dropout is
-        logged, not only reported on ``/diagnostics``.
+        the future: a target that previews the robot's lag).  ``command``:
+        the target to correct when it is not the pose wanted (a dynamic
+        feedforward's shift).  A change between integrating and holding the
+        correction through a dropout is logged, not only reported on
+        ``/diagnostics``.
         """
         with self._lock:
             if self._law is None:
-                return position, z_axis
+                return (position, z_axis) if command is None else command
             out = self._law.corrected_target(time.monotonic(), position, z_axis,
-                                             wanted_at=self._monotonic(stamp, future=True))
+                                             wanted_at=self._monotonic(stamp, future=True),
+                                             command=command)
             degraded, state = self._law.blind, self._law.state
             wd = self._law.watchdog
             trip = None

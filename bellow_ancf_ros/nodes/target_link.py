@@ -126,17 +126,21 @@ class TargetLink:
             if self._filter is not None:
                 self._filter.reset()
 
-    def target(self, item, wanted_at: float):
-        """The target to solve for ``item`` (new or re-solved) wanted at ``wanted_at``."""
+    def targets(self, item, wanted_at: float):
+        """``(command, reference)`` for ``item`` (new or re-solved) wanted at ``wanted_at``.
+
+        The command is shaped and shifted; the reference (shaped, not
+        shifted) is the pose wanted, which the closed loop measures against.
+        """
         pos, z = item[0], item[1]
         with self._lock:
             filt = self._filter
             if filt is None:
-                return pos, z
+                return (pos, z), (pos, z)
             if item is not self._last_item:
                 self._last_item = item
                 filt.push(wanted_at, pos, z)
-            return filt.target(time.monotonic())
+            return filt.targets(time.monotonic())
 
     def status(self) -> dict:
         """Diagnostics values."""

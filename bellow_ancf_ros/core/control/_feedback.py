@@ -210,6 +210,7 @@ class IntegralFeedback:
         self._used_meas_t: float | None = None
         self._history: deque = deque()    # (wanted-at time, target position, target z-axis)
         self._target_p = self._target_z = None
+        self._command_p = self._command_z = None
         self._saturated = False
         self._held = False
         self.state = WAITING
@@ -322,13 +323,16 @@ class IntegralFeedback:
 
     # ------------------------------------------------------------ control step
     def corrected_target(self, t: float, position: Any, z_axis: Any = None,
-                         wanted_at: float | None = None):
+                         wanted_at: float | None = None, command: tuple | None = None):
         """The target to hand to the inverse at time ``t``: ``(position, z_axis or None)``.
 
         ``wanted_at``: the time the target is wanted at (default ``t``; later
-        for a target that previews the robot's lag).  Integrates the newest
-        accepted measurement first (unless a safeguard says otherwise); see
-        the module docstring.
+        for a target that previews the robot's lag).  ``command``: the
+        ``(position, z_axis)`` to correct and hand on, when it is not the pose
+        wanted (a dynamic feedforward shifts the command by the motion's
+        loads; the measured pose is still compared with the pose wanted).
+        Integrates the newest accepted measurement first (unless a safeguard
+        says otherwise); see the module docstring.
         """
         s = self.settings
         p_t = np.asarray(position, dtype=float).reshape(3)
@@ -336,6 +340,12 @@ class IntegralFeedback:
         if self.use_orientation:
             z_t = np.asarray(z_axis, dtype=float).reshape(3)
             z_t = z_t / np.linalg.norm(z_t)
+        p_c, z_c = p_t, z_t
+        if command is not None:
+            p_c = np.asarray(command[0], dtype=float).reshape(3)
+            if self.use_orientation:
+                z_c = np.asarray(command[1], dtype=float).reshape(3)
+                z_c = z_c / np.linalg.norm(z_c)
         if self._target_p is not None and (
                 np.linalg.norm(p_t - self._target_p) > s.reset_jump_m
                 or (z_t is not None and np.linalg.norm(rotation_between(self._target_z, z_t))
@@ -344,6 +354,7 @@ class IntegralFeedback:
             self.resets += 1
         self._phi = self._azimuth(p_t)
         self._target_p, self._target_z = p_t, z_t
+        self._command_p, self._command_z = p_c, z_c
         self._history.append((float(t if wanted_at is None else wanted_at), p_t, z_t))
         while len(self._history) > 2 and self._history[1][0] < float(t) - HISTORY_S:
             self._history.popleft()
@@ -368,8 +379,8 @@ class IntegralFeedback:
         elif self._outlier:
             self.state = OUTLIER
         if self.fallback:
-            return p_t.copy(), None if z_t is None else z_t.copy()
-        return self._apply(p_t, z_t)
+            return p_c.copy(), None if z_c is None else z_c.copy()
+        return self._apply(p_c, z_c)
 
     def _target_at(self, t: float):
         """The target wanted at time ``t``: interpolated between the targets around it.
@@ -434,14 +445,14 @@ class IntegralFeedback:
         """
         self._saturated = bool((not reachable) or at_limit)
         self._held = False
-        if reachable or self.fallback or achieved_position is None or self._target_p is None:
+        if reachable or self.fallback or achieved_position is None or self._command_p is None:
             return
         s = self.settings
-        c_real = np.asarray(achieved_position, dtype=float).reshape(3) - self._target_p
+        c_real = np.asarray(achieved_position, dtype=float).reshape(3) - self._command_p
         if np.linalg.norm(c_real) < np.linalg.norm(self.correction_m):
             self.correction_m = _clamp(c_real, s.max_correction_m)
         if self.use_orientation and achieved_z_axis is not None:
-            r_real = rotation_between(self._target_z, achieved_z_axis)
+            r_real = rotation_between(self._command_z, achieved_z_axis)
             if np.linalg.norm(r_real) < np.linalg.norm(self.correction_rad):
                 self.correction_rad = _clamp(r_real, s.max_correction_rad)
 

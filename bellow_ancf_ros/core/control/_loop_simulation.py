@@ -157,12 +157,15 @@ class LoopSimulation:
         p, z = target(t + self.preview_s)
         p = np.asarray(p, dtype=float)
         z = None if (z is None or not self.use_orientation) else np.asarray(z, dtype=float)
-        if self.feedforward is not None:
+        command = None
+        if self.feedforward is not None:   # the command shifted; the loop compares the wanted
             self.feedforward.push(t + self.preview_s, p, z)
-            p, z = self.feedforward.target()
+            command = self.feedforward.target()
         fb = self.feedback
         if fb is not None:
-            p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s)
+            p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s, command=command)
+        elif command is not None:
+            p, z = command
         inv = solve_inverse(self.model, p, z, payload_kg=self.payload_kg,
                             warm_start=self.inverse)
         fw = inv.forward

@@ -90,21 +90,30 @@ class TargetFilter:
         return self.shaper is not None and self.mode is not None and not self._arrived
 
     def target(self, now: float):
-        """The target to solve for now: ``(position, z_axis or None)``."""
+        """The target to command now: ``(position, z_axis or None)`` (shaped and shifted)."""
+        return self.targets(now)[0]
+
+    def targets(self, now: float):
+        """``(command, reference)``: the target to command now, and the pose wanted now.
+
+        The reference is the shaped target without the feedforward's shift: a
+        closed loop compares the measured pose with it and corrects the command.
+        """
         if self._newest is None:
             raise ValueError('no target pushed yet')
         t_new, p, z = self._newest
         if self.mode is None:
-            return p, z
-        out_p, out_z = p, z
+            return (p, z), (p, z)
+        ref_p, ref_z = p, z
         if self.shaper is not None:
             t = max(now, t_new)
-            out_p, out_z = self.shaper.at(t)
+            ref_p, ref_z = self.shaper.at(t)
             self._arrived = t >= t_new + self.shaper.duration_s
+        out_p, out_z = ref_p, ref_z
         if self.feedforward is not None:
             fp, fz = self.feedforward.target()
-            out_p = out_p + (fp - p)
-            if out_z is not None and fz is not None:
-                zz = out_z + (fz - z)
+            out_p = ref_p + (fp - p)
+            if ref_z is not None and fz is not None:
+                zz = ref_z + (fz - z)
                 out_z = zz / np.linalg.norm(zz)
-        return out_p, out_z
+        return (out_p, out_z), (ref_p, ref_z)

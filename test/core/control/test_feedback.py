@@ -406,3 +406,24 @@ def test_targets_are_interpolated_at_the_capture_time():
         fb.report(True, False)
         t += 0.02
     assert np.linalg.norm(fb.correction_m) < 1e-9
+
+
+def test_a_shifted_command_is_corrected_but_the_pose_wanted_is_measured_against():
+    """Dynamic feedforward shifts the command: a robot exactly at the pose wanted leaves no
+    correction (it is not pulled onto the shifted command), and the shift is handed on."""
+    fb = IntegralFeedback(FeedbackSettings(gain_per_s=5.0, correction_frame='base'))
+    wanted = np.array([0.01, 0.0, 0.2])
+    shift = np.array([0.0, 0.002, 0.0])
+    for k in range(50):
+        t = 0.02 * k
+        fb.measurement(t, wanted)
+        p, _ = fb.corrected_target(t, wanted, command=(wanted + shift, None))
+    np.testing.assert_allclose(fb.correction_m, 0.0, atol=1e-15)
+    np.testing.assert_allclose(p, wanted + shift)
+    # measured 1 mm short of the pose wanted: the correction grows towards it, on the command
+    for k in range(50, 100):
+        t = 0.02 * k
+        fb.measurement(t, wanted - np.array([0.001, 0.0, 0.0]))
+        p, _ = fb.corrected_target(t, wanted, command=(wanted + shift, None))
+    assert fb.correction_m[0] > 0.5e-3 and abs(fb.correction_m[1]) < 1e-12
+    np.testing.assert_allclose(p, wanted + shift + fb.correction_m)

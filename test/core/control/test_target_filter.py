@@ -69,3 +69,15 @@ def test_bad_shaping_and_a_stream_going_back():
     tf.push(1.0, [0.01, 0.0, 0.2])   # time went back (a new stream): taken as it is
     np.testing.assert_allclose(tf.target(1.0)[0], [0.01, 0.0, 0.2], atol=1e-15)
     assert not TargetFilter().enabled and TargetFilter('zv').enabled
+
+
+def test_the_reference_is_shaped_not_shifted():
+    tf = TargetFilter('zv', dynamic_feedforward=True, lag_s=0.06)
+    tf.set_mode(F, ZETA)
+    w = 2 * math.pi / 2.0
+    for k in range(30):
+        t = 0.02 * k
+        tf.push(t, np.array([0.01 * math.sin(w * t), 0.0, 0.2]))
+    (cmd, _), (ref, _) = tf.targets(t)
+    np.testing.assert_allclose(ref, tf.shaper.at(t)[0])
+    assert np.linalg.norm(cmd - ref) > 1e-4   # the shift is on the command only
