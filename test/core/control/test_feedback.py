@@ -409,8 +409,11 @@ def test_targets_are_interpolated_at_the_capture_time():
 
 
 def test_a_shifted_command_is_corrected_but_the_pose_wanted_is_measured_against():
-    """Dynamic feedforward shifts the command: a robot exactly at the pose wanted leaves no
-    correction (it is not pulled onto the shifted command), and the shift is handed on."""
+    """Dynamic feedforward shifts the command; the loop measures against the pose wanted.
+
+    A robot exactly at the pose wanted leaves no correction (it is not pulled
+    onto the shifted command), and the shift is handed on.
+    """
     fb = IntegralFeedback(FeedbackSettings(gain_per_s=5.0, correction_frame='base'))
     wanted = np.array([0.01, 0.0, 0.2])
     shift = np.array([0.0, 0.002, 0.0])
