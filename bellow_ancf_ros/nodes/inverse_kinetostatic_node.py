@@ -143,6 +143,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_problem,
                     precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
+from ..core.control import SHAPERS, gain_setting
 from . import contract, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
@@ -336,10 +337,20 @@ class InverseKinetostaticNode(LifecycleNode):
     def _configure_time_check(self, param) -> str:
         """Refuse a change of a parameter read on configure unless unconfigured.
 
-        Also refuses a ``payload_kg`` the configured robot cannot carry at
-        the current target (or the current command), where the model can
-        tell (core :func:`~bellow_ancf_ros.core.payload_problem`).
+        Refuses a ``feedback_gain_per_s`` or ``target_shaping`` value that
+        is not allowed, at any time (an unconfigured node would only find out
+        at its next configure).  Also refuses a ``payload_kg`` the configured
+        robot cannot carry at the current target (or the current command),
+        where the model can tell (core :func:`~bellow_ancf_ros.core.payload_problem`).
         """
+        if param.name == 'feedback_gain_per_s':   # dynamic typing: rclpy checks no type
+            try:
+                gain_setting(param.value)
+            except ValueError as exc:
+                return f'feedback_gain_per_s: {exc}'
+        if param.name == 'target_shaping' and param.value not in SHAPERS:
+            return (f'target_shaping = {param.value!r} is not allowed; allowed: '
+                    f'{", ".join(map(repr, SHAPERS))}')
         if not getattr(self, '_configured', False):   # (declaring parameters in __init__)
             return ''
         if param.name == 'payload_kg':

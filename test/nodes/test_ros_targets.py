@@ -87,5 +87,19 @@ def test_dynamic_feedforward_shifts_a_moving_stream_not_a_held_target(h, one):
 
 def test_bad_target_shaping_refused(h):
     with pytest.raises(ValueError, match="parameter target_shaping = 'zvdd' is not allowed; "
-                       "allowed: one of: 'none', 'zv', 'zvd'"):
+                       "allowed: a string, one of: 'none', 'zv', 'zvd'"):
         h.add(InverseKinetostaticNode, target_shaping='zvdd')
+
+
+def test_bad_gain_or_shaping_refused_while_unconfigured_too(h):
+    """Dynamic typing lets any value through rclpy: the node refuses it at once, any state."""
+    from rclpy.parameter import Parameter as P
+    node = h.add(InverseKinetostaticNode, name='live_bad')
+    node.trigger_deactivate()
+    node.trigger_cleanup()
+    for name, value in (('feedback_gain_per_s', 'fast'), ('feedback_gain_per_s', 99.0),
+                        ('target_shaping', 'zvdd')):
+        res = node.set_parameters([P(name, value=value)])[0]
+        assert not res.successful and 'not allowed' in res.reason, (name, res.reason)
+    assert node.set_parameters([P('feedback_gain_per_s', value=1.0)])[0].successful
+    assert node.set_parameters([P('target_shaping', value='zv')])[0].successful
