@@ -21,7 +21,8 @@ remedy against the case it is for:
   dynamic one (lag and mode inverted).
 
 Every figure is measured by this run; the rows run in parallel on the
-machine's cores.
+machine's cores.  The tests assert on the same runs (``step_residual``:
+test_shaping, ``circle_10x``: test_dynamic_feedforward).
 """
 
 from __future__ import annotations
@@ -44,8 +45,8 @@ LAG_S, DELAY_S = 0.06, 0.05
 PREVIEW_S = 0.09
 
 
-def _held_50g(gain):
-    """Two segments, 50 g, held target: largest error over the last 4 s of 20 s."""
+def held_50g(gain):
+    """Two segments, 50 g, held target: the errors over 4-8 s and 16-20 s, gain, watchdog."""
     model = RobotModel(load_robot('two_segment'))
     robot = SimulatedRobot('two_segment_mismatched', seed=1, payload_kg=0.05)
     watch = gain != 'fixed, no watchdog'
@@ -55,18 +56,27 @@ def _held_50g(gain):
                          mode_check=ModeCheck(k, LAG_S, DELAY_S) if watch else None)
     fw = solve_forward(model, [40e3, 0, 0, 0, 0, 0], payload_kg=0.05)
     rec = sim.run(20.0, lambda t: (fw.position, fw.z_axis))
-    s = rec.summary(start_s=16.0)
-    early = rec.summary(start_s=4.0, end_s=8.0)
     wd = sim.feedback.watchdog
-    trips = 0 if wd is None else wd.trips
-    first = '' if wd is None or wd.last_trip is None else f'; {wd.last_trip.message}'
+    return {'early': rec.summary(start_s=4.0, end_s=8.0), 'late': rec.summary(start_s=16.0),
+            'gain_per_s': sim.feedback.gain_per_s, 'trips': 0 if wd is None else wd.trips,
+            'trip': None if wd is None or wd.last_trip is None else wd.last_trip.message}
+
+
+def _held_50g_line(gain):
+    r = held_50g(gain)
+    early, s = r['early'], r['late']
+    first = '' if r['trip'] is None else f'; {r["trip"]}'
     return (f'gain {gain:<18s} held 50 g: max {early["max_mm"]:6.3f} mm over 4-8 s, '
             f'{s["max_mm"]:6.3f} mm {s["max_deg"]:6.3f} deg over 16-20 s; gain in use '
-            f'{sim.feedback.gain_per_s:.3g} /s; watchdog trips {trips}{first}')
+            f'{r["gain_per_s"]:.3g} /s; watchdog trips {r["trips"]}{first}')
 
 
-def _step(kind):
-    """Matched two-segment robot, 10 mm step at 8 s: residual swing from 9 s to 10 s."""
+def step_residual(kind):
+    """Matched two-segment robot, 10 mm step at 8 s: the residual swing from 9 s to 10 s.
+
+    Returns ``(largest distance from the final pose [m], the shaper's delay
+    [s], the mode (frequency [Hz], damping ratio))``.
+    """
     model = RobotModel(load_robot('two_segment'))
     fw0 = solve_forward(model, [30e3, 0, 0, 0, 0, 0])
     goal = fw0.position + np.array([0.0, 0.010, 0.0])
@@ -85,16 +95,24 @@ def _step(kind):
     a = rec.arrays()
     final = a['true_p'][a['t'] > 10.5].mean(axis=0)
     w = (a['t'] >= 9.0) & (a['t'] <= 10.0)
-    swing = np.linalg.norm(a['true_p'][w] - final, axis=1).max()
+    swing = float(np.linalg.norm(a['true_p'][w] - final, axis=1).max())
     times, amps = shaper_impulses(kind, mode.frequency_hz, mode.damping_ratio)
-    return (f'shaping {kind:<4s} 10 mm step (mode {mode.frequency_hz:.3g} Hz, zeta '
-            f'{mode.damping_ratio:.3f}): residual swing 1-2 s after it {swing * 1e3:7.4f} mm; '
-            f'delay {float(amps @ times) * 1e3:4.0f} ms')
+    return swing, float(amps @ times), (mode.frequency_hz, mode.damping_ratio)
 
 
-def _circle_10x(args):
-    """Matched robot, 2 s circle, fourth period: quasi-static vs dynamic feedforward."""
-    name, dynamic = args
+def _step_line(kind):
+    swing, delay, (f, zeta) = step_residual(kind)
+    return (f'shaping {kind:<4s} 10 mm step (mode {f:.3g} Hz, zeta {zeta:.3f}): residual '
+            f'swing 1-2 s after it {swing * 1e3:7.4f} mm; delay {delay * 1e3:4.0f} ms')
+
+
+def circle_10x(name, dynamic):
+    """Matched robot, 2 s circle: RMSE and maximum over the fourth period (``summary``).
+
+    No creep or play: only the robot's dynamics and the regulators' lag
+    differ from the model.  The quasi-static feedforward previews the lag
+    as a delay; the dynamic one inverts it (and the first mode).
+    """
     period = 2.0
     model = RobotModel(load_robot(name))
     cfg = model.cfg
@@ -114,7 +132,13 @@ def _circle_10x(args):
     sim.run(1.0, lambda t: start)
     t0 = sim.robot.time_s
     rec = sim.run(4 * period, lambda t: circ(t - t0))
-    s = rec.summary(t0 + 3 * period, t0 + 4 * period)
+    assert rec.out_of_limits == 0, 'a command outside the limits was computed'
+    return rec.summary(t0 + 3 * period, t0 + 4 * period)
+
+
+def _circle_line(args):
+    name, dynamic = args
+    s = circle_10x(name, dynamic)
     ang = f' {s["rmse_deg"]:6.3f} deg' if 'rmse_deg' in s else ''
     label = 'dynamic' if dynamic else 'quasi-static'
     return (f'feedforward {label:<12s} {name:<12s} circle at 10x: RMSE {s["rmse_mm"]:6.3f} mm'
@@ -130,9 +154,9 @@ def _run(job):
 
 
 def main() -> None:
-    jobs = ([(_held_50g, g) for g in ('fixed, no watchdog', 'fixed, watchdog', 'auto')]
-            + [(_step, k) for k in ('none', 'zv', 'zvd')]
-            + [(_circle_10x, (n, d)) for n in ('one_segment', 'two_segment')
+    jobs = ([(_held_50g_line, g) for g in ('fixed, no watchdog', 'fixed, watchdog', 'auto')]
+            + [(_step_line, k) for k in ('none', 'zv', 'zvd')]
+            + [(_circle_line, (n, d)) for n in ('one_segment', 'two_segment')
                for d in (False, True)])
     print('remedies bench: what the swing costs and what each remedy buys (LoopSimulation, '
           f'dynamic robot; {os.cpu_count()} CPUs)', flush=True)

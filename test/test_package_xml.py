@@ -51,7 +51,7 @@ MODULE_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'pyth
 STDLIB_OR_OWN = {'bellow_ancf_ros'}
 #: the test suite's own helper modules (test/, test/data/, bench/)
 LOCAL_TEST_HELPERS = {'conftest', 'reference_beams', 'calibration_data', 'make_solver_baseline',
-                      'update_readme'}
+                      'update_readme', 'remedies_bench'}
 
 
 def dependencies():

@@ -1,15 +1,16 @@
 """Dynamic feedforward: the shift inverts the first mode and the regulators' lag."""
 
 import math
+import os
+import sys
 
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_inverse
-from bellow_ancf_ros.core.control import (DynamicFeedforward, LoopSimulation, PlantEffects,
-                                          SimulatedRobot, StreamFeedforward, dynamic_path)
-from bellow_ancf_ros.core.dynamics import natural_modes
-from bellow_ancf_ros.core.experiments import trajectory_target
+from bellow_ancf_ros.core.control import DynamicFeedforward, StreamFeedforward, dynamic_path
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..', '..', '..', 'bench'))
+import remedies_bench  # noqa: E402  (the bench's runs: one measurement, asserted here)
 
 F, ZETA, TAU = 2.4, 0.05, 0.06
 
@@ -73,33 +74,12 @@ def test_dynamic_feedforward_halves_the_error_at_ten_times_the_papers_speed(name
     """A matched robot (same file; no creep or play): only its dynamics and lag differ.
 
     Circle period 2 s, evaluated over the fourth period (the start's swing
-    gone).  Measured: one segment 0.221 -> 0.053 mm, two segments 0.921 ->
-    0.157 mm (0.331 -> 0.047 deg).
+    gone), the runs of ``make bench`` (bench/remedies_bench.py).  Measured:
+    one segment 0.221 -> 0.053 mm, two segments 0.921 -> 0.157 mm (0.331 ->
+    0.047 deg).
     """
-    period = 2.0
-    model = RobotModel(load_robot(name))
-    cfg = model.cfg
-    circ = (trajectory_target('planar_circle', cfg, period=period) if cfg.n_segments == 1
-            else trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0))
-    p0, z0 = circ(0.0)
-    mode = natural_modes(solve_inverse(model, p0, z0 if cfg.n_segments > 1 else None).forward,
-                         1).first
-    eff = PlantEffects(creep_fraction=0.0, regulator_hysteresis_pa=0.0)
-    tau = eff.regulator_time_constant_s
-    out = {}
-    for dynamic in (False, True):
-        robot = SimulatedRobot(name, seed=1, effects=eff)
-        ff = StreamFeedforward(mode.frequency_hz, mode.damping_ratio, lag_s=tau, window_s=0.1)
-        # the quasi-static feedforward previews the lag as a delay; the dynamic one inverts it
-        sim = LoopSimulation(model, robot, None, physics_rate_hz=robot.auto_physics_rate_hz,
-                             preview_s=eff.preview_s(50.0) - (tau if dynamic else 0.0),
-                             feedforward=ff if dynamic else None)
-        start = circ(0.0)
-        sim.run(1.0, lambda t: start)
-        t0 = sim.robot.time_s
-        rec = sim.run(4 * period, lambda t: circ(t - t0))
-        out[dynamic] = rec.summary(t0 + 3 * period, t0 + 4 * period)
-        assert rec.out_of_limits == 0
-    assert out[True]['rmse_mm'] <= 0.5 * out[False]['rmse_mm'], out
-    if cfg.n_segments > 1:
-        assert out[True]['rmse_deg'] <= 0.5 * out[False]['rmse_deg'], out
+    quasi_static, dynamic = remedies_bench.circle_10x(name, False), \
+        remedies_bench.circle_10x(name, True)
+    assert dynamic['rmse_mm'] <= 0.5 * quasi_static['rmse_mm'], (quasi_static, dynamic)
+    if 'rmse_deg' in dynamic:
+        assert dynamic['rmse_deg'] <= 0.5 * quasi_static['rmse_deg'], (quasi_static, dynamic)
