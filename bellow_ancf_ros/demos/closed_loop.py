@@ -68,11 +68,16 @@ from .closed_loop_plot import rms as _rms
 from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until, wait_up
 
 PAPER_PERIOD_S = 20.0
-SPEEDS = (1.0, 4.0)            # times the paper's speed
+SPEEDS = (1.0, 4.0, 10.0)      # times the paper's speed
 TARGET_RATE_HZ = 50.0
-#: (segments, speed) -> closed-loop RMSE goals (mm, deg or None)
-GOALS = {(1, 1.0): (0.5, None), (1, 4.0): (1.0, None), (2, 1.0): (0.5, 0.5), (2, 4.0): (1.5, 1.0)}
+#: (segments, speed, payload [kg]) -> closed-loop RMSE goals (mm, deg or None)
+GOALS = {(1, 1.0, 0.0): (0.5, None), (1, 4.0, 0.0): (1.0, None), (1, 10.0, 0.0): (0.5, None),
+         (2, 1.0, 0.0): (0.5, 0.5), (2, 4.0, 0.0): (1.5, 1.0), (2, 10.0, 0.0): (1.0, 0.5),
+         (2, 1.0, 0.05): (0.5, 0.5), (2, 10.0, 0.05): (1.5, 0.75)}
 STEADY_GOALS = {1: (0.3, None), 2: (0.5, 0.5)}   # segments -> held target (mm, deg)
+SPIN_UP_S = 5.0                # the path's speed rises over min(period, this) [s]
+STEP_M = 0.010                 # the step target's size
+STEP_GOAL_M = 1e-4             # shaped: residual swing 1-2 s after the step
 OUTLIER_EXCESS_GOAL_KPA = 2.0  # a command step after an outlier, beyond the normal steps
 OUTLIER_MIN_M = 5e-3           # a measured pose this far from the true one is an outlier
 DROPOUT_GAP_S = 0.25           # measured poses this far apart: a dropout
@@ -86,6 +91,9 @@ class Case:
     trajectory: str
     bending_angle_deg: float | None
     label: str
+    payload_kg: float = 0.0          #: carried by the robot and declared to the controller
+    modes: tuple = MODES             #: the controllers run (``feedback`` / feedforward kind)
+    speeds: tuple | None = None      #: its speeds (None: every speed asked for)
 
     @property
     def plant(self) -> str:
@@ -96,6 +104,8 @@ class Case:
 CASES = (
     Case('one_segment', 'planar_circle', None, 'one segment, planar circle'),
     Case('two_segment', 'bending_circle', 10.0, 'two segments, bending circle at 10 deg'),
+    Case('two_segment', 'bending_circle', 10.0, 'two segments carrying 50 g (declared)',
+         payload_kg=0.05, modes=('integral',), speeds=(1.0, 10.0)),
 )
 
 
@@ -110,7 +120,8 @@ class Column:
     @property
     def key(self) -> str:
         """Results key."""
-        return f'{self.case.robot}@{self.speed:g}x'
+        load = f'+{self.case.payload_kg * 1e3:g}g' if self.case.payload_kg else ''
+        return f'{self.case.robot}{load}@{self.speed:g}x'
 
     @property
     def label(self) -> str:
@@ -129,8 +140,9 @@ class Column:
 
 
 def columns(cases=CASES, speeds=SPEEDS, period_scale: float = 1.0) -> list:
-    """Every case at every speed, in run order."""
-    return [Column(c, v, PAPER_PERIOD_S / v * period_scale) for c in cases for v in speeds]
+    """Every case at every speed (of its own, if it has them), in run order."""
+    return [Column(c, v, PAPER_PERIOD_S / v * period_scale) for c in cases for v in speeds
+            if c.speeds is None or v in c.speeds]
 
 
 # ---------------------------------------------------------------- one run
@@ -162,9 +174,12 @@ class Run:
         self.t0 = time.monotonic()
         self.procs['robot'] = NodeProcess('simulated_robot_node', {
             'robot_config': case.plant, 'seed': args.seed, 'plant': args.plant,
-            'physics_rate_hz': args.physics_rate}, self.env, log_dir, tag=self.tag)
+            'physics_rate_hz': args.physics_rate, 'payload_kg': case.payload_kg}, self.env,
+            log_dir, tag=self.tag)
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
-            'robot_config': case.robot, 'feedback': mode}, self.env, log_dir, tag=self.tag)
+            'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
+            'dynamic_feedforward': mode == 'dynamic', 'payload_kg': case.payload_kg},
+            self.env, log_dir, tag=self.tag)
         self.procs['forward'] = NodeProcess('forward_kinetostatic_node', {
             'robot_config': case.robot, 'max_rate_hz': 5.0}, self.env, log_dir,
             remaps={'pressure_command': 'measured_pressure'}, tag=self.tag)
@@ -220,7 +235,8 @@ class Run:
         self._lead_in = self.rec.node.create_timer(0.1, lead_in)
         traj = {'robot_config': case.robot, 'trajectory': case.trajectory,
                 'rate_hz': TARGET_RATE_HZ, 'period_s': self.col.period_s,
-                'start_delay_s': self.args.lead_in, 'preview_s': preview_s(self.args.plant)}
+                'start_delay_s': self.args.lead_in, 'spin_up_s': self.spin_up_s,
+                'preview_s': preview_s(self.args.plant, self.mode == 'dynamic')}
         if case.bending_angle_deg is not None:
             traj['bending_angle_deg'] = case.bending_angle_deg
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', traj, self.env,
@@ -241,7 +257,8 @@ class Run:
     def wait_flowing(self) -> None:
         """Wait for the trajectory publisher's first target; set the evaluation window.
 
-        The first period lets the closed loop learn; the second is evaluated.
+        The spin-up and the first period at full speed let the closed loop
+        learn; the second is evaluated.
         """
         ok = wait_until(lambda: self._first_trajectory_target() is not None,
                         self.args.startup_timeout + self.args.lead_in)
@@ -249,11 +266,16 @@ class Run:
         if not ok:
             raise RuntimeError('no target from the trajectory publisher')
         period = self.col.period_s
-        self.times['eval'] = self._first_trajectory_target() + period
+        self.times['eval'] = self._first_trajectory_target() + self.spin_up_s + period
         self.times['stop'] = self.times['eval'] + period
         print(f'  {self.name}: trajectory started {time.monotonic() - self.t0:.1f} s after '
-              f'the nodes; the second {period:g} s period evaluated, then {self.args.hold:g} s '
-              'hold', flush=True)
+              f'the nodes; spin-up {self.spin_up_s:g} s, the second {period:g} s period at '
+              f'full speed evaluated, then {self.args.hold:g} s hold', flush=True)
+
+    @property
+    def spin_up_s(self) -> float:
+        """The path's speed rises over this long (``trajectory_publisher`` ``spin_up_s``)."""
+        return round(min(self.col.period_s, self.args.spin_up), 3)
 
     def run_until_stop(self) -> None:
         """Wait for the end of the evaluated period (a dead node raises)."""
@@ -306,11 +328,15 @@ class Run:
         return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap)
 
 
-def preview_s(plant: str) -> float:
-    """The trajectory's preview: the regulators' dead time and lag, half a target period."""
+def preview_s(plant: str, dynamic: bool = False) -> float:
+    """The trajectory's preview: the regulators' dead time and lag, half a target period.
+
+    ``dynamic``: without the lag (the dynamic feedforward inverts it).
+    """
     from ..core.control import PlantEffects
     e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
-    return round(e.preview_s(TARGET_RATE_HZ), 3)
+    lag = e.regulator_time_constant_s if dynamic else 0.0
+    return round(e.preview_s(TARGET_RATE_HZ) - lag, 3)
 
 
 def run_column(col: Column, args, domains: list, log_dir: Path) -> dict:
@@ -325,10 +351,10 @@ def run_column(col: Column, args, domains: list, log_dir: Path) -> dict:
     """
     if getattr(args, 'sequential', True):
         out = {}
-        for mode in MODES:
+        for mode in col.case.modes:
             out.update(_run_modes(col, args, domains, log_dir, (mode,)))
         return out
-    return _run_modes(col, args, domains, log_dir, MODES)
+    return _run_modes(col, args, domains, log_dir, col.case.modes)
 
 
 def _run_modes(col: Column, args, domains: list, log_dir: Path, modes) -> dict:
@@ -498,6 +524,11 @@ def _parse(argv):
                     help='run feedforward and closed loop at the same time (half as long; the '
                          'two pipelines share the cores, and on two cores the two-segment '
                          "closed loop's solves wait, its commands gap and the robot rings)")
+    ap.add_argument('--spin-up', type=float, default=SPIN_UP_S,
+                    help="[s] the path's speed rises from zero over min(period, this) "
+                         '(trajectory_publisher spin_up_s; default: %(default)s)')
+    ap.add_argument('--no-step', action='store_true',
+                    help='skip the step-target phase (10 mm step, unshaped and ZVD-shaped)')
     ap.add_argument('--no-goals', action='store_true',
                     help='exit 0 without checking the closed-loop goals (short test runs)')
     return ap.parse_args(argv)
@@ -515,7 +546,8 @@ def _fmt(r: dict, two: bool) -> str:
 
 def _goals(col: Column, cl: dict, two: bool) -> tuple[bool, str]:
     """Whether the closed loop met the column's goals, and the line that says so."""
-    goal_mm, goal_deg = GOALS.get((2 if two else 1, col.speed), (math.inf, None))
+    goal_mm, goal_deg = GOALS.get((2 if two else 1, col.speed, col.case.payload_kg),
+                                  (math.inf, None))
     s_mm, s_deg = STEADY_GOALS[2 if two else 1]
     ok = _rms(cl['pos_err']) * 1e3 <= goal_mm and (
         goal_deg is None or math.degrees(_rms(cl['ang_err'])) <= goal_deg)
@@ -540,7 +572,7 @@ def main(argv=None) -> int:
     speeds = [float(v) for v in args.speeds.split(',')]
     cols = columns([c for c in CASES if c.robot in args.cases.split(',')], speeds,
                    args.period_scale)
-    domains = random.sample(range(102), 2 * len(cols))
+    domains = random.sample(range(102), sum(len(c.case.modes) for c in cols) + 2)
     print(f'bellow_ancf_ros main job: the default model controls a simulated robot that is not '
           f'the model (config/*_mismatched.yaml), {args.plant} plant, targets at '
           f'{TARGET_RATE_HZ:g} Hz previewed by {preview_s(args.plant):g} s; node logs in '
@@ -563,7 +595,7 @@ def main(argv=None) -> int:
         two = col.bending_angle_deg is not None
         res = results.get(col.key, {})
         print(f'  {col.label} (controller: default model, robot: {col.case.plant}):')
-        for mode in MODES:
+        for mode in col.case.modes:
             r = res.get(mode)
             if r is None:
                 print(f'    {MODE_NAMES[mode]:12s} FAILED')
@@ -587,20 +619,26 @@ def main(argv=None) -> int:
                   f'diagnostics {r["levels"][0]} OK / {r["levels"][1]} WARN / '
                   f'{r["levels"][2]} ERROR')
             passed &= r['safe']
-        ff, cl = res.get('none'), res.get('integral')
-        if ff and cl and 'pos_err' in ff and 'pos_err' in cl:
-            ratio = _rms(cl['pos_err']) / _rms(ff['pos_err'])
-            line = f'    closed-loop / feedforward position RMSE: {ratio * 100:.1f} %'
-            if two:
-                line += (f', angle RMSE: '
-                         f'{_rms(cl["ang_err"]) / _rms(ff["ang_err"]) * 100:.1f} %')
-            print(line)
+        ff, dyn, cl = res.get('none'), res.get('dynamic'), res.get('integral')
+        for other, what in ((dyn, 'dynamic / quasi-static feedforward'),
+                            (cl, 'closed-loop / feedforward')):
+            if ff and other and 'pos_err' in ff and 'pos_err' in other:
+                ratio = _rms(other['pos_err']) / _rms(ff['pos_err'])
+                line = f'    {what} position RMSE: {ratio * 100:.1f} %'
+                if two:
+                    line += (f', angle RMSE: '
+                             f'{_rms(other["ang_err"]) / _rms(ff["ang_err"]) * 100:.1f} %')
+                print(line)
+        if cl and 'pos_err' in cl:
             met, text = _goals(col, cl, two)
             print(text)
             if not args.no_goals:
                 passed &= met
         elif not args.no_goals:
             passed = False
+    if not args.no_step:
+        from .step_target import step_phase
+        passed &= step_phase(args, domains, log_dir)
     path = Path(args.plot)
     plot(results, cols, path)
     print(f'  plot written to {path}; total {time.monotonic() - t_all:.0f} s')

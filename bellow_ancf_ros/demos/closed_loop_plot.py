@@ -10,8 +10,8 @@ import numpy as np
 __all__ = ['MODES', 'MODE_NAMES', 'PAPER', 'figure', 'plot', 'rms']
 
 PAPER = 'paper, real two-segment robot, feedforward: 4.14 mm and 1.58 deg on average'
-MODES = ('none', 'integral')
-MODE_NAMES = {'none': 'feedforward', 'integral': 'closed loop'}
+MODES = ('none', 'dynamic', 'integral')
+MODE_NAMES = {'none': 'feedforward', 'dynamic': 'dynamic FF', 'integral': 'closed loop'}
 
 
 def rms(v: np.ndarray) -> float:
@@ -42,13 +42,13 @@ def figure(results: dict, cases):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import ScalarFormatter
 
-    fig = plt.figure(figsize=(6.5 * len(cases), 11))
+    fig = plt.figure(figsize=(5.0 * len(cases), 11))
     gs = fig.add_gridspec(3, len(cases), height_ratios=[2.2, 1, 1], hspace=0.45, wspace=0.25)
-    colours = {'none': 'tab:orange', 'integral': 'tab:green'}
+    colours = {'none': 'tab:orange', 'dynamic': 'tab:blue', 'integral': 'tab:green'}
     for col, case in enumerate(cases):
         res = results.get(case.key, {})
         ax = fig.add_subplot(gs[0, col], projection='3d')
-        ref = res.get('none') or res.get('integral')
+        ref = res.get('none') or res.get('dynamic') or res.get('integral')
         for mode in MODES:
             r = res.get(mode)
             if r and 'measured' in r:
@@ -92,7 +92,7 @@ def figure(results: dict, cases):
             a.set_xlabel('time in the evaluated period [s]')
             a.grid(True, alpha=0.3)
             a.set_ylim(bottom=0.0)
-            a.legend(fontsize=8, loc='lower center', bbox_to_anchor=(0.5, 1.0), ncol=2,
+            a.legend(fontsize=7, loc='lower center', bbox_to_anchor=(0.5, 1.0), ncol=2,
                      frameon=False)   # above the plot, not over the data
     fig.suptitle('bellow_ancf_ros: mismatched simulated robot, true pose vs target '
                  f'({PAPER})', fontsize=10)

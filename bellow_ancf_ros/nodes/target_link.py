@@ -7,7 +7,12 @@ each new target (at the time it is wanted at: its stamp, or its arrival for
 a zero stamp) and with the robot's first mode at the held equilibrium
 (:class:`~.mode_watch.ModeWatch`).  The node solves for what it returns.
 While a shaped target still moves after a step, the newest target is
-re-solved at ``SHAPING_RATE_HZ`` so that the staircase reaches the robot.
+re-solved at ``SHAPING_RATE_HZ``, and at each of the shaper's impulse times
+(a one-shot timer each, :data:`IMPULSE_LEAD_S` after it): the staircase's
+levels reach the robot at their times, not up to a re-solve period late (a
+level 10 ms late at the two-segment robot's 2.4 Hz mode leaves 7 % of the
+swing the shaper cancels; in ``make demo`` 0.27 mm of residual swing after a
+10 mm step on the 50 Hz re-solves alone).
 
 Defaults: no shaping (a shaper delays every target by its centroid, a
 quarter to half of the first period: 0.1-0.2 s for the two-segment robot,
@@ -33,6 +38,8 @@ __all__ = ['SHAPING_RATE_HZ', 'TARGET_PARAMETER_TABLE', 'TargetLink']
 
 #: Re-solve rate of a shaped target while it moves [Hz].
 SHAPING_RATE_HZ = 50.0
+#: A shaper level is solved this long after its impulse time [s] (the level is then in).
+IMPULSE_LEAD_S = 0.001
 #: The parameters TargetLink declares (read on configure).
 TARGET_PARAMETER_TABLE = (
     Param('target_shaping', 'none', descriptor(
@@ -60,6 +67,9 @@ class TargetLink:
         self._filter: TargetFilter | None = None
         self._timer = None
         self._last_item = None
+        self._resubmit: Callable[[Any], None] | None = None
+        self._levels: list[threading.Timer] = []   # one-shot re-solves at impulse times
+        self._last_pose = None
 
     def _read_kind(self) -> str:
         kind = self.node.get_parameter('target_shaping').value
@@ -83,6 +93,7 @@ class TargetLink:
             return
         with self._lock:
             self._filter = filt
+        self._resubmit = resubmit
         modes.listen(self._on_mode)
         if modes.result is not None:
             self._on_mode(None, modes.result)
@@ -112,12 +123,38 @@ class TargetLink:
                 f'{filt.shaper.duration_s * 1e3:.0f} ms to arrive')
 
     def release(self) -> None:
-        """Drop the filter and the re-solve timer."""
+        """Drop the filter and the re-solve timers."""
         if self._timer is not None:
             self.node.destroy_timer(self._timer)
         self._timer = self._last_item = None
         with self._lock:
             self._filter = None
+            self._cancel_levels()
+
+    def _cancel_levels(self) -> None:
+        for timer in self._levels:
+            timer.cancel()
+        self._levels = []
+        self._last_pose = None
+
+    def _schedule_levels(self, item, filt: TargetFilter, wanted_at: float) -> None:
+        """One-shot re-solves of ``item`` at the shaper's impulse times (a new pose only)."""
+        pose = (tuple(item[0]), None if item[1] is None else tuple(item[1]))
+        if filt.shaper is None or filt.mode is None or pose == self._last_pose:
+            return
+        self._cancel_levels()
+        self._last_pose = pose
+        resubmit, now = self._resubmit, time.monotonic()
+
+        def level() -> None:
+            if self._last_item is item and resubmit is not None:
+                resubmit(item)
+        for t_i in filt.shaper.times[1:]:
+            timer = threading.Timer(max(wanted_at + float(t_i) + IMPULSE_LEAD_S - now, 0.0),
+                                    level)
+            timer.daemon = True
+            timer.start()
+            self._levels.append(timer)
 
     def reset(self) -> None:
         """Forget the stream (on activate)."""
@@ -125,6 +162,7 @@ class TargetLink:
         with self._lock:
             if self._filter is not None:
                 self._filter.reset()
+            self._cancel_levels()
 
     def targets(self, item, wanted_at: float):
         """``(command, reference)`` for ``item`` (new or re-solved) wanted at ``wanted_at``.
@@ -140,6 +178,7 @@ class TargetLink:
             if item is not self._last_item:
                 self._last_item = item
                 filt.push(wanted_at, pos, z)
+                self._schedule_levels(item, filt, wanted_at)
             return filt.targets(time.monotonic())
 
     def status(self) -> dict:

@@ -17,7 +17,9 @@ one period), ``start_delay_s`` (time to wait before the first target, e.g. for
 the controller to come up), ``ramp_in_s`` (default 2 s: when the robot is
 off the path's start, the targets lead in from where it is, onto the path
 with minimum-jerk timing, instead of a jump; the path's clock starts after
-it).  Where it is: the target another node holds it at (``target_pose``),
+it), ``spin_up_s`` (default 0: the path's speed rises from zero over this
+long, :func:`~bellow_ancf_ros.core.experiments.spin_up`, so that a fast path
+does not start with a jump of velocity that rings a robot's first mode).  Where it is: the target another node holds it at (``target_pose``),
 else its ``measured_pose``, else the controller's ``commanded_pose``.
 ``preview_s`` (default 0) publishes, at every tick, the pose wanted that far
 ahead, stamped with the time it is wanted at (a stamp in the future): the
@@ -47,7 +49,8 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 
 from ..core import ConfigError, load_robot
-from ..core.experiments import TRAJECTORY_NAMES, lead_in, trajectory, trajectory_parameters
+from ..core.experiments import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
+                               trajectory_parameters)
 from ..core import geometry
 from .diagnostics import Heartbeat
 from .measured_feedback import measured_pose_qos
@@ -106,6 +109,11 @@ PARAMETERS = (
         'Lead the target from the commanded pose the controller holds (commanded_pose) '
         'onto the path over this long [s], instead of a jump; 0 = off.', D, lo=0.0,
         hi=60.0, read_only=True)),
+    Param('spin_up_s', 0.0, descriptor(
+        'Start the path with a speed that rises from zero to full over this long [s] '
+        '(minimum-jerk timing), instead of at full speed: a robot with a lightly damped '
+        'mode then does not ring at a fast path\'s start; 0 = off.', D, lo=0.0, hi=600.0,
+        read_only=True)),
 )
 TOPICS = (
     Topic('publishes', 'target_pose', 'geometry_msgs/PoseStamped',
@@ -312,6 +320,7 @@ class TrajectoryPublisher(Node):
                                                self._stamp(now, preview)))
                 return
             t -= duration
+        t = spin_up(t, float(self.get_parameter('spin_up_s').value))
         if not self.get_parameter('loop').value and t > self._period():
             self.finished = True
             self.get_logger().info('trajectory finished (loop is false)')

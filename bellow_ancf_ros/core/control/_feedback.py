@@ -107,6 +107,8 @@ import numpy as np
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ._history import bracket
 from ._median_gate import WINDOW, MedianGate
+from ._mode_check import RETUNE_FRACTION
+from ._notch import NOTCH_POLE_DAMPING, ModeNotch
 from ._watchdog import OscillationWatchdog
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
@@ -147,6 +149,7 @@ class FeedbackSettings:
     reset_jump_rad: float = math.radians(10.0)
     max_dt_s: float = 0.1
     correction_frame: str = 'azimuthal'
+    notch: bool = False    #: the applied correction passes a notch at the watched mode
 
     def __post_init__(self) -> None:
         """Refuse a non-positive or non-finite setting, naming it."""
@@ -156,6 +159,10 @@ class FeedbackSettings:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == 'correction_frame':
+                continue
+            if f.name == 'notch':
+                if not isinstance(v, bool):
+                    raise ValueError(f'feedback setting notch must be true or false, got {v!r}')
                 continue
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f'feedback setting {f.name} must be a positive finite number, '
@@ -199,6 +206,10 @@ class IntegralFeedback:
         self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
         self.gain_scale = 1.0       # cut by the watchdog on every trip
         self._hold_until = -math.inf
+        self.notch: ModeNotch | None = None   # settings.notch: made by the first watch()
+
+    #: A mode at least this damped needs no notch.
+    _NOTCH_MAX_DAMPING = NOTCH_POLE_DAMPING
 
     # ------------------------------------------------------------ state
     def reset(self) -> None:
@@ -214,6 +225,8 @@ class IntegralFeedback:
         self._saturated = False
         self._held = False
         self.state = WAITING
+        if getattr(self, 'notch', None) is not None:
+            self.notch.reset()
 
     @property
     def correction_m(self) -> np.ndarray:
@@ -257,8 +270,11 @@ class IntegralFeedback:
         return self.state in (STALE, OUTLIER, HELD)
 
     # ------------------------------------------------------------ inputs
-    def watch(self, frequency_hz: float) -> None:
+    def watch(self, frequency_hz: float, damping_ratio: float | None = None) -> None:
         """Watch the measured error for an oscillation near this mode (the robot's first).
+
+        With ``settings.notch`` and a ``damping_ratio``, the applied
+        correction also passes a notch at this mode (:class:`~._notch.ModeNotch`).
 
         On a trip (:class:`~._watchdog.OscillationWatchdog`) the gain is
         halved (:attr:`gain_scale`) and the correction is held for one
@@ -266,6 +282,12 @@ class IntegralFeedback:
         what was seen.  A new frequency (a payload moved the mode) keeps the
         cut gain.
         """
+        if (self.settings.notch and damping_ratio is not None
+                and damping_ratio < self._NOTCH_MAX_DAMPING):
+            if self.notch is None:
+                self.notch = ModeNotch(frequency_hz, damping_ratio)
+            elif abs(frequency_hz / self.notch.frequency_hz - 1.0) > RETUNE_FRACTION:
+                self.notch.set_mode(frequency_hz, damping_ratio)   # a new load, not a bend
         if self.watchdog is None:
             self.watchdog = OscillationWatchdog(frequency_hz)
         elif abs(self.watchdog.frequency_hz - frequency_hz) > 1e-9:
@@ -380,7 +402,7 @@ class IntegralFeedback:
             self.state = OUTLIER
         if self.fallback:
             return p_c.copy(), None if z_c is None else z_c.copy()
-        return self._apply(p_c, z_c)
+        return self._apply(p_c, z_c, float(t))
 
     def _target_at(self, t: float):
         """The target wanted at time ``t``: interpolated between the targets around it.
@@ -430,11 +452,15 @@ class IntegralFeedback:
             self.state = TRACKING
         self.correction_m, self.correction_rad = c_new, r_new
 
-    def _apply(self, p_t: np.ndarray, z_t: np.ndarray | None):
-        p = p_t + self.correction_m
+    def _apply(self, p_t: np.ndarray, z_t: np.ndarray | None, t: float):
+        c, r = self.correction_m, self.correction_rad
+        if self.notch is not None:   # the correction as the robot is given it (notched)
+            out = self.notch.filter(t, np.concatenate([c, r]))
+            c, r = out[:3], out[3:]
+        p = p_t + c
         if z_t is None:
             return p, None
-        return p, rotation_from_vector(self.correction_rad) @ z_t
+        return p, rotation_from_vector(r) @ z_t
 
     def report(self, reachable: bool, at_limit: bool, achieved_position: Any = None,
                achieved_z_axis: Any = None) -> None:
@@ -475,6 +501,8 @@ class IntegralFeedback:
             'measured_poses_outliers': self.rejected,
             'feedback_resets': self.resets,
             'feedback_gain_per_s': f'{self.gain_per_s:.4g}',
+            'feedback_notch_hz': ('off' if self.notch is None
+                                  else f'{self.notch.frequency_hz:.4g}'),
             'oscillation_trips': 0 if self.watchdog is None else self.watchdog.trips,
             'oscillation_seen': ('none' if self.watchdog is None or self.watchdog.last_trip is None
                                  else self.watchdog.last_trip.message),

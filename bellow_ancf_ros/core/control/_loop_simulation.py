@@ -213,7 +213,7 @@ class LoopSimulation:
             self.feedforward.set_mode(res.frequency_hz, res.damping_ratio)
         if fb is None:
             return
-        fb.watch(res.frequency_hz)
+        fb.watch(res.frequency_hz, res.damping_ratio)
         if res.auto and (not self.gains or res.gain_per_s != self.gains[-1][1]):
             fb.set_gain(res.gain_per_s)
             self.gains.append((t, res.gain_per_s))

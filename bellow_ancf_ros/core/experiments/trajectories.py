@@ -66,6 +66,7 @@ from ..model import RobotConfig, Stage1, load_robot
 
 __all__ = [
     'lead_in',
+    'spin_up',
     'trajectory_target',
     'MULTI_SEGMENT_TRAJECTORIES',
     'ONE_SEGMENT_TRAJECTORIES',
@@ -343,3 +344,28 @@ def lead_in(start_position, start_z, end_position, end_z, fraction):
         return pos, None
     z0 = np.asarray(start_z, dtype=float) / np.linalg.norm(start_z)
     return pos, rotation_from_vector(s * rotation_between(z0, end_z)) @ z0
+
+
+def spin_up(t: float, duration_s: float) -> float:
+    """The path's time after ``t`` seconds of a start whose speed rises over ``duration_s``.
+
+    A path that starts at full speed (a circle does) asks a robot at rest for
+    a jump of velocity: a robot with a lightly damped mode rings for seconds
+    after it (docs/dynamics.md; ``trajectory_publisher`` ``spin_up_s``).  The
+    speed factor rises from 0 to 1 with minimum-jerk timing
+    ``sigma = 10 f^3 - 15 f^4 + 6 f^5`` of ``f = t / duration_s``, so the
+    path's speed, acceleration and jerk start at zero; the path time is its
+    integral, ``duration_s (5 f^4 / 2 - 3 f^5 + f^6)``, and from the end of
+    the spin-up on ``t - duration_s / 2`` (the path at full speed, half the
+    spin-up behind a path that started at full speed).  ``duration_s`` 0:
+    ``t`` itself.
+    """
+    t, d = float(t), float(duration_s)
+    if not (math.isfinite(d) and d >= 0):
+        raise ValueError(f'spin_up_s = {duration_s!r} is not allowed; allowed: a time >= 0 [s]')
+    if d == 0.0 or t >= d:
+        return t - d / 2
+    if t <= 0.0:
+        return t
+    f = t / d
+    return d * f ** 4 * (2.5 - 3.0 * f + f * f)

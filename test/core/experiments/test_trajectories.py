@@ -254,3 +254,19 @@ def test_lead_in_goes_from_the_held_pose_to_the_path_smoothly():
     ang = [angle_between(z, z1) for _, z in poses]
     assert np.all(np.diff(ang) <= 1e-12)
     assert lead_in(p0, None, p1, None, 0.5)[1] is None
+
+
+def test_spin_up_starts_at_rest_and_joins_the_path_at_full_speed():
+    from bellow_ancf_ros.core.experiments import spin_up
+    d, h = 2.0, 1e-4
+    assert spin_up(0.0, d) == 0.0 and spin_up(-1.0, d) == -1.0
+    speed = lambda t: (spin_up(t + h, d) - spin_up(t - h, d)) / (2 * h)  # noqa: E731
+    assert abs(speed(h)) < 1e-6 and speed(d) == pytest.approx(1.0, abs=1e-6)
+    assert spin_up(d, d) == pytest.approx(d / 2) and spin_up(5.0, d) == pytest.approx(4.0)
+    acc = [(speed(t + h) - speed(t - h)) / (2 * h) for t in (2 * h, d - 2 * h)]
+    assert max(abs(a) for a in acc) < 1e-2            # no jump of acceleration at either end
+    ts = np.linspace(0, d, 201)
+    assert np.all(np.diff([spin_up(t, d) for t in ts]) >= 0)   # never backwards
+    assert spin_up(3.0, 0.0) == 3.0
+    with pytest.raises(ValueError, match='spin_up_s'):
+        spin_up(1.0, -1.0)
