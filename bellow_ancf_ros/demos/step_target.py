@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .pipeline import NodeProcess, Recorder, child_env, wait_until, wait_up
+from .pipeline import NodeProcess, Recorder, child_env, wait_up
 
 __all__ = ['residual_swing', 'step_phase']
 

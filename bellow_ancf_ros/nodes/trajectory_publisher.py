@@ -19,8 +19,9 @@ off the path's start, the targets lead in from where it is, onto the path
 with minimum-jerk timing, instead of a jump; the path's clock starts after
 it), ``spin_up_s`` (default 0: the path's speed rises from zero over this
 long, :func:`~bellow_ancf_ros.core.experiments.spin_up`, so that a fast path
-does not start with a jump of velocity that rings a robot's first mode).  Where it is: the target another node holds it at (``target_pose``),
-else its ``measured_pose``, else the controller's ``commanded_pose``.
+does not start with a jump of velocity that rings a robot's first mode).
+Where it is (for the lead-in): the target another node holds it at
+(``target_pose``), else its ``measured_pose``, else the controller's ``commanded_pose``.
 ``preview_s`` (default 0) publishes, at every tick, the pose wanted that far
 ahead, stamped with the time it is wanted at (a stamp in the future): the
 inverse node commands it at once, so that the robot, behind its regulators'
@@ -50,7 +51,7 @@ from rclpy.node import Node
 
 from ..core import ConfigError, load_robot
 from ..core.experiments import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
-                               trajectory_parameters)
+                                trajectory_parameters)
 from ..core import geometry
 from .diagnostics import Heartbeat
 from .measured_feedback import measured_pose_qos

@@ -21,19 +21,20 @@ def test_main_demo_short_run_one_segment(tmp_path):
     res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.closed_loop',
                           '--cases', 'one_segment', '--speeds', '4',
                           '--period-scale', '0.5', '--lead-in', '1', '--hold', '1.5',
-                          '--no-goals', '--side-by-side', '--plot', str(plot)],
-                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150,
+                          '--no-goals', '--no-step', '--side-by-side', '--plot', str(plot)],
+                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=200,
                          stdin=subprocess.DEVNULL)
     out = res.stdout + res.stderr
     assert res.returncode == 0, out
     assert 'PASS' in out
-    for mode in ('feedforward', 'closed loop'):
+    for mode in ('feedforward', 'dynamic FF', 'closed loop'):
         line = next(ln for ln in out.splitlines() if ln.strip().startswith(mode + ' ')
                     and 'RMSE' in ln)
         assert 'held target' in line, line
-    assert out.count('all finite and within the limits: yes') == 2
-    assert out.count('last (vent): [0.0, 0.0, 0.0]') == 2
+    assert out.count('all finite and within the limits: yes') == 3
+    assert out.count('last (vent): [0.0, 0.0, 0.0]') == 3
     assert 'closed-loop / feedforward position RMSE' in out
+    assert 'dynamic / quasi-static feedforward position RMSE' in out
     assert 'realistic plant' in out and 'outliers (largest command step after one' in out
     assert plot.is_file() and plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
@@ -54,7 +55,7 @@ def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
     fig = ros_demo_plot.figure({c.key: {'none': res, 'integral': res} for c in cols}, cols)
     fig.canvas.draw()
     axes3d = [a for a in fig.axes if a.name == '3d']
-    assert len(axes3d) == 4
+    assert len(axes3d) == len(cols) == 8   # 1x, 4x, 10x per robot; 50 g at 1x and 10x
     for ax in axes3d:
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             assert axis.get_major_formatter().get_offset() == ''

@@ -14,7 +14,8 @@ from .trajectories import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
 
 __all__ = [
     "ConvergenceResult", "ConvergenceRow", "Scheme", "TRAJECTORY_NAMES", "TrackResult",
-    "compare_pcc", "convergence_study", "lead_in", "spin_up", "studies", "trajectories", "trajectory",
+    "compare_pcc", "convergence_study", "lead_in", "spin_up", "studies", "trajectories",
+    "trajectory",
     "trajectory_parameters", "trajectory_target", "tracking_study", "workspace_schemes",
     "workspace_study",
 ]
