@@ -14,7 +14,13 @@ remedy against the case it is for:
 * **shaping**: the matched two-segment robot (only its dynamics and the
   regulators' lag), a 10 mm step target: the residual swing from 1 s after
   the step (largest distance from the final pose over the next second) with
-  no shaping, ZV and ZVD, and the shaper's delay;
+  no shaping, ZV and ZVD, and the shaper's delay; then the mismatched
+  realistic robot (its 1 kPa play, creep): unshaped, ZVD, and ZVD with the
+  commands compensated for the play (``regulator_play_kpa``);
+* **notch**: the same robot with ``feedback_gain_per_s: auto`` and a notch
+  at the mode (``feedback_notch``) held, and on the 10x circle with and
+  without the path's spin-up (``spin_up_s``): what the notch's gain and a
+  smooth start buy;
 * **dynamic feedforward**: the matched robots (no creep, no play) on the
   paper's circle at 10 times its speed (2 s period), fourth period: RMSE of
   the quasi-static feedforward (lag previewed as a delay) against the
@@ -50,10 +56,12 @@ def held_50g(gain):
     model = RobotModel(load_robot('two_segment'))
     robot = SimulatedRobot('two_segment_mismatched', seed=1, payload_kg=0.05)
     watch = gain != 'fixed, no watchdog'
-    k = AUTO_GAIN if gain == 'auto' else 2.5
-    sim = LoopSimulation(model, robot, FeedbackSettings(gain_per_s=2.5), preview_s=PREVIEW_S,
-                         physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=0.05,
-                         mode_check=ModeCheck(k, LAG_S, DELAY_S) if watch else None)
+    k = AUTO_GAIN if gain.startswith('auto') else 2.5
+    notch = gain.endswith('notch')
+    sim = LoopSimulation(model, robot, FeedbackSettings(gain_per_s=2.5, notch=notch),
+                         preview_s=PREVIEW_S, physics_rate_hz=robot.auto_physics_rate_hz,
+                         payload_kg=0.05,
+                         mode_check=ModeCheck(k, LAG_S, DELAY_S, notch=notch) if watch else None)
     fw = solve_forward(model, [40e3, 0, 0, 0, 0, 0], payload_kg=0.05)
     rec = sim.run(20.0, lambda t: (fw.position, fw.z_axis))
     wd = sim.feedback.watchdog
@@ -71,12 +79,22 @@ def _held_50g_line(gain):
             f'{r["gain_per_s"]:.3g} /s; watchdog trips {r["trips"]}{first}')
 
 
-def step_residual(kind):
-    """Matched two-segment robot, 10 mm step at 8 s: the residual swing from 9 s to 10 s.
+def step_residual(kind, robot_name='two_segment', play_pa=None):
+    """Two-segment robot, 10 mm step at 8 s: the residual swing from 9 s to 10 s.
 
-    Returns ``(largest distance from the final pose [m], the shaper's delay
-    [s], the mode (frequency [Hz], damping ratio))``.
+    ``robot_name`` ``'two_segment'``: the matched robot, only its dynamics
+    and the regulators' lag and dead time; ``'two_segment_mismatched'``: the
+    mismatched robot with every realistic effect (1 kPa play, creep), the
+    swing measured as ``make demo`` does (a quadratic drift taken out), the
+    commands compensated for a play of ``play_pa`` (None: none).  The shaper
+    is at the model's mode, and its levels are solved at their impulse
+    times (the inverse node's one-shot re-solves).
+
+    Returns ``(largest distance from the final pose (matched) or from the
+    drift (mismatched) [m], the shaper's delay [s], the mode (frequency
+    [Hz], damping ratio))``.
     """
+    from bellow_ancf_ros.demos.step_target import residual_swing
     model = RobotModel(load_robot('two_segment'))
     fw0 = solve_forward(model, [30e3, 0, 0, 0, 0, 0])
     goal = fw0.position + np.array([0.0, 0.010, 0.0])
@@ -85,25 +103,33 @@ def step_residual(kind):
 
     def step(t):
         return (fw0.position if t < 8.0 else goal), fw0.z_axis
-    e = PlantEffects.ideal(dynamics=True, regulator_time_constant_s=0.06,
-                           regulator_dead_time_s=0.015, position_noise_m=0.0,
-                           angle_noise_rad=0.0)
-    robot = SimulatedRobot('two_segment', seed=0, effects=e)
-    sim = LoopSimulation(model, robot, None, physics_rate_hz=robot.auto_physics_rate_hz)
+    matched = robot_name == 'two_segment'
+    e = (PlantEffects.ideal(dynamics=True, regulator_time_constant_s=0.06,
+                            regulator_dead_time_s=0.015, position_noise_m=0.0,
+                            angle_noise_rad=0.0) if matched else PlantEffects())
+    robot = SimulatedRobot(robot_name, seed=0, effects=e)
+    sim = LoopSimulation(model, robot, None, physics_rate_hz=robot.auto_physics_rate_hz,
+                         play_compensation_pa=play_pa or 0.0)
     tgt = step if kind == 'none' else shaped(step, kind, mode.frequency_hz, mode.damping_ratio)
-    rec = sim.run(11.0, tgt)
-    a = rec.arrays()
-    final = a['true_p'][a['t'] > 10.5].mean(axis=0)
-    w = (a['t'] >= 9.0) & (a['t'] <= 10.0)
-    swing = float(np.linalg.norm(a['true_p'][w] - final, axis=1).max())
     times, amps = shaper_impulses(kind, mode.frequency_hz, mode.damping_ratio)
+    rec = sim.run(11.0, tgt, solve_at=[8.0 + t + 1e-3 for t in times])
+    a = rec.arrays()
+    if matched:
+        final = a['true_p'][a['t'] > 10.5].mean(axis=0)
+        w = (a['t'] >= 9.0) & (a['t'] <= 10.0)
+        swing = float(np.linalg.norm(a['true_p'][w] - final, axis=1).max())
+    else:
+        swing = residual_swing(a['t'] - 8.0, a['true_p'], 1.0, 2.0)
     return swing, float(amps @ times), (mode.frequency_hz, mode.damping_ratio)
 
 
-def _step_line(kind):
-    swing, delay, (f, zeta) = step_residual(kind)
-    return (f'shaping {kind:<4s} 10 mm step (mode {f:.3g} Hz, zeta {zeta:.3f}): residual '
-            f'swing 1-2 s after it {swing * 1e3:7.4f} mm; delay {delay * 1e3:4.0f} ms')
+def _step_line(args):
+    kind, robot_name, play_pa = args
+    swing, delay, (f, zeta) = step_residual(kind, robot_name, play_pa)
+    what = ('matched robot' if robot_name == 'two_segment' else
+            f'mismatched realistic robot, play compensation {(play_pa or 0) / 1e3:g} kPa')
+    return (f'shaping {kind:<4s} 10 mm step ({what}; mode {f:.3g} Hz, zeta {zeta:.3f}): '
+            f'residual swing 1-2 s after it {swing * 1e3:7.4f} mm; delay {delay * 1e3:4.0f} ms')
 
 
 def circle_10x(name, dynamic):
@@ -145,6 +171,37 @@ def _circle_line(args):
             f'{ang} (max {s["max_mm"]:.3f} mm)')
 
 
+def circle_10x_50g(notch, spin_up_s=2.0):
+    """Two segments carrying 50 g, mismatched realistic robot, closed loop on the automatic gain.
+
+    The 2 s circle after its start held 3 s and a spin-up (``spin_up_s``, 0:
+    the path starts at full speed); one period at full speed to learn, the
+    next evaluated.  Returns ``(summary, gain [1/s], watchdog trips)``.
+    """
+    from bellow_ancf_ros.core.experiments import spin_up
+    model = RobotModel(load_robot('two_segment'))
+    robot = SimulatedRobot('two_segment_mismatched', seed=1, payload_kg=0.05)
+    sim = LoopSimulation(model, robot, FeedbackSettings(notch=notch), preview_s=PREVIEW_S,
+                         physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=0.05,
+                         mode_check=ModeCheck(AUTO_GAIN, LAG_S, DELAY_S, notch=notch))
+    circ = trajectory_target('bending_circle', model.cfg, period=2.0, bending_angle_deg=10.0)
+    sim.run(3.0, lambda t: circ(0.0))
+    t0 = sim.robot.time_s
+    rec = sim.run(4.0 + spin_up_s, lambda t: circ(spin_up(t - t0, spin_up_s)))
+    assert rec.out_of_limits == 0, 'a command outside the limits was computed'
+    start = t0 + spin_up_s + 2.0
+    return (rec.summary(start, start + 2.0), sim.feedback.gain_per_s,
+            sim.feedback.watchdog.trips)
+
+
+def _circle_50g_line(args):
+    notch, spin = args
+    s, gain, trips = circle_10x_50g(notch, spin)
+    return (f'closed loop, 50 g, circle at 10x, {"notch" if notch else "no notch":8s} '
+            f'spin-up {spin:g} s: RMSE {s["rmse_mm"]:6.3f} mm {s["rmse_deg"]:6.3f} deg '
+            f'(max {s["max_mm"]:.3f} mm); automatic gain {gain:.3g} /s; watchdog trips {trips}')
+
+
 def _run(job):
     limit_blas_threads()
     fn, arg = job
@@ -154,8 +211,13 @@ def _run(job):
 
 
 def main() -> None:
-    jobs = ([(_held_50g_line, g) for g in ('fixed, no watchdog', 'fixed, watchdog', 'auto')]
-            + [(_step_line, k) for k in ('none', 'zv', 'zvd')]
+    jobs = ([(_held_50g_line, g) for g in ('fixed, no watchdog', 'fixed, watchdog', 'auto',
+                                           'auto, notch')]
+            + [(_circle_50g_line, a) for a in ((False, 0.0), (False, 2.0), (True, 0.0),
+                                               (True, 2.0))]
+            + [(_step_line, (k, 'two_segment', None)) for k in ('none', 'zv', 'zvd')]
+            + [(_step_line, (k, 'two_segment_mismatched', p)) for k, p in
+               (('none', None), ('zvd', None), ('zvd', 1e3))]
             + [(_circle_line, (n, d)) for n in ('one_segment', 'two_segment')
                for d in (False, True)])
     print('remedies bench: what the swing costs and what each remedy buys (LoopSimulation, '

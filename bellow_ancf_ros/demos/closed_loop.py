@@ -15,8 +15,10 @@ pipeline as separate processes on an isolated random ``ROS_DOMAIN_ID``
 with ``feedback: none`` (the paper's quasi-static feedforward controller),
 ``dynamic_feedforward: true`` (the motion's inertial and damping loads
 through the first mode) and ``feedback: integral`` (the closed loop, on the
-automatic gain with the notch; the 50 g case runs it alone) one after the other (each on its own domain and with
-the cores to itself; ``--side-by-side``: at once). The simulated robot
+automatic gain; the 50 g case runs it alone) one after the other (each on
+its own domain and with the cores to itself; ``--side-by-side``: at once);
+the inverse node compensates the regulators' documented play
+(``regulator_play_kpa``). The simulated robot
 is realistic by default (``--ideal``: the clean robot): it has mass and rings
 (the dynamic model: first modes 8.6 Hz and 2.6 Hz, damping ratios 0.14 and
 0.05), regulators with 60 ms lag, 15 ms dead time and 1 kPa hysteresis,
@@ -188,7 +190,8 @@ class Run:
             log_dir, tag=self.tag)
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
             'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
-            'dynamic_feedforward': mode == 'dynamic', 'payload_kg': case.payload_kg},
+            'dynamic_feedforward': mode == 'dynamic', 'payload_kg': case.payload_kg,
+            'regulator_play_kpa': play_kpa(args.plant)},
             self.env, log_dir, tag=self.tag)
         self.procs['forward'] = NodeProcess('forward_kinetostatic_node', {
             'robot_config': case.robot, 'max_rate_hz': 5.0}, self.env, log_dir,
@@ -336,6 +339,13 @@ class Run:
         snap = self.rec.snapshot()
         self.rec.close()
         return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap)
+
+
+def play_kpa(plant: str) -> float:
+    """The regulators' play the inverse node compensates (their data sheet: the plant's)."""
+    from ..core.control import PlantEffects
+    e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
+    return e.regulator_hysteresis_pa / 1e3
 
 
 def preview_s(plant: str, dynamic: bool = False) -> float:

@@ -1,7 +1,8 @@
 """The main job's step phase: a 10 mm step target, unshaped and ZVD-shaped (``make demo``).
 
 The two-segment pipeline of :mod:`.closed_loop` (the mismatched realistic
-robot, the default model, feedforward) holds a target, then the target jumps
+robot, the default model, feedforward, the commands compensated for the
+regulators' documented 1 kPa play: ``regulator_play_kpa``) holds a target, then the target jumps
 10 mm sideways.  The inverse node runs once with ``target_shaping: none`` and
 once with ``zvd`` (the shaper at the model's first mode at the held
 equilibrium).  Measured on the robot's true pose: the residual swing from
@@ -58,6 +59,7 @@ def _run(shaping: str, args, domain: int, log_dir: Path, poses) -> dict:
     from ..core.geometry import quaternion_from_z_axis
     from ..nodes.ros_util import command_qos, pose_message
     from builtin_interfaces.msg import Time
+    from .closed_loop import play_kpa
     env = child_env(domain)
     tag = f'step_{shaping}_'
     rec = Recorder(domain, {'true_pose': PoseStamped}, name=f'ros_demo_step_{shaping}')
@@ -66,8 +68,8 @@ def _run(shaping: str, args, domain: int, log_dir: Path, poses) -> dict:
             'robot_config': ROBOT + '_mismatched', 'seed': args.seed, 'plant': args.plant,
             'physics_rate_hz': args.physics_rate}, env, log_dir, tag=tag),
         'inverse': NodeProcess('inverse_kinetostatic_node', {
-            'robot_config': ROBOT, 'feedback': 'none', 'target_shaping': shaping}, env,
-            log_dir, tag=tag)}
+            'robot_config': ROBOT, 'feedback': 'none', 'target_shaping': shaping,
+            'regulator_play_kpa': play_kpa(args.plant)}, env, log_dir, tag=tag)}
     out = {'ok': False}
     try:
         pub = rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())

@@ -143,7 +143,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_problem,
                     precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
-from ..core.control import SHAPERS, gain_setting
+from ..core.control import SHAPERS, PlayCompensation, gain_setting
 from . import contract, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
@@ -210,6 +210,11 @@ PARAMETERS = (
         'Rate at which the current command is republished while active and no new one went '
         'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
         'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True)),
+    Param('regulator_play_kpa', 0.0, descriptor(
+        "The regulators' hysteresis (play) band [kPa], from their data sheet: each command "
+        'is sent at the edge of the band that puts the valve exactly at the pressure wanted '
+        '(a change of direction no longer vanishes in the play; a shaped step then leaves no '
+        'swing); 0 = off. Read on configure.', D, lo=0.0, hi=50.0)),
     Param('allow_other_publishers', False, descriptor(
         'Publish pressure_command even while another node publishes it (default false: '
         'vent once, deactivate and wait for activate; see ownership in docs/ros.md).', B)),
@@ -260,6 +265,7 @@ class InverseKinetostaticNode(LifecycleNode):
                          extra_check=self._configure_time_check)
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
         self._targets = TargetLink(self)   # target_shaping, dynamic_feedforward
+        self._play = None                  # regulator_play_kpa: PlayCompensation
         self._modes: ModeWatch | None = None   # the first mode, when something needs it
         self.add_post_set_parameters_callback(self._after_set)
 
@@ -432,6 +438,9 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._cfg, self._model = cfg, model
             self._warm = fw0 if fw0.success else None
+            play = 1e3 * float(self.get_parameter('regulator_play_kpa').value)
+            self._play = (PlayCompensation(model.A, play, cfg.p_min, cfg.p_max) if play > 0
+                          else None)
         qos = command_qos()
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
         self._owner = TopicOwner(self, 'pressure_command',
@@ -514,6 +523,8 @@ class InverseKinetostaticNode(LifecycleNode):
             vent = contract.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
             msg = pressure_message(vent, self._unit())
             self.last_command_pa = vent
+            if self._play is not None:
+                self._play.vent()
             self._last_pose = None   # (the vented robot's pose is not a solve's)
             self.stats['vents'] += 1
             # under the lock: no solve result can be published after the vent
@@ -763,6 +774,9 @@ class InverseKinetostaticNode(LifecycleNode):
                 self._warm = inv
                 if stamp.sec == 0 and stamp.nanosec == 0:
                     stamp = self.get_clock().now().to_msg()
+                if self._play is not None:   # the valve at p, past the regulators' play
+                    p = contract.safe_pressures(self._play.command(p), cfg.p_min, cfg.p_max,
+                                                model.A)
                 self._pub_cmd.publish(pressure_message(p, unit))
                 self._last_publish_t = time.monotonic()
                 self._last_pose = pose_message(

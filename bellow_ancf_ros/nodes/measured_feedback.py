@@ -62,7 +62,7 @@ __all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'm
 
 _D, _S, _B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
               ParameterType.PARAMETER_BOOL)
-_DEF = FeedbackSettings(notch=True)   # the node's defaults (the notch is on)
+_DEF = FeedbackSettings()
 #: The parameters FeedbackLink declares (what the inverse node's ``--help`` prints); all are
 #: read on configure.
 FEEDBACK_PARAMETER_TABLE = (
@@ -84,7 +84,8 @@ FEEDBACK_PARAMETER_TABLE = (
         'damping ratio at the held equilibrium, followed as they move): a lightly damped '
         'mode no longer limits the gain (two segments carrying 50 g: automatic gain 0.38 '
         '-> 1.75 /s); the margins are then those of the worst robot mode within 10 % of '
-        "the model's. Read on configure.", _B)),
+        "the model's. Off by default: measured, the higher gain passed more mocap noise and "
+        'tracked no better (docs/closed_loop.md). Read on configure.', _B)),
 ) + tuple(Param(name, float(default), descriptor(text + ' Read on configure.', _D, lo=lo, hi=hi))
           for name, default, text, lo, hi in (
     ('feedback_max_correction_mm', _DEF.max_correction_m * 1e3,

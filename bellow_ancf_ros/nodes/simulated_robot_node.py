@@ -288,6 +288,7 @@ class SimulatedRobotNode(Node):
                       'timeouts': 0, 'dropped_poses': 0, 'outliers': 0}
         self._timeout_s = float(g('command_timeout_s').value)
         self._last_cmd_t: float | None = None
+        self._tick_t = time.monotonic()   # the instant the robot's state is at (physics tick)
         self.last_refusal_reason = ''
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'measured_pose', qos)
@@ -352,12 +353,15 @@ class SimulatedRobotNode(Node):
             self.last_refusal_reason = str(exc)
             self._refusals.report(str(exc), self.stats['refused'])
             return
-        self.robot.command(p)   # one array assignment: the physics thread reads it whole
-        self._last_cmd_t = time.monotonic()
+        now = time.monotonic()
+        # in effect when it arrived (plus the dead time), not at the next physics tick: a
+        # shaped step's levels would otherwise land on the physics rate's grid
+        self.robot.command(p, min(max(now - self._tick_t, 0.0), 2 * self._physics_period))
+        self._last_cmd_t = now
 
     # ------------------------------------------------------------ physics
     def _physics_loop(self) -> None:
-        last = time.monotonic()
+        last = self._tick_t = time.monotonic()
         next_t = last
         tick = 0
         while not self._stop.is_set():
@@ -378,6 +382,7 @@ class SimulatedRobotNode(Node):
                                           f'{self._timeout_s:g} s (controller dead or stopped)')
             failures = self.robot.failures
             self.robot.step(now - last)   # only this thread steps the robot
+            self._tick_t = now            # the robot's time is this instant
             # the state is the robot's at `now` (the tick), not when its computation ended
             self._state_stamp = self.get_clock().now() - Duration(
                 nanoseconds=int((time.monotonic() - now) * 1e9))

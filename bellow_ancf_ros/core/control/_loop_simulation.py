@@ -33,6 +33,7 @@ from ..geometry import angle_between
 from ..model import RobotModel
 from ..solve import solve_inverse
 from ._feedback import FeedbackSettings, IntegralFeedback
+from ._play import PlayCompensation
 from ._simulated_robot import SimulatedRobot
 
 __all__ = ['LoopRecord', 'LoopSimulation']
@@ -120,12 +121,16 @@ class LoopSimulation:
     feedforward : a :class:`~._dynamic_feedforward.StreamFeedforward`: the
         (previewed) target is shifted for the robot's first mode before the
         inverse (dynamic feedforward); its mode follows ``mode_check``.
+    play_compensation_pa : the regulators' play the commands are compensated
+        for (:class:`~._play.PlayCompensation`, as the inverse node's
+        ``regulator_play_kpa``); 0: none.
     """
 
     def __init__(self, model: RobotModel, robot: SimulatedRobot,
                  feedback: FeedbackSettings | None = None, control_rate_hz: float = 50.0,
                  physics_rate_hz: float = 200.0, preview_s: float = 0.0,
-                 payload_kg: float | None = None, mode_check=None, feedforward=None) -> None:
+                 payload_kg: float | None = None, mode_check=None, feedforward=None,
+                 play_compensation_pa: float = 0.0) -> None:
         """Set up the loop at the robot's current time; nothing is commanded yet."""
         for name, v in (('control_rate_hz', control_rate_hz),
                         ('physics_rate_hz', physics_rate_hz)):
@@ -149,6 +154,9 @@ class LoopSimulation:
         self.mode_check = mode_check
         self.feedforward = feedforward
         self.gains: list = []                 # (time, gain) whenever the automatic gain changed
+        cfg = model.cfg
+        self.play = (PlayCompensation(cfg.n_actuators_total, play_compensation_pa, cfg.p_min,
+                                      cfg.p_max) if play_compensation_pa > 0 else None)
         t = robot.time_s
         self._next = {'physics': t + self.physics_dt, 'mocap': t, 'control': t}
 
@@ -179,7 +187,8 @@ class LoopSimulation:
                 usable = False
         if usable:
             self.inverse, self.command = inv, cmd
-            self.robot.command(cmd)
+            self.robot.command(cmd if self.play is None else self.play.command(cmd),
+                               t - self.robot.time_s)
             self._check_modes(t, fw)
             if fb is not None:
                 fb.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
@@ -229,13 +238,20 @@ class LoopSimulation:
             self.feedback.measurement(sample.captured_s, sample.position,
                                       sample.rotation[:, 2])
 
-    def run(self, duration_s: float, target: Target, record: LoopRecord | None = None
-            ) -> LoopRecord:
-        """Run ``duration_s`` more seconds towards ``target``; the record (appended to)."""
+    def run(self, duration_s: float, target: Target, record: LoopRecord | None = None,
+            solve_at=()) -> LoopRecord:
+        """Run ``duration_s`` more seconds towards ``target``; the record (appended to).
+
+        ``solve_at``: extra control steps at these times (the inverse node
+        re-solves a shaped target at each of its shaper's impulse times); a
+        command between two physics steps takes effect when it was sent.
+        """
         rec = LoopRecord() if record is None else record
         end = self.robot.time_s + float(duration_s)
         mocap_dt = self.robot.mocap.period_s
         nxt = self._next
+        extra = sorted(float(t) for t in solve_at if float(t) >= self.robot.time_s)
+        nxt['extra'] = extra.pop(0) if extra else math.inf
         while True:
             kind = min(nxt, key=nxt.get)
             t = nxt[kind]
@@ -249,5 +265,9 @@ class LoopSimulation:
                 nxt[kind] = t + mocap_dt
             else:
                 self._control(t, target, rec)
-                nxt[kind] = t + self.control_dt
+                if kind == 'extra':
+                    nxt[kind] = extra.pop(0) if extra else math.inf
+                else:
+                    nxt[kind] = t + self.control_dt
+        nxt.pop('extra', None)
         return rec

@@ -74,11 +74,19 @@ class PressureRegulators:
             raise ValueError('pressures must be finite numbers')
         return np.clip(arr, self.p_min, self.p_max)
 
-    def set_command(self, p: Any) -> None:
-        """New set-points [Pa] (clipped into the hardware limits; NaN/inf raise ``ValueError``)."""
+    def set_command(self, p: Any, after_s: float = 0.0) -> None:
+        """New set-points [Pa] (clipped into the hardware limits; NaN/inf raise ``ValueError``).
+
+        ``after_s``: they arrived this long after the regulators' current time
+        (a command between two physics steps takes effect when it arrived,
+        plus the dead time, not at a step's edge).
+        """
         c = self._checked(p)
         self.command_pa = c
-        self._pending.append((self.time_s + self.dead_time_s, c))
+        at = self.time_s + self.dead_time_s + max(float(after_s), 0.0)
+        if self._pending and at < self._pending[-1][0]:
+            at = self._pending[-1][0]   # in the order they arrived
+        self._pending.append((at, c))
 
     def _advance(self, dt: float) -> None:
         """Follow the current set-point for ``dt`` (exact lag, slew-limited, clipped)."""

@@ -182,9 +182,13 @@ class SimulatedRobot:
         return solve_forward(self.model, p, payload_kg=self.payload_kg, warm_start=warm,
                              check_stability=check, tip_force_n=self.tip_force_n)
 
-    def command(self, pressures_pa: Any) -> None:
-        """Hand set-points [Pa] to the regulators (clipped into the hardware limits)."""
-        self.regulators.set_command(pressures_pa)
+    def command(self, pressures_pa: Any, after_s: float = 0.0) -> None:
+        """Hand set-points [Pa] to the regulators (clipped into the hardware limits).
+
+        ``after_s``: they arrived this long after the robot's current time
+        (between two steps), and take effect then (plus the dead time).
+        """
+        self.regulators.set_command(pressures_pa, after_s)
 
     def set_payload(self, payload_kg: float) -> None:
         """Change the payload [kg]; the next :meth:`step` solves the new equilibrium."""
