@@ -855,6 +855,25 @@ def test_trajectory_publisher_preview_stamps_the_pose_with_the_time_it_is_wanted
         assert turn == pytest.approx(2 * math.pi * (sb - sa) / 4.0, abs=2e-3)
 
 
+def test_trajectory_publisher_spin_up_starts_the_path_at_rest(h, one):
+    """spin_up_s: the angle along the circle follows spin_up(t), from rest to full speed."""
+    got = h.record(PoseStamped, 'target_pose')
+    h.add(TrajectoryPublisher, rate_hz=50.0, period_s=2.0, spin_up_s=1.0, ramp_in_s=0.0)
+    wait_for(lambda: h.count('target_pose') >= 75, what='targets')
+    c = np.asarray(trajectories.default_parameters('planar_circle', one.cfg)['center'])
+    msgs = list(got)
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for _, m in msgs])
+    ang = np.unwrap([math.atan2(*(pose_of(m)[0] - c)[1::-1]) for _, m in msgs])
+    t = stamps - stamps[0]
+    speed = np.diff(ang) / np.diff(t)
+    full = 2 * math.pi / 2.0
+    assert abs(np.median(speed[t[1:] < 0.1])) < 0.05 * full    # starts at rest
+    late = speed[t[1:] > 1.1]
+    assert late.size and np.median(late) == pytest.approx(full, rel=0.05)
+    # half the spin-up behind a path started at full speed
+    assert ang[-1] - ang[0] == pytest.approx(full * (t[-1] - 0.5), abs=0.1)
+
+
 def test_trajectory_publisher_one_segment_rejects_bending(h, one):
     got = h.record(PoseStamped, 'target_pose')
     node = h.add(TrajectoryPublisher, rate_hz=50.0, trajectory='planar_rose')

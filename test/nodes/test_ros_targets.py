@@ -103,3 +103,34 @@ def test_bad_gain_or_shaping_refused_while_unconfigured_too(h):
         assert not res.successful and 'not allowed' in res.reason, (name, res.reason)
     assert node.set_parameters([P('feedback_gain_per_s', value=1.0)])[0].successful
     assert node.set_parameters([P('target_shaping', value='zv')])[0].successful
+
+
+def test_regulator_play_is_compensated_in_every_command_not_the_vent(h, one):
+    """regulator_play_kpa: each command at the band's edge on its way; the vent exactly 0."""
+    from std_msgs.msg import Float64MultiArray
+
+    from bellow_ancf_ros.core import solve_inverse
+    h.record(Float64MultiArray, 'pressure_command')
+    node = h.add(InverseKinetostaticNode, regulator_play_kpa=1.0, command_rate_hz=0.0,
+                 name='play')
+    a = solve_forward(one, [40e3, 20e3, 5e3]).position
+    b = solve_forward(one, [30e3, 25e3, 5e3]).position
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    sent = []
+    for target in (a, b):
+        n0 = h.count('pressure_command')
+        pub.publish(target_msg(target))
+        wait_for(lambda: h.count('pressure_command') > n0, what='a command')
+        sent.append(np.asarray(h.last('pressure_command').data))
+    pa = solve_inverse(one, a).pressures_pa
+    pb = solve_inverse(one, b).pressures_pa
+    np.testing.assert_allclose(sent[0], pa + 500.0, atol=5.0)            # up from the vent
+    moved = np.abs(pb - pa) > 1.0
+    np.testing.assert_allclose(sent[1][moved], (pb + 500.0 * np.sign(pb - pa))[moved], atol=5.0)
+    # where the valves then stand (the regulators' play of 1 kPa): at the pressures wanted
+    valve = np.clip(np.zeros(3), sent[0] - 500.0, sent[0] + 500.0)
+    valve = np.clip(valve, sent[1] - 500.0, sent[1] + 500.0)
+    np.testing.assert_allclose(valve, pb, atol=5.0)
+    node.trigger_deactivate()
+    wait_for(lambda: not np.any(np.asarray(h.last('pressure_command').data)), what='vent')
