@@ -179,7 +179,7 @@ class Run:
         self.env = child_env(domain)
         self.rec = _recorder(domain, f'ros_demo_recorder_{mode}')
         self.procs: dict[str, NodeProcess] = {}
-        self.tag = f'{case.robot}_{col.speed:g}x_{mode}_'
+        self.tag = f'{col.key.replace("@", "_")}_{mode}_'
         self.ok = True
         self.times: dict[str, float] = {}
         self.stopped: set = set()

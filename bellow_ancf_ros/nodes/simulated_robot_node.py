@@ -54,6 +54,7 @@ is refused at start-up.
 from __future__ import annotations
 
 import math
+from collections import deque
 import threading
 import time
 from typing import Any
@@ -288,7 +289,7 @@ class SimulatedRobotNode(Node):
                       'timeouts': 0, 'dropped_poses': 0, 'outliers': 0}
         self._timeout_s = float(g('command_timeout_s').value)
         self._last_cmd_t: float | None = None
-        self._tick_t = time.monotonic()   # the instant the robot's state is at (physics tick)
+        self._commands: deque = deque()   # (pressures, arrival time): for the physics thread
         self.last_refusal_reason = ''
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'measured_pose', qos)
@@ -354,14 +355,14 @@ class SimulatedRobotNode(Node):
             self._refusals.report(str(exc), self.stats['refused'])
             return
         now = time.monotonic()
-        # in effect when it arrived (plus the dead time), not at the next physics tick: a
-        # shaped step's levels would otherwise land on the physics rate's grid
-        self.robot.command(p, min(max(now - self._tick_t, 0.0), 2 * self._physics_period))
+        # handed to the physics thread with its arrival time: it takes effect then (plus the
+        # dead time), not at a physics tick (a shaped step's levels would land on its grid)
+        self._commands.append((p, now))
         self._last_cmd_t = now
 
     # ------------------------------------------------------------ physics
     def _physics_loop(self) -> None:
-        last = self._tick_t = time.monotonic()
+        last = time.monotonic()   # the instant the robot's state is at
         next_t = last
         tick = 0
         while not self._stop.is_set():
@@ -380,9 +381,11 @@ class SimulatedRobotNode(Node):
                 self.stats['timeouts'] += 1
                 self.get_logger().warning(f'vented: no pressure_command for '
                                           f'{self._timeout_s:g} s (controller dead or stopped)')
+            while self._commands:   # in the order they arrived, each at its time
+                p_cmd, t_arr = self._commands.popleft()
+                self.robot.command(p_cmd, min(max(t_arr - last, 0.0), now - last))
             failures = self.robot.failures
             self.robot.step(now - last)   # only this thread steps the robot
-            self._tick_t = now            # the robot's time is this instant
             # the state is the robot's at `now` (the tick), not when its computation ended
             self._state_stamp = self.get_clock().now() - Duration(
                 nanoseconds=int((time.monotonic() - now) * 1e9))
