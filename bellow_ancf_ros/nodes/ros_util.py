@@ -643,9 +643,10 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
         try:
             executor_choice()
             if not numba_cache.is_compiled():   # say at once what the blank terminal is
+                # the duration as README.md and docs/cli.md give it (52-66 s measured)
                 print(f'[{name}] compiling the numerical kernels once after installation '
-                      '(about 20 s; `ros2 run bellow_ancf_ros bellow-ancf warm-up` does it '
-                      'ahead of time)', file=sys.stderr, flush=True)
+                      '(about a minute on a 2-core machine; `ros2 run bellow_ancf_ros '
+                      'bellow-ancf warm-up` does it ahead of time)', file=sys.stderr, flush=True)
             node = make()
             _SPINNING.set()  # from here a signal stops the node cleanly (run_node)
         except (StartupParameterError, ConfigError) as exc:

@@ -1,14 +1,16 @@
 """``--help`` of every node executable: it answers before ROS starts and publishes nothing.
 
-Every console script of ``setup.py`` except the CLI is started with
-``--help`` (as ``ros2 run bellow_ancf_ros <exe> --help`` would start it), on
-a random ROS_DOMAIN_ID with LOCALHOST discovery, while a real rclpy
-listener in this process subscribes every topic the nodes publish.  The
+Every console script of ``setup.py`` except the CLI is started with ``-h``
+or ``--help`` (every other one; as ``ros2 run bellow_ancf_ros <exe> --help``
+would start it), on a random ROS_DOMAIN_ID with LOCALHOST discovery, while
+a real rclpy listener in this process subscribes every topic the nodes
+publish.  The
 listener is shown to hear a node that does start (the trajectory publisher
 without ``--help``), so that "received nothing" means something.  The help
-text comes from the node's own parameter table: an in-process node of each
-class declares exactly the parameters, defaults and descriptors its help
-prints.
+text comes from the node's own parameter table: it prints each parameter's
+default and, where the descriptor declares one, its range (read back from
+the text and compared with the table), and an in-process node of each class
+declares exactly the parameters, defaults and descriptors its help prints.
 """
 
 import ast
@@ -16,6 +18,7 @@ import importlib
 import os
 from pathlib import Path
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -128,6 +131,49 @@ class Listener:
         rclpy.try_shutdown(context=self.ctx)
 
 
+def _help_default(text):
+    """The default as the help prints it (Python literals, true/false) -> a Python value."""
+    return ast.literal_eval(re.sub(r'\btrue\b', 'True', re.sub(r'\bfalse\b', 'False', text)))
+
+
+def _table_default(value):
+    return value.tolist() if hasattr(value, 'tolist') else (
+        list(value) if isinstance(value, (list, tuple)) else value)
+
+
+def check_parameter_lines(out, cls):
+    """Each parameter's help line shows its default and the descriptor's range, if any.
+
+    The line is ``  name: default; allowed[; read-only (start-up only)]``
+    (ros_util.node_help); the default and the range are read back from the
+    text and compared with the node's table.
+    """
+    lines = {line.split(':')[0].strip(): line for line in out.splitlines()
+             if re.match(r'  [a-z_0-9]+: ', line)}
+    for p in cls.PARAMETERS:
+        assert p.name in lines, (p.name, out)
+        line = lines[p.name]
+        default_text, allowed = line[len(f'  {p.name}: '):].split('; ', 1)
+        default, want = _help_default(default_text), _table_default(p.default)
+        assert default == want and type(default) is type(want), (line, p.default)
+        if isinstance(want, list):
+            assert [type(v) for v in default] == [type(v) for v in want], (line, p.default)
+        d = p.descriptor
+        ranges = re.findall(r'from (\S+?) to ([^\s,;]+)', allowed)
+        if d.floating_point_range:
+            r = d.floating_point_range[0]
+            assert len(ranges) == 1, line
+            assert [float(v) for v in ranges[0]] == pytest.approx(
+                [r.from_value, r.to_value], rel=1e-5), line   # printed with 6 digits (:g)
+        elif d.integer_range:
+            r = d.integer_range[0]
+            assert len(ranges) == 1, line
+            assert [int(v) for v in ranges[0]] == [r.from_value, r.to_value], line
+        elif not d.additional_constraints:
+            assert not ranges, line   # no range printed that the descriptor does not declare
+        assert line.endswith('; read-only (start-up only)') == d.read_only, line
+
+
 def _start(module, args, env, log_path):
     log = open(log_path, 'w')
     proc = subprocess.Popen([sys.executable, '-m', module, *args], env=env, stdout=log,
@@ -153,8 +199,10 @@ def test_help_answers_before_ros_and_publishes_nothing(env, tmp_path):
     procs = {}
     try:
         t0 = time.monotonic()
+        flags = {exe: ('-h', '--help')[i % 2] for i, (exe, _) in enumerate(NODES)}
+        assert set(flags.values()) == {'-h', '--help'}
         for exe, module in NODES:
-            procs[exe] = _start(module, ['--help'], env, tmp_path / f'{exe}.log')
+            procs[exe] = _start(module, [flags[exe]], env, tmp_path / f'{exe}.log')
         nodes_seen, ended = set(), {}
         while len(ended) < len(procs) and time.monotonic() - t0 < HELP_TIMEOUT_S:
             nodes_seen.update(listener.other_nodes())
@@ -169,15 +217,14 @@ def test_help_answers_before_ros_and_publishes_nothing(env, tmp_path):
             proc, log = procs[exe]
             log.close()
             out = (tmp_path / f'{exe}.log').read_text()
-            assert exe in ended, f'{exe} --help did not end within {HELP_TIMEOUT_S} s:\n{out}'
+            assert exe in ended, f'{exe} {flags[exe]} did not end in {HELP_TIMEOUT_S} s:\n{out}'
             assert proc.returncode == 0, out
             assert 'Traceback' not in out, out
             assert f'ros2 run bellow_ancf_ros {exe}' in out, out
             cls = node_class(module)
             first = sys.modules[module].__doc__.strip().splitlines()[0].replace('``', '')
             assert first[:40] in ' '.join(out.split()), (first, out)
-            for p in cls.PARAMETERS:   # every parameter with its default
-                assert f'\n  {p.name}: ' in out, (p.name, out)
+            check_parameter_lines(out, cls)   # every parameter: default, range
             for t in cls.TOPICS:
                 assert t.name in out, (t.name, out)
         print('help answered in ' + ', '.join(f'{k} {v:.1f} s' for k, v in ended.items()))
