@@ -15,11 +15,11 @@ pipeline as separate processes on an isolated random ``ROS_DOMAIN_ID``
 with ``feedback: none`` (the paper's quasi-static feedforward controller),
 ``dynamic_feedforward: true`` (the motion's inertial and damping loads
 through the first mode) and ``feedback: integral`` (the closed loop, on the
-automatic gain; the 50 g case runs it alone) one after the other (each on
-its own domain and with the cores to itself; ``--side-by-side``: at once);
-the inverse node compensates the regulators' documented play
-(``regulator_play_kpa``). The simulated robot
-is realistic by default (``--ideal``: the clean robot): it has mass and rings
+automatic gain; the 50 g case runs it alone, with ``feedback_notch``) one
+after the other (each on its own domain and with the cores to itself;
+``--side-by-side``: at once); the inverse node compensates the regulators'
+documented play (``regulator_play_kpa``). The simulated robot is realistic
+by default (``--ideal``: the clean robot): it has mass and rings
 (the dynamic model: first modes 8.6 Hz and 2.6 Hz, damping ratios 0.14 and
 0.05), regulators with 60 ms lag, 15 ms dead time and 1 kPa hysteresis,
 bellows creeping 15 % of their elongation over 2 s, a motion capture at 120 Hz
@@ -33,7 +33,8 @@ Each run: the nodes come up; this process holds the path's first point
 ``--lead-in`` (default 2 s), sends its first target; the path's speed rises
 from zero over min(period, ``--spin-up``) (``spin_up_s``, default 5 s); the
 first period at full speed lets the integrator learn, the second is
-evaluated; then the trajectory publisher stops and the last target is held
+evaluated; then the trajectory publisher stops, this process brings the
+path to rest over the same time (``spin_down``) and holds its last target
 (``--hold``, default 4 s).  Then the step phase (:mod:`.step_target`): a
 10 mm step target, two segments, unshaped and ZVD-shaped, and the residual
 swing 1-2 s after it.
@@ -106,6 +107,7 @@ class Case:
     payload_kg: float = 0.0          #: carried by the robot and declared to the controller
     modes: tuple = MODES             #: the controllers run (``feedback`` / feedforward kind)
     speeds: tuple | None = None      #: its speeds (None: every speed asked for)
+    notch: bool = False              #: the closed loop's ``feedback_notch``
 
     @property
     def plant(self) -> str:
@@ -116,8 +118,11 @@ class Case:
 CASES = (
     Case('one_segment', 'planar_circle', None, 'one segment, planar circle'),
     Case('two_segment', 'bending_circle', 10.0, 'two segments, bending circle at 10 deg'),
-    Case('two_segment', 'bending_circle', 10.0, 'two segments carrying 50 g (declared)',
-         payload_kg=0.05, modes=('integral',), speeds=(1.0, 10.0)),
+    # the notch: the automatic gain without it (0.41 /s) relearns the held target after a
+    # 10x path too slowly for the hold (1.16 mm after 4 s; with it, 1.75 /s: 0.21 mm)
+    Case('two_segment', 'bending_circle', 10.0, 'two segments carrying 50 g (declared), '
+         'notch at the mode', payload_kg=0.05, modes=('integral',), speeds=(1.0, 10.0),
+         notch=True),
 )
 
 
@@ -191,7 +196,7 @@ class Run:
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
             'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
             'dynamic_feedforward': mode == 'dynamic', 'payload_kg': case.payload_kg,
-            'regulator_play_kpa': play_kpa(args.plant)},
+            'regulator_play_kpa': play_kpa(args.plant), 'feedback_notch': case.notch},
             self.env, log_dir, tag=self.tag)
         self.procs['forward'] = NodeProcess('forward_kinetostatic_node', {
             'robot_config': case.robot, 'max_rate_hz': 5.0}, self.env, log_dir,
@@ -249,6 +254,7 @@ class Run:
         traj = {'robot_config': case.robot, 'trajectory': case.trajectory,
                 'rate_hz': TARGET_RATE_HZ, 'period_s': self.col.period_s,
                 'start_delay_s': self.args.lead_in, 'spin_up_s': self.spin_up_s,
+                'ramp_in_s': 0.0,   # this process holds the path's first point (lead-in)
                 'preview_s': preview_s(self.args.plant, self.mode == 'dynamic')}
         if case.bending_angle_deg is not None:
             traj['bending_angle_deg'] = case.bending_angle_deg
@@ -297,20 +303,55 @@ class Run:
             self._check()
 
     def stop_trajectory(self) -> None:
-        """Stop the trajectory publisher: the last target is held from now on.
+        """Stop the trajectory publisher; this process brings the path to rest, then holds it.
 
-        The newest target this process recorded is republished at 10 Hz during
-        the hold, so that the inverse node holds the same target as the one the
-        measured poses are compared with (a publisher stopped by a signal may
-        have sent a last sample that only one of the two received).
+        The path is continued from the newest target this process recorded,
+        its speed falling to zero over the spin-up's time (``spin_down``: a
+        path that stopped dead would ring the robot's mode, and the held
+        target would measure the ringing), targets at 50 Hz stamped like the
+        publisher's (previewed); the last one is then republished at 10 Hz
+        during the hold, so that the inverse node holds the same target as
+        the one the measured poses are compared with.
         """
-        self.procs['trajectory'].stop()
+        from builtin_interfaces.msg import Time
+
+        from ..core.experiments import spin_down, spin_up, trajectory
+        from ..core.geometry import quaternion_from_z_axis
+        from ..nodes.ros_util import pose_message
+        proc = self.procs['trajectory']
+        proc.interrupt()   # Ctrl-C; the slow-down starts now, not after its exit (a dead stop)
         self.stopped.add('trajectory')
         with self.rec.lock:
-            _, last = self.rec.msgs['target_pose'][-1]
-        self._hold_timer = self.rec.node.create_timer(
-            0.1, lambda: self._target_pub.publish(last))
-        self.times['hold'] = time.monotonic()
+            stamped = [m for _, m in self.rec.msgs['target_pose'] if _stamp(m) > 0]
+        first, last = _stamp(stamped[0]), _stamp(stamped[-1])
+        d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode == 'dynamic')
+        tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
+        case = self.case
+        kw = {'period': self.col.period_s}
+        if case.bending_angle_deg is not None:
+            kw['bending_angle_deg'] = case.bending_angle_deg
+        clock = self.rec.node.get_clock()
+        final = []
+
+        def tick() -> None:
+            if final:
+                self._target_pub.publish(final[0])
+                return
+            now = clock.now()
+            stamp_s = now.nanoseconds * 1e-9 + preview
+            s = stamp_s - last
+            pos, z = trajectory(case.trajectory, tau_last + spin_down(s, d), case.robot, **kw)
+            q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
+            msg = pose_message(pos[0], q, 'base', Time(sec=int(stamp_s),
+                                                       nanosec=int(stamp_s % 1.0 * 1e9)))
+            self._target_pub.publish(msg)
+            if s >= d:
+                final.append(msg)   # at rest: held from now on (10 Hz)
+                self._hold_timer.cancel()
+                self._hold_timer = self.rec.node.create_timer(0.1, tick)
+        self._hold_timer = self.rec.node.create_timer(1.0 / TARGET_RATE_HZ, tick)
+        proc.stop()
+        self.times['hold'] = time.monotonic() + d
         self.times['end'] = self.times['hold'] + self.args.hold
 
     def hold(self) -> None:

@@ -9,12 +9,13 @@
 from . import studies, trajectories
 from .studies import (ConvergenceResult, ConvergenceRow, Scheme, TrackResult, compare_pcc,
                       convergence_study, tracking_study, workspace_schemes, workspace_study)
-from .trajectories import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
+from .trajectories import (TRAJECTORY_NAMES, lead_in, spin_down, spin_up, trajectory,
                            trajectory_parameters, trajectory_target)
 
 __all__ = [
     "ConvergenceResult", "ConvergenceRow", "Scheme", "TRAJECTORY_NAMES", "TrackResult",
-    "compare_pcc", "convergence_study", "lead_in", "spin_up", "studies", "trajectories",
+    "compare_pcc", "convergence_study", "lead_in", "spin_down", "spin_up", "studies",
+    "trajectories",
     "trajectory",
     "trajectory_parameters", "trajectory_target", "tracking_study", "workspace_schemes",
     "workspace_study",

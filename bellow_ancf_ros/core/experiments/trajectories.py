@@ -66,6 +66,7 @@ from ..model import RobotConfig, Stage1, load_robot
 
 __all__ = [
     'lead_in',
+    'spin_down',
     'spin_up',
     'trajectory_target',
     'MULTI_SEGMENT_TRAJECTORIES',
@@ -369,3 +370,18 @@ def spin_up(t: float, duration_s: float) -> float:
         return t
     f = t / d
     return d * f ** 4 * (2.5 - 3.0 * f + f * f)
+
+
+def spin_down(s: float, duration_s: float) -> float:
+    """How far [path time] a path at full speed goes in ``s`` seconds while it stops.
+
+    The mirror of :func:`spin_up`: the speed falls from full to zero over
+    ``duration_s`` with minimum-jerk timing, covering half of it in path
+    time (``duration_s / 2`` from then on); a path that stops so does not
+    ring a robot's mode as a jump to rest would.
+    """
+    d = float(duration_s)
+    if not (math.isfinite(d) and d >= 0):
+        raise ValueError(f'spin_up_s = {duration_s!r} is not allowed; allowed: a time >= 0 [s]')
+    s = min(max(float(s), 0.0), d)
+    return d / 2 - spin_up(d - s, d) if d > 0 else 0.0

@@ -270,3 +270,14 @@ def test_spin_up_starts_at_rest_and_joins_the_path_at_full_speed():
     assert spin_up(3.0, 0.0) == 3.0
     with pytest.raises(ValueError, match='spin_up_s'):
         spin_up(1.0, -1.0)
+
+
+def test_spin_down_mirrors_the_spin_up():
+    from bellow_ancf_ros.core.experiments import spin_down, spin_up
+    d, h = 2.0, 1e-4
+    speed = lambda s: (spin_down(s + h, d) - spin_down(s - h, d)) / (2 * h)  # noqa: E731
+    assert spin_down(0.0, d) == 0.0 and spin_down(d, d) == pytest.approx(d / 2)
+    assert speed(2 * h) == pytest.approx(1.0, abs=1e-3) and abs(speed(d - 2 * h)) < 1e-3
+    assert spin_down(9.0, d) == pytest.approx(d / 2)      # at rest after it
+    for s in np.linspace(0, d, 11):   # the spin-up run backwards
+        assert spin_down(s, d) == pytest.approx(d / 2 - spin_up(d - s, d))
