@@ -78,14 +78,12 @@ def _run(shaping: str, args, domain: int, log_dir: Path, poses) -> dict:
             raise RuntimeError('nodes did not come up')
         msgs = [pose_message(p, quaternion_from_z_axis(z), 'base', Time(sec=0, nanosec=0))
                 for p, z in poses]
-        which = [0]
-        timer = rec.node.create_timer(0.1, lambda: pub.publish(msgs[which[0]]))
+        timer = rec.node.create_timer(0.1, lambda: pub.publish(msgs[0]))
         time.sleep(SETTLE_S)
-        which[0] = 1
-        pub.publish(msgs[1])
+        timer.cancel()   # the step target once (the node holds it): no re-solve of the same
+        pub.publish(msgs[1])   # target between the shaper's levels
         t_step = time.monotonic()
         time.sleep(AFTER_S)
-        timer.cancel()
         snap = rec.snapshot()['true_pose']
         t = np.array([a for a, _ in snap]) - t_step
         pos = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]

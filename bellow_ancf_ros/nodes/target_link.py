@@ -7,8 +7,9 @@ each new target (at the time it is wanted at: its stamp, or its arrival for
 a zero stamp) and with the robot's first mode at the held equilibrium
 (:class:`~.mode_watch.ModeWatch`).  The node solves for what it returns.
 While a shaped target still moves after a step, the newest target is
-re-solved at ``SHAPING_RATE_HZ``, and at each of the shaper's impulse times
-(a one-shot timer each, :data:`IMPULSE_LEAD_S` after it): the staircase's
+re-solved at ``SHAPING_RATE_HZ``; after a step (a new pose after a held
+one), at each of the shaper's impulse times instead (a one-shot timer each,
+:data:`IMPULSE_LEAD_S` after it, no re-solve in between): the staircase's
 levels reach the robot at their times, not up to a re-solve period late (a
 level 10 ms late at the two-segment robot's 2.4 Hz mode leaves 7 % of the
 swing the shaper cancels; in ``make demo`` 0.27 mm of residual swing after a
@@ -68,8 +69,10 @@ class TargetLink:
         self._timer = None
         self._last_item = None
         self._resubmit: Callable[[Any], None] | None = None
+        self._modes = None                          # the node's ModeWatch
         self._levels: list[threading.Timer] = []   # one-shot re-solves at impulse times
         self._last_pose = None
+        self._last_pose_t: float | None = None     # when the newest pose was first wanted
 
     def _read_kind(self) -> str:
         kind = self.node.get_parameter('target_shaping').value
@@ -93,7 +96,7 @@ class TargetLink:
             return
         with self._lock:
             self._filter = filt
-        self._resubmit = resubmit
+        self._resubmit, self._modes = resubmit, modes
         modes.listen(self._on_mode)
         if modes.result is not None:
             self._on_mode(None, modes.result)
@@ -102,8 +105,9 @@ class TargetLink:
                 item = self._last_item
                 with self._lock:
                     busy = self._filter is not None and self._filter.busy(time.monotonic())
-                if item is not None and busy:
-                    resubmit(item)
+                    timed = any(t.is_alive() for t in self._levels)
+                if item is not None and busy and not timed:   # (a step's levels are timed:
+                    resubmit(item)   # a re-solve in between would only delay one of them)
             self._timer = self.node.create_timer(1.0 / SHAPING_RATE_HZ, tick)
         self.node.get_logger().info(
             f'targets: shaping {self._kind}, dynamic feedforward '
@@ -135,20 +139,32 @@ class TargetLink:
         for timer in self._levels:
             timer.cancel()
         self._levels = []
-        self._last_pose = None
+        self._last_pose = self._last_pose_t = None
 
     def _schedule_levels(self, item, filt: TargetFilter, wanted_at: float) -> None:
-        """One-shot re-solves of ``item`` at the shaper's impulse times (a new pose only)."""
+        """One-shot re-solves of ``item`` at the shaper's impulse times (a step only).
+
+        A step: a new pose after one held for at least the shaper's duration.
+        A stream (a new pose more often) keeps the 50 Hz re-solves: timers for
+        every target would only multiply the solves.
+        """
         pose = (tuple(item[0]), None if item[1] is None else tuple(item[1]))
         if filt.shaper is None or filt.mode is None or pose == self._last_pose:
             return
-        self._cancel_levels()
-        self._last_pose = pose
+        previous = self._last_pose_t
+        self._cancel_levels()   # (they were for another pose)
+        self._last_pose, self._last_pose_t = pose, wanted_at
+        if previous is not None and wanted_at - previous < filt.shaper.duration_s:
+            return   # a stream: the 50 Hz re-solves
+        if self._modes is not None:   # no modal analysis stalls a level
+            self._modes.quiet(wanted_at + filt.shaper.duration_s + 0.05)
         resubmit, now = self._resubmit, time.monotonic()
 
-        def level() -> None:
-            if self._last_item is item and resubmit is not None:
-                resubmit(item)
+        def level() -> None:   # the newest item, if it still wants this pose (republished)
+            cur = self._last_item
+            if cur is not None and resubmit is not None and (
+                    tuple(cur[0]), None if cur[1] is None else tuple(cur[1])) == pose:
+                resubmit(cur)
         for t_i in filt.shaper.times[1:]:
             timer = threading.Timer(max(wanted_at + float(t_i) + IMPULSE_LEAD_S - now, 0.0),
                                     level)
