@@ -59,7 +59,7 @@ most 0.5 mm / 0.5 deg at the paper's speed, 1.0 mm (one segment) and 1.5 mm /
 times, with 50 g 0.5 mm / 0.5 deg at 1x and 1.5 mm / 0.75 deg at 10x; held
 target within 0.3 mm (one) and 0.5 mm / 0.5 deg (two); no command more than
 2 kPa beyond a normal step after an outlier; the shaped step's residual
-swing at most 0.1 mm); 1 otherwise.
+swing at most :data:`~.step_target.STEP_GOAL_M`); 1 otherwise.
 """
 
 from __future__ import annotations
@@ -78,7 +78,8 @@ import numpy as np
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until, wait_up
+from .pipeline import NodeProcess, Recorder, child_env, play_kpa, tidy, wait_until, wait_up
+from .step_target import step_phase
 
 PAPER_PERIOD_S = 20.0
 SPEEDS = (1.0, 4.0, 10.0)      # times the paper's speed
@@ -89,8 +90,6 @@ GOALS = {(1, 1.0, 0.0): (0.5, None), (1, 4.0, 0.0): (1.0, None), (1, 10.0, 0.0):
          (2, 1.0, 0.05): (0.5, 0.5), (2, 10.0, 0.05): (1.5, 0.75)}
 STEADY_GOALS = {1: (0.3, None), 2: (0.5, 0.5)}   # segments -> held target (mm, deg)
 SPIN_UP_S = 5.0                # the path's speed rises over min(period, this) [s]
-STEP_M = 0.010                 # the step target's size
-STEP_GOAL_M = 1e-4             # shaped: residual swing 1-2 s after the step
 OUTLIER_EXCESS_GOAL_KPA = 2.0  # a command step after an outlier, beyond the normal steps
 OUTLIER_MIN_M = 5e-3           # a measured pose this far from the true one is an outlier
 DROPOUT_GAP_S = 0.25           # measured poses this far apart: a dropout
@@ -380,13 +379,6 @@ class Run:
         snap = self.rec.snapshot()
         self.rec.close()
         return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap)
-
-
-def play_kpa(plant: str) -> float:
-    """The regulators' play the inverse node compensates (their data sheet: the plant's)."""
-    from ..core.control import PlantEffects
-    e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
-    return e.regulator_hysteresis_pa / 1e3
 
 
 def preview_s(plant: str, dynamic: bool = False) -> float:
@@ -698,7 +690,6 @@ def main(argv=None) -> int:
         elif not args.no_goals:
             passed = False
     if not args.no_step:
-        from .step_target import step_phase
         passed &= step_phase(args, domains, log_dir)
     path = Path(args.plot)
     plot(results, cols, path)

@@ -18,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'tidy', 'wait_until', 'wait_up']
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'play_kpa', 'tidy', 'wait_until', 'wait_up']
 
 
 class NodeProcess:
@@ -136,6 +136,16 @@ def child_env(domain: int) -> dict:
     env['PYTHONPATH'] = pkg_parent + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH')
                                       else '')
     return env
+
+
+def play_kpa(plant: str) -> float:
+    """The regulators' play the inverse node is told to compensate: the simulated plant's.
+
+    A lab takes it from its regulators' data sheet (``regulator_play_kpa``).
+    """
+    from ..core.control import PlantEffects
+    e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
+    return e.regulator_hysteresis_pa / 1e3
 
 
 def record_qos():

@@ -10,7 +10,7 @@ equilibrium).  Measured on the robot's true pose: the residual swing from
 quadratic fitted over that second (the bellows' creep moves the robot slowly
 on; a quadratic takes that drift out and leaves the swing at the 2.4 Hz
 mode), and the time the shaper adds (its delay, from the node's log).
-Goal: shaped, at most :data:`~.closed_loop.STEP_GOAL_M`.
+Goal: shaped, at most :data:`STEP_GOAL_M`.
 """
 
 from __future__ import annotations
@@ -20,9 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .pipeline import NodeProcess, Recorder, child_env, wait_up
+from .pipeline import NodeProcess, Recorder, child_env, play_kpa, wait_up
 
-__all__ = ['residual_swing', 'step_phase']
+__all__ = ['STEP_GOAL_M', 'STEP_M', 'residual_swing', 'step_phase']
+
+STEP_M = 0.010     # the step target's size
+STEP_GOAL_M = 1e-4  # shaped: the residual swing 1-2 s after the step at most this
 
 SETTLE_S = 8.0     # the first target is held this long before the step
 AFTER_S = 3.0      # the step target is held this long
@@ -48,7 +51,6 @@ def residual_swing(t: np.ndarray, positions: np.ndarray, start_s: float,
 def _targets():
     """The held pose and the step's pose: 10 mm sideways (a reachable pair of the bench)."""
     from ..core import RobotModel, load_robot, solve_forward
-    from .closed_loop import STEP_M
     fw = solve_forward(RobotModel(load_robot(ROBOT)), [30e3, 0, 0, 0, 0, 0])
     return (fw.position, fw.z_axis), (fw.position + np.array([0.0, STEP_M, 0.0]), fw.z_axis)
 
@@ -59,7 +61,6 @@ def _run(shaping: str, args, domain: int, log_dir: Path, poses) -> dict:
     from ..core.geometry import quaternion_from_z_axis
     from ..nodes.ros_util import command_qos, pose_message
     from builtin_interfaces.msg import Time
-    from .closed_loop import play_kpa
     env = child_env(domain)
     tag = f'step_{shaping}_'
     rec = Recorder(domain, {'true_pose': PoseStamped}, name=f'ros_demo_step_{shaping}')
@@ -116,7 +117,6 @@ def _shaper_line(log: Path) -> str:
 
 def step_phase(args, domains: list, log_dir: Path) -> bool:
     """Both runs, the printed comparison; True when they ran and the shaped swing met its goal."""
-    from .closed_loop import STEP_GOAL_M
     poses = _targets()
     print(f'\n10 mm step target, two segments, feedforward (robot: {ROBOT}_mismatched, '
           f'{args.plant} plant): residual swing 1-2 s after the step (true pose, a quadratic '
