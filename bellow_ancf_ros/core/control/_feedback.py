@@ -193,6 +193,7 @@ class IntegralFeedback:
         """Start with no correction; ``use_orientation`` for two or more segments."""
         self.settings = settings or FeedbackSettings()
         self.use_orientation = bool(use_orientation)
+        self.notch: ModeNotch | None = None   # settings.notch: made by the first watch()
         self.reset()
         self._meas_t: float | None = None
         self._meas_p = self._meas_z = None
@@ -206,10 +207,6 @@ class IntegralFeedback:
         self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
         self.gain_scale = 1.0       # cut by the watchdog on every trip
         self._hold_until = -math.inf
-        self.notch: ModeNotch | None = None   # settings.notch: made by the first watch()
-
-    #: A mode at least this damped needs no notch.
-    _NOTCH_MAX_DAMPING = NOTCH_POLE_DAMPING
 
     # ------------------------------------------------------------ state
     def reset(self) -> None:
@@ -225,7 +222,7 @@ class IntegralFeedback:
         self._saturated = False
         self._held = False
         self.state = WAITING
-        if getattr(self, 'notch', None) is not None:
+        if self.notch is not None:
             self.notch.reset()
 
     @property
@@ -283,7 +280,7 @@ class IntegralFeedback:
         cut gain.
         """
         if (self.settings.notch and damping_ratio is not None
-                and damping_ratio < self._NOTCH_MAX_DAMPING):
+                and damping_ratio < NOTCH_POLE_DAMPING):   # (a mode that damped needs none)
             if self.notch is None:
                 self.notch = ModeNotch(frequency_hz, damping_ratio)
             elif abs(frequency_hz / self.notch.frequency_hz - 1.0) > RETUNE_FRACTION:
