@@ -78,7 +78,8 @@ import numpy as np
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import NodeProcess, Recorder, child_env, play_kpa, tidy, wait_until, wait_up
+from .pipeline import (NodeProcess, Recorder, child_env, plant_effects, play_kpa, tidy,
+                       wait_until, wait_up)
 from .step_target import step_phase
 
 PAPER_PERIOD_S = 20.0
@@ -155,6 +156,14 @@ class Column:
     def bending_angle_deg(self) -> float | None:
         """The case's bending angle (None: one segment)."""
         return self.case.bending_angle_deg
+
+    @property
+    def path_kw(self) -> dict:
+        """The trajectory's parameters: the period, and the bending angle if it has one."""
+        kw = {'period': self.period_s}
+        if self.bending_angle_deg is not None:
+            kw['bending_angle_deg'] = self.bending_angle_deg
+        return kw
 
 
 def columns(cases=CASES, speeds=SPEEDS, period_scale: float = 1.0) -> list:
@@ -233,10 +242,7 @@ class Run:
         from ..core.geometry import quaternion_from_z_axis
         from ..nodes.ros_util import command_qos, pose_message
         case = self.case
-        kw = {'period': self.col.period_s}
-        if case.bending_angle_deg is not None:
-            kw['bending_angle_deg'] = case.bending_angle_deg
-        pos, z = trajectory(case.trajectory, 0.0, case.robot, **kw)
+        pos, z = trajectory(case.trajectory, 0.0, case.robot, **self.col.path_kw)
         q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
         first = pose_message(pos[0], q, 'base', self._zero_stamp())
         pub = self.rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
@@ -332,10 +338,7 @@ class Run:
         first, last = _stamp(stamped[0]), _stamp(stamped[-1])
         d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode == 'dynamic')
         tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
-        case = self.case
-        kw = {'period': self.col.period_s}
-        if case.bending_angle_deg is not None:
-            kw['bending_angle_deg'] = case.bending_angle_deg
+        case, kw = self.case, self.col.path_kw
         clock = self.rec.node.get_clock()
         final = []
 
@@ -393,8 +396,7 @@ def preview_s(plant: str, dynamic: bool = False) -> float:
 
     ``dynamic``: without the lag (the dynamic feedforward inverts it).
     """
-    from ..core.control import PlantEffects
-    e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
+    e = plant_effects(plant)
     lag = e.regulator_time_constant_s if dynamic else 0.0
     return round(e.preview_s(TARGET_RATE_HZ) - lag, 3)
 

@@ -18,7 +18,8 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'play_kpa', 'tidy', 'wait_until', 'wait_up']
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'plant_effects', 'play_kpa', 'tidy',
+           'wait_until', 'wait_up']
 
 
 class NodeProcess:
@@ -138,14 +139,18 @@ def child_env(domain: int) -> dict:
     return env
 
 
+def plant_effects(plant: str):
+    """The simulated robot's effects for its ``plant`` parameter (``realistic`` or ``ideal``)."""
+    from ..core.control import PlantEffects
+    return PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
+
+
 def play_kpa(plant: str) -> float:
     """The regulators' play the inverse node is told to compensate: the simulated plant's.
 
     A lab takes it from its regulators' data sheet (``regulator_play_kpa``).
     """
-    from ..core.control import PlantEffects
-    e = PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
-    return e.regulator_hysteresis_pa / 1e3
+    return plant_effects(plant).regulator_hysteresis_pa / 1e3
 
 
 def record_qos():

@@ -56,6 +56,11 @@ TARGET_PARAMETER_TABLE = (
 )
 
 
+def _pose_key(item) -> tuple:
+    """A target item's pose as a comparable key: (position, z-axis or None)."""
+    return tuple(item[0]), None if item[1] is None else tuple(item[1])
+
+
 class TargetLink:
     """Shaping and dynamic feedforward of the inverse node's targets (module docstring)."""
 
@@ -148,7 +153,7 @@ class TargetLink:
         A stream (a new pose more often) keeps the 50 Hz re-solves: timers for
         every target would only multiply the solves.
         """
-        pose = (tuple(item[0]), None if item[1] is None else tuple(item[1]))
+        pose = _pose_key(item)
         if filt.shaper is None or filt.mode is None or pose == self._last_pose:
             return
         previous = self._last_pose_t
@@ -162,8 +167,7 @@ class TargetLink:
 
         def level() -> None:   # the newest item, if it still wants this pose (republished)
             cur = self._last_item
-            if cur is not None and resubmit is not None and (
-                    tuple(cur[0]), None if cur[1] is None else tuple(cur[1])) == pose:
+            if cur is not None and resubmit is not None and _pose_key(cur) == pose:
                 resubmit(cur)
         for t_i in filt.shaper.times[1:]:
             timer = threading.Timer(max(wanted_at + float(t_i) + IMPULSE_LEAD_S - now, 0.0),

@@ -121,6 +121,13 @@ def _notch_rad(notch):
     return 2 * math.pi * f, z, zp
 
 
+def _w_top(tau, T, ms, nt) -> float:
+    """The top of the frequency range searched [rad/s]: far above the modes, lag and delay."""
+    w = max(max([wn for wn, _ in ms] + ([nt[0]] if nt else [])) * 50.0,
+            50.0 / max(tau, 1e-3), 1e3)
+    return max(w, 20 * math.pi / T) if T > 0 else w
+
+
 def _limit_by_grid(tau, T, ms, notch, w_top):
     """``(k_max, w_lim)``: every crossing of an odd multiple of -180 deg, found on a grid.
 
@@ -173,10 +180,7 @@ def loop_margins(gain_per_s: float, lag_s: float, delay_s: float,
             w_180, gm = math.inf, math.inf
         return LoopMargins(math.degrees(pm), gm, w_c, k * gm, pm / w_c if pm > 0 else 0.0,
                            w_180)
-    w_top = max(max([wn for wn, _ in ms] + ([nt[0]] if nt else [])) * 50.0,
-                50.0 / max(tau, 1e-3), 1e3)
-    if T > 0:
-        w_top = max(w_top, 20 * math.pi / T)
+    w_top = _w_top(tau, T, ms, nt)
     if nt is not None:
         k_max, w_lim = _limit_by_grid(tau, T, ms, nt, w_top)
         return _with_crossovers(k, tau, T, ms, nt, w_top, k_max, w_lim)
@@ -305,9 +309,7 @@ def _safe_gain_sampled(lag_s, delay_s, modes, min_gain_margin, min_phase_margin_
     tau, T = float(lag_s), float(delay_s)
     ms = _checked(1.0, tau, T, modes)
     nt = _notch_rad(notch)
-    w_top = max(max([wn for wn, _ in ms] + ([nt[0]] if nt else [])) * 50.0,
-                50.0 / max(tau, 1e-3), 1e3)
-    grid = np.geomspace(1e-6, w_top, 20000)
+    grid = np.geomspace(1e-6, _w_top(tau, T, ms, nt), 20000)
     ph, lg = _phase(grid, tau, T, ms, nt), _log_gain(grid, tau, T, ms, nt)
 
     def ok(k):
