@@ -569,7 +569,15 @@ def smallest_element_count(segments: Sequence[SegmentConfig]) -> int | None:
 
 
 def _element_count_issue(segments: Sequence[SegmentConfig], n: int) -> tuple[str, str] | None:
-    """``(key, reason)`` when ``n`` elements cannot carry the plates, else None."""
+    """``(key, reason)`` when ``n`` elements cannot carry the plates, else None.
+
+    Counts above ``_MAX_ELEMENTS_SEARCHED`` are refused first: checking them
+    takes time and memory in proportion to ``n`` (a file with ``10**12`` would
+    exhaust the machine before any answer).
+    """
+    if n > _MAX_ELEMENTS_SEARCHED:
+        return ('model.n_elements', f'at most {_MAX_ELEMENTS_SEARCHED} elements per actuator '
+                                    f'are allowed, got {n}')
     for j, seg in enumerate(segments):
         why = plate_support_problem(seg.plate_fractions, n)
         if why is None:
@@ -655,6 +663,21 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
                 damping_time = chk.number(dyn, 'dynamics', 'damping_time_s', nonneg=True)
             if 'mass_damping_per_s' in dyn:
                 mass_damping = chk.number(dyn, 'dynamics', 'mass_damping_per_s', nonneg=True)
+
+    # A finite number in the file can still leave the floating-point range in SI.
+    for key, value in (('p_min_kpa', p_min), ('p_max_kpa', p_max)):
+        if value is not None and not math.isfinite(value * 1e3):
+            chk.err(f'pressure_limits.{key}',
+                    f'{value!r} kPa overflows in Pa (|p| must be below 1.7e305 kPa)')
+            p_min = p_max = None
+    if d_eff is not None and l0 is not None:
+        d = d_eff * 1e-3
+        area = math.pi / 4.0 * d * d
+        if not (0.0 < area < math.inf and l0 / area < math.inf):
+            chk.err('actuator.d_eff_mm',
+                    f'{d_eff!r} mm leaves the floating-point range: the actuation area '
+                    f'pi/4 D_eff**2 = {area!r} m^2 and l0_m/area must be positive and finite')
+            d_eff = None
 
     # Stage 1 must map [p_min, p_max] monotonically (docs/model.md section 2).
     if None not in (coeffs, l0, d_eff, p_min, p_max):

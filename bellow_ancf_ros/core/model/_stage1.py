@@ -119,7 +119,8 @@ class Stage1:
         ``p_min >= p_max``, or when ``P -> lam`` is not strictly monotonic over
         ``[p_min, p_max]`` (``dP/dlam <= 0`` somewhere on the way from
         ``lam = 1``, the polynomial saturates before reaching a limit, or a
-        limit would need ``lam <= 0``).
+        limit would need ``lam <= 0``), or if the stretch at a limit cannot be
+        computed within the solver's budget.
 
     Attributes
     ----------
@@ -157,23 +158,53 @@ class Stage1:
         self.d_eff = float(d_eff)
         self.p_min = float(p_min)
         self.p_max = float(p_max)
-        self.area = math.pi / 4.0 * self.d_eff ** 2
+        try:                                          # (a float's ** raises on overflow)
+            self.area = math.pi / 4.0 * self.d_eff ** 2
+        except OverflowError:
+            self.area = math.inf
         # P = _p_per_h * h(x): pressure per unit of k(lam)*(lam-1) [N/m -> Pa]
-        self._p_per_h = self.l0 / self.area
+        self._p_per_h = self.l0 / self.area if self.area > 0.0 else math.inf
+        if not (self.area < math.inf and 0.0 < self._p_per_h < math.inf):
+            raise ValueError(
+                f'l0 = {self.l0!r} m and d_eff = {self.d_eff!r} m leave the floating-point '
+                f'range: the area pi/4 D_eff**2 = {self.area!r} m^2 and l0/area = '
+                f'{self._p_per_h!r} 1/m must be positive and finite')
 
-        self._k = npoly.polytrim(c, tol=0)          # k(lam), ascending in lam
-        self._dk = npoly.polyder(self._k)
-        # k about lam = 1:  kx(x) = k(1 + x)
-        self._kx = npoly.polytrim(np.polynomial.Polynomial(self._k)(
-            np.polynomial.Polynomial([1.0, 1.0])).coef, tol=0)
-        self._h = npoly.polymulx(self._kx)            # h(x) = kx(x) * x
-        self._dh = npoly.polyder(self._h)
-        self._k1 = float(self._kx[0])                 # k(1) = dh/dx at x = 0
-        # Closed form when h is at most quadratic (k at most linear).
-        self._quadratic = self._kx.size <= 2
+        # Coefficients too large for floating point overflow here: _find_branch refuses them.
+        with np.errstate(over='ignore', invalid='ignore'):
+            self._k = npoly.polytrim(c, tol=0)          # k(lam), ascending in lam
+            self._dk = npoly.polyder(self._k)
+            # k about lam = 1:  kx(x) = k(1 + x)
+            self._kx = npoly.polytrim(np.polynomial.Polynomial(self._k)(
+                np.polynomial.Polynomial([1.0, 1.0])).coef, tol=0)
+            self._h = npoly.polymulx(self._kx)            # h(x) = kx(x) * x
+            self._dh = npoly.polyder(self._h)
+            self._k1 = float(self._kx[0])                 # k(1) = dh/dx at x = 0
+            try:                                          # (a float's ** raises on overflow)
+                self._k1sq = self._k1 ** 2
+            except OverflowError:
+                self._k1sq = math.inf
+            # Closed form when h is at most quadratic (k at most linear).
+            self._quadratic = self._kx.size <= 2
 
-        self._find_branch()
-        lam_lim = self.stretch(np.array([self.p_min, self.p_max, 0.5 * (self.p_min + self.p_max)]))
+            # Rounding-error bound of the computed residual h(x) - t (see _noise).
+            self._kl_abs = np.abs(self._k) * np.arange(1, self._k.size + 1)   # (1 + i) |c_i|
+            self._noise_factor = 2 * self._k.size * _EPS       # (2n + 2) eps, n = degree
+
+        with np.errstate(over='ignore'):  # huge turning points: h(x_hi) may overflow to inf
+            self._find_branch()
+        limits = np.array([self.p_min, self.p_max, 0.5 * (self.p_min + self.p_max)])
+        try:
+            lam_lim = self.stretch(limits)
+        except RuntimeError as exc:      # the solver's honest failure (budget spent)
+            raise ValueError(
+                f'stiffness polynomial k(lam) = {self._poly_str()} N/m: the stretch at '
+                f'the pressure limits cannot be computed: {exc}') from None
+        if not np.all(np.isfinite(lam_lim)):
+            raise ValueError(
+                f'stiffness polynomial k(lam) = {self._poly_str()} N/m: the stretch at the '
+                f'pressure limits overflows (lam = {lam_lim[:2].tolist()}); the coefficients '
+                f'or pressures are too large for floating point')
         self.lam_min = float(lam_lim[0])
         self.lam_max = float(lam_lim[1])
         self.lam_mid = float(lam_lim[2])  # at mid-range pressure
@@ -195,12 +226,28 @@ class Stage1:
         ``k`` is evaluated with the original coefficients at ``lam = 1 + x``,
         so that ``pressure(lam)`` is eq. (24) term by term.
         """
-        return npoly.polyval(1.0 + x, self._k) * x
+        return _horner(1.0 + x, self._k) * x
 
     def _dh_val(self, x: np.ndarray) -> np.ndarray:
         """dh/dx = k'(1+x) * x + k(1+x)."""
         lam = 1.0 + x
-        return npoly.polyval(lam, self._dk) * x + npoly.polyval(lam, self._k)
+        return _horner(lam, self._dk) * x + _horner(lam, self._k)
+
+    def _noise(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Bound on the rounding error of the computed residual ``h(x) - t``.
+
+        ``lam = fl(1 + x)`` (relative error ``u = eps/2``), Horner's rule for
+        ``k`` of degree ``n`` (error at most ``gamma_2n * sum |c_i| lam**i``),
+        the product with ``x`` and the difference with ``t`` (``u`` each) give
+        to first order ``(2n + 2) u |x| K + u |x| L + u |t|`` with
+        ``K = sum |c_i| |lam|**i`` and ``L = sum i |c_i| |lam|**i``; returned
+        with a margin of two, ``(2n + 2) eps (|x| (K + L) + |t|)``
+        (``K + L`` in one Horner pass over ``(1 + i) |c_i|``).  A residual
+        below it says nothing about the sign of the exact one: the iterate is
+        as good as the arithmetic allows.
+        """
+        return self._noise_factor * (np.abs(x) * _horner(np.abs(1.0 + x), self._kl_abs)
+                                     + np.abs(t))
 
     def _kpa(self, h: float) -> str:
         return f'{h * self._p_per_h / 1e3:.6g} kPa'
@@ -209,6 +256,10 @@ class Stage1:
         """Delimit the monotone branch through x = 0 and check the limits reach it."""
         where = (f'stiffness polynomial k(lam) = {self._poly_str()} N/m '
                  f'(l0 = {self.l0} m, D_eff = {self.d_eff} m)')
+        if not (np.all(np.isfinite(self._dh)) and np.all(np.isfinite(self._kl_abs))):
+            raise ValueError(
+                f'{where}: the coefficients are too large for floating point: '
+                f'k(1 + x) x or its derivative overflows')
         if not self._k1 > 0.0:
             raise ValueError(
                 f'{where}: dP/dlam <= 0 at lam = 1 (k(1) = {self._k1:.6g} N/m must be '
@@ -221,7 +272,12 @@ class Stage1:
                 or self._dh_val(np.array(z.real)) <= 0.0]
         crit = np.asarray(crit, dtype=float)
         above = crit[crit > 0.0]
+        if not above.size and self._h[-1] < 0.0:
+            # h -> -inf, so dh/dx has a positive root: the companion matrix lost
+            # it to round-off (coefficients of very different sizes).
+            above = self._first_turn()
         below = crit[(crit < 0.0) & (crit > -1.0)]
+        below = np.append(below, self._last_turn(below.max() if below.size else -1.0))
         self._x_hi = float(above.min()) if above.size else math.inf
         self._x_lo = float(below.max()) if below.size else -1.0     # lam > 0
         self._h_hi = float(self._h_val(np.array(self._x_hi))) if above.size else math.inf
@@ -245,6 +301,59 @@ class Stage1:
             raise ValueError(
                 f'{where}: p_min = {self.p_min / 1e3:.6g} kPa cannot be reached on the '
                 f'monotonic pressure-to-stretch branch: {reason}')
+
+    def _first_turn(self) -> np.ndarray:
+        """The first ``x > 0`` with ``dh/dx <= 0`` on a grid, refined by bisection.
+
+        Used only when the roots of ``dh/dx`` missed a turning point that its
+        negative leading coefficient proves.  Grids of 256 steps over
+        ``[0, 1], [1, 2], [2, 4], ...``; empty if none is found below 1e300 (then
+        the stretch search reports the failure).  A dip of ``dh/dx`` between two
+        grid points inside ``[p_min, p_max]`` is still refused by
+        :meth:`_check_monotone`.
+        """
+        a, b = 0.0, 1.0
+        with np.errstate(over='ignore', invalid='ignore'):  # inf - inf: not positive
+            while b < 1e300:
+                xs = np.linspace(a, b, 257)
+                ok = self._dh_val(xs) > 0.0
+                ok[0] = True                            # dh(0) = k(1) > 0; a: last grid's
+                bad = np.flatnonzero(~ok)
+                if bad.size:
+                    return np.array([self._turn(float(xs[bad[0] - 1]), float(xs[bad[0]]))])
+                a, b = b, 2.0 * b
+        return np.empty(0)
+
+    def _last_turn(self, x_lo: float) -> np.ndarray:
+        """The last ``x`` in ``(x_lo, 0)`` with ``dh/dx <= 0`` on a 256-step grid, or none.
+
+        A turning point between ``lam = 0`` (or the largest negative root of
+        ``dh/dx``) and ``lam = 1`` that the roots of ``dh/dx`` missed.
+        """
+        xs = np.linspace(x_lo, 0.0, 257)[1:]
+        ok = self._dh_val(xs) > 0.0
+        ok[-1] = True                                   # dh(0) = k(1) > 0
+        bad = np.flatnonzero(~ok)
+        if not bad.size:
+            return np.empty(0)
+        return np.array([self._turn(float(xs[bad[-1] + 1]), float(xs[bad[-1]]))])
+
+    def _turn(self, x_pos: float, x_neg: float) -> float:
+        """Bisect between ``dh/dx(x_pos) > 0`` and ``dh/dx(x_neg) <= 0``; the positive end.
+
+        Budget 200 halvings: about 60 reach adjacent floats unless the turn
+        sits within ``1e-40`` of ``x = 0``; then the end kept is still a point
+        with ``dh/dx > 0``.
+        """
+        for _ in range(200):
+            mid = 0.5 * (x_pos + x_neg)
+            if mid in (x_pos, x_neg):
+                break
+            if self._dh_val(np.array(mid)) > 0.0:
+                x_pos = mid
+            else:
+                x_neg = mid
+        return x_pos
 
     def _check_monotone(self, x_a: float, x_b: float) -> None:
         """Independent check that dh/dx > 0 on [x_a, x_b] (minimum of dh there).
@@ -329,6 +438,9 @@ class Stage1:
         ------
         ValueError
             For NaN or infinite pressures, or pressures beyond the branch.
+        RuntimeError
+            If the iteration spends its budget (:meth:`_solve_newton`); a
+            pressure on the branch converges in about 5-20 iterations.
         """
         a = np.asarray(p, dtype=float)
         if self._quadratic and a.ndim == 1 and a.size <= _SMALL:
@@ -358,13 +470,13 @@ class Stage1:
         checks and their messages to :meth:`stretch`.
         """
         c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0
-        k1, pph, lo, hi = self._k1, self._p_per_h, self._h_lo, self._h_hi
+        k1, k1sq, pph, lo, hi = self._k1, self._k1sq, self._p_per_h, self._h_lo, self._h_hi
         out = []
         for v in a.tolist():
             t = v / pph
             if not lo < t < hi:
                 return None
-            out.append(1.0 + 2.0 * t / (k1 + math.sqrt(max(k1 ** 2 + 4.0 * c1 * t, 0.0))))
+            out.append(1.0 + 2.0 * t / (k1 + math.sqrt(max(k1sq + 4.0 * c1 * t, 0.0))))
         return np.array(out)
 
     def _solve_quadratic(self, t: np.ndarray) -> np.ndarray:
@@ -374,18 +486,39 @@ class Stage1:
         cancellation for every ``t`` on the branch (also ``c1 = 0`` or ``< 0``).
         """
         c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0
-        disc = np.maximum(self._k1 ** 2 + 4.0 * c1 * t, 0.0)
+        disc = np.maximum(self._k1sq + 4.0 * c1 * t, 0.0)
         return 2.0 * t / (self._k1 + np.sqrt(disc))
 
-    def _solve_newton(self, t: np.ndarray, max_iter: int = 200) -> np.ndarray:
+    #: Iteration budget of :meth:`_solve_newton` (per pressure).  A root takes
+    #: about 5-10 Newton steps; bisection halves a bracket of width ``w`` to
+    #: the stop tolerance in about ``52 + log2(w)`` steps.
+    _MAX_ITER = 200
+
+    def _solve_newton(self, t: np.ndarray, max_iter: int | None = None) -> np.ndarray:
         """Vectorised safeguarded Newton for ``h(x) = t`` on the monotone branch.
 
         ``h`` is strictly increasing on ``(x_lo, x_hi)`` and ``h(0) = 0``, so
         ``[x_lo, 0]`` brackets negative targets and ``[0, x_hi]`` positive
-        ones (``x_hi = inf`` is replaced by a doubling search).  A Newton step
-        leaving the current bracket is replaced by bisection; the bracket
-        shrinks every iteration, so the iteration cannot diverge.
+        ones (``x_hi = inf`` is replaced by a doubling search).  Each iterate
+        moves one end of the bracket; a Newton step leaving the bracket, or
+        landing on one of its ends (two iterates swinging between each other
+        would never shrink it), is replaced by bisection.
+
+        A pressure is done when the Newton step is below ``2 eps (1 + |x|)``,
+        the bracket is that narrow, the residual is zero, or the residual is
+        at the rounding level of its own evaluation (:meth:`_noise`): then
+        ``x - r/h'(x)`` is returned, as good as the arithmetic allows (further
+        steps would only chase rounding noise, and may swing between two
+        iterates forever).
+
+        Raises
+        ------
+        RuntimeError
+            If a pressure is not done after ``max_iter`` iterations (default
+            :attr:`_MAX_ITER`) or cannot be bracketed; the message names the
+            pressure, the bracket and the residual.
         """
+        max_iter = self._MAX_ITER if max_iter is None else max_iter
         t = np.array(t, dtype=float)
         shape = t.shape
         t = t.ravel()
@@ -396,37 +529,45 @@ class Stage1:
             step = 1.0
             while np.any(grow):
                 cand = np.full(grow.sum(), step)
-                reached = self._h_val(cand) >= t[grow]
+                with np.errstate(over='ignore'):        # inf reaches any target
+                    reached = self._h_val(cand) >= t[grow]
                 idx = np.flatnonzero(grow)
                 hi[idx[reached]] = step
                 lo[idx[~reached]] = step
                 grow[idx[reached]] = False
                 step *= 2.0
                 if step > 1e300:            # unreachable for a finite target
-                    raise RuntimeError('stage 1: failed to bracket the stretch')
+                    raise RuntimeError(
+                        f'stage 1: failed to bracket the stretch at '
+                        f'{t[grow][0] * self._p_per_h:.6g} Pa')
         x = np.clip(t / self._k1, lo, hi)   # first-order guess, h'(0) = k(1)
         x = np.where(np.isfinite(x), x, 0.5 * (lo + hi))
         active = np.ones(t.shape, dtype=bool)
         for _ in range(max_iter):
-            xa = x[active]
-            r = self._h_val(xa) - t[active]
-            lo_a, hi_a = lo[active], hi[active]
-            lo_a = np.where(r < 0.0, xa, lo_a)
-            hi_a = np.where(r > 0.0, xa, hi_a)
-            d = self._dh_val(xa)
-            with np.errstate(divide='ignore', invalid='ignore'):
-                xn = xa - r / d
-            outside = ~((xn >= lo_a) & (xn <= hi_a)) | (r == 0.0)
-            xn = np.where(outside, 0.5 * (lo_a + hi_a), xn)
-            xn = np.where(r == 0.0, xa, xn)
-            tol = 2.0 * _EPS * (1.0 + np.abs(xa))
-            done = (np.abs(xn - xa) <= tol) | (hi_a - lo_a <= tol) | (r == 0.0)
-            x[active] = xn
-            lo[active], hi[active] = lo_a, hi_a
-            idx = np.flatnonzero(active)
-            active[idx[done]] = False
             if not np.any(active):
                 break
-        else:                               # pragma: no cover - bracket guarantees it
-            raise RuntimeError('stage 1: Newton iteration did not converge')
+            xa, ta = x[active], t[active]
+            r = self._h_val(xa) - ta
+            lo_a = np.where(r < 0.0, xa, lo[active])
+            hi_a = np.where(r > 0.0, xa, hi[active])
+            d = self._dh_val(xa)
+            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+                xn = xa - r / d
+            on_end = (xn != xa) & ((xn == lo_a) | (xn == hi_a))
+            bisect = ~((xn >= lo_a) & (xn <= hi_a)) | on_end
+            quiet = np.abs(r) <= self._noise(xa, ta)     # residual at rounding level
+            xn = np.where(bisect, np.where(quiet, xa, 0.5 * (lo_a + hi_a)), xn)
+            xn = np.where(r == 0.0, xa, xn)
+            tol = 2.0 * _EPS * (1.0 + np.abs(xa))
+            done = (np.abs(xn - xa) <= tol) | (hi_a - lo_a <= tol) | (r == 0.0) | quiet
+            x[active] = xn
+            lo[active], hi[active] = lo_a, hi_a
+            active[np.flatnonzero(active)[done]] = False
+        if np.any(active):
+            i = int(np.flatnonzero(active)[0])
+            res = float(self._h_val(x[i:i + 1])[0] - t[i]) / abs(t[i])
+            raise RuntimeError(
+                f'stage 1: the stretch at {t[i] * self._p_per_h:.6g} Pa did not converge in '
+                f'{max_iter} iterations (stretch bracket [{float(1.0 + lo[i])!r}, '
+                f'{float(1.0 + hi[i])!r}], relative residual {res:.3g})')
         return x.reshape(shape)

@@ -559,3 +559,126 @@ def test_every_accepted_count_matches_a_fine_reference_two_segments(two_cfg):
         fw = solve_forward(RobotModel(two_cfg, n), p)
         assert fw.converged and fw.stable, (n, fw.message)
         assert np.linalg.norm(fw.position - ref) < 0.01 * 0.2076, n  # 1 % of the robot length
+
+
+# ------------------------------------------ robustness: only ConfigError (issue 36)
+def test_issue36_file_loads(tmp_path, one):
+    """Stage 1's Newton swung forever between two iterates at p_min of this valid file."""
+    one['actuator']['stiffness_coeffs_n_per_m'] = [28.9, 576.94, -260.83722699795754,
+                                                   298.82506635307084]
+    one['pressure_limits'] = {'p_min_kpa': -268.35083388056347, 'p_max_kpa': 23.49094129759813}
+    path = tmp_path / 'issue36.yaml'
+    path.write_text(yaml.safe_dump(one))
+    cfg = load_robot(path)
+    from bellow_ancf_ros.core import Stage1
+    s = Stage1.from_config(cfg)
+    assert s.lam_min == pytest.approx(0.5423, abs=1e-4)
+    assert s.lam_max == pytest.approx(1.0189, abs=1e-4)
+    assert s.pressure(s.lam_min) == pytest.approx(cfg.p_min, rel=1e-12)
+
+
+@pytest.mark.parametrize('where, value, key', [
+    (('model', 'n_elements'), 10 ** 12, 'model.n_elements'),          # was: memory exhausted
+    (('pressure_limits', 'p_max_kpa'), 1e306, 'pressure_limits.p_max_kpa'),   # inf in Pa
+    (('actuator', 'd_eff_mm'), 1.7e308, 'actuator.d_eff_mm'),         # was: OverflowError
+    (('actuator', 'd_eff_mm'), 1e-320, 'actuator.d_eff_mm'),          # was: ZeroDivisionError
+    (('actuator', 'stiffness_coeffs_n_per_m'), [28.9, 576.94, 1e308],
+     'actuator.stiffness_coeffs_n_per_m'),                            # k(1 + x) overflows
+])
+def test_values_that_leave_the_float_range_name_their_key(one, where, value, key):
+    one[where[0]][where[1]] = value
+    assert refused(one, key).key == key
+
+
+def test_a_stiffness_whose_square_overflows_loads_rigid(one):
+    """k(1)**2 overflows (was: OverflowError): the actuator does not stretch at any pressure."""
+    from bellow_ancf_ros.core import Stage1
+    one['actuator']['stiffness_coeffs_n_per_m'] = [1e232]
+    s = Stage1.from_config(robot_from_dict(one))
+    assert s.lam_min == s.lam_max == 1.0
+
+
+def _random_value(rng):
+    """A value of any YAML type, plausible or hostile."""
+    pool = [0.0, -0.0, 5e-324, 1e-320, 1.7e308, -1.7e308, math.nan, math.inf, -math.inf,
+            0, 1, -1, 3, 10 ** 30, 2 ** 63, True, False, None, '', 'abc', '1.0', [], [1.0, 2.0],
+            {'x': 1.0}, float(rng.normal() * 10.0 ** rng.uniform(-300, 300)),
+            float(rng.normal() * 10.0 ** rng.uniform(-3, 3)), int(rng.integers(-5, 2000))]
+    return pool[rng.integers(len(pool))]
+
+
+def _random_coeffs(rng):
+    """k(lam) of the issue-36 family, of random sizes, or monotone by construction."""
+    kind, degree = rng.integers(4), int(rng.integers(0, 7))
+    if kind == 0:
+        return [28.9, 576.94] + rng.uniform(-600.0, 600.0, rng.integers(0, 4)).tolist()
+    if kind in (1, 2):
+        spread = 6.0 if kind == 1 else 300.0
+        return (rng.normal(size=degree + 1)
+                * 10.0 ** rng.uniform(-spread / 2, spread, degree + 1)).tolist()
+    dh = Polynomial([10.0 ** rng.uniform(0.0, 4.0)])       # h' > 0 everywhere
+    for _ in range(rng.integers(1, 4)):
+        r, s = rng.uniform(-1.0, 2.0), abs(rng.normal()) * 10.0 ** rng.uniform(-4.0, 0.0)
+        dh = dh * Polynomial([r * r + s * s, -2.0 * r, 1.0])
+    h = dh.integ()
+    return Polynomial(h.coef[1:])(Polynomial([-1.0, 1.0])).coef.tolist()
+
+
+def _paths(d, prefix=()):
+    """Every key path of a nested description."""
+    items = d.items() if isinstance(d, dict) else enumerate(d) if isinstance(d, list) else ()
+    for k, v in items:
+        yield prefix + (k,)
+        yield from _paths(v, prefix + (k,))
+
+
+def _random_robot(rng, bases):
+    d = copy.deepcopy(bases[rng.integers(len(bases))])
+    if rng.random() < 0.7:
+        d['actuator']['stiffness_coeffs_n_per_m'] = _random_coeffs(rng)
+    if rng.random() < 0.6:
+        d['pressure_limits'] = {'p_min_kpa': -10.0 ** rng.uniform(-3.0, 3.5),
+                                'p_max_kpa': 10.0 ** rng.uniform(-3.0, 3.5)}
+    for _ in range(rng.integers(0, 4)):
+        paths = list(_paths(d))
+        path = paths[rng.integers(len(paths))]
+        parent = d
+        for k in path[:-1]:
+            parent = parent[k]
+        if isinstance(parent, dict) and rng.random() < 0.15:
+            del parent[path[-1]]
+        else:
+            parent[path[-1]] = _random_value(rng)
+    return d
+
+
+@pytest.mark.parametrize('seed', [36, 3600, 36000])
+def test_random_robot_files_load_or_raise_config_error(tmp_path, seed):
+    """Seeded fuzz of robot files: every outcome is a RobotConfig or a one-line ConfigError.
+
+    Random stiffness polynomials (any order and size, mixed signs), pressure
+    limits, and hostile values, deleted keys and wrong types anywhere; every
+    tenth file goes through YAML and ``load_robot``.
+    """
+    from bellow_ancf_ros.core import Stage1
+    rng = np.random.default_rng(seed)
+    bases = [yaml.safe_load((REPO_CONFIG / f'{n}.yaml').read_text())
+             for n in ('one_segment', 'two_segment', 'three_segment')]
+    outcomes = {'ok': 0, 'refused': 0}
+    for i in range(120):
+        d = _random_robot(rng, bases)
+        try:
+            if i % 10 == 0:
+                path = tmp_path / f'fuzz{i}.yaml'
+                path.write_text(yaml.safe_dump(d))
+                cfg = load_robot(path)
+            else:
+                cfg = robot_from_dict(d)
+        except ConfigError as exc:
+            outcomes['refused'] += 1
+            assert '\n' not in str(exc) and exc.key, str(exc)
+            continue
+        outcomes['ok'] += 1
+        s = Stage1.from_config(cfg)
+        assert s.lam_min <= s.lam_max
+    assert outcomes['ok'] > 10 and outcomes['refused'] > 10, outcomes

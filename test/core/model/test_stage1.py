@@ -261,3 +261,104 @@ def test_refuses_p_min_needing_nonpositive_stretch():
 def test_refuses_bad_arguments(args):
     with pytest.raises(ValueError):
         Stage1(*args)
+
+
+# ------------------------------------- termination at the rounding level (issue 36)
+ISSUE36 = (28.9, 576.94, -260.83722699795754, 298.82506635307084)   # a valid robot file's
+ISSUE36_KPA = (-268.35083388056347, 23.49094129759813)             # k and limits [kPa]
+
+
+def exact_residual(s, p, lam):
+    """``k(lam) (lam - 1) l0 - p A`` of eq. (24) in exact rational arithmetic."""
+    lam = Fraction(lam)
+    k = sum(Fraction(c) * lam ** i for i, c in enumerate(s.coeffs))
+    return k * (lam - 1) * Fraction(s.l0) - Fraction(p) * Fraction(s.area)
+
+
+def assert_root_within_rounding(s, p, lam):
+    """The exact root of eq. (24) lies within the rounding uncertainty of ``lam``.
+
+    The computed residual of ``h(x) = k(1 + x) x`` can be wrong by about
+    ``(2n + 2) eps (|x| sum (1 + i) |c_i| lam**i + |t|)`` (degree ``n``,
+    ``t = p A / l0``); divided by ``dh/dx`` that is how far from the root no
+    arithmetic can tell, plus the rounding of ``1 + x`` to ``lam``.
+    """
+    eps = np.finfo(float).eps
+    x, t = lam - 1.0, p * s.area / s.l0
+    c = np.abs(np.asarray(s.coeffs))
+    size = sum((1 + i) * ci * lam ** i for i, ci in enumerate(c))
+    slope = s.dpressure(lam) * s.area / s.l0
+    assert slope > 0.0
+    delta = 4.0 * np.spacing(lam) + 4.0 * 2 * c.size * eps * (abs(x) * size + abs(t)) / slope
+    below, above = lam - delta, lam + delta
+    assert exact_residual(s, p, below) < 0 < exact_residual(s, p, above), (p, lam, delta)
+
+
+def test_issue36_two_iterates_one_rounding_step_apart_terminate():
+    """Newton swung between two iterates 18 ulps apart at p_min until its budget raised (issue 36).
+
+    Both residuals are about 6e-14 N/m, at the rounding level of evaluating
+    k(lam) (lam - 1) near lam = 0.54: the solve stops there.
+    """
+    s = Stage1(ISSUE36, L0, 8.087 * 1e-3, ISSUE36_KPA[0] * 1e3, ISSUE36_KPA[1] * 1e3)
+    assert s.lam_min == pytest.approx(0.5423, abs=1e-4)
+    assert s.lam_max == pytest.approx(1.0189, abs=1e-4)
+    for p, lam in ((s.p_min, s.lam_min), (s.p_max, s.lam_max)):
+        assert_root_within_rounding(s, p, lam)
+    p = np.linspace(s.p_min, s.p_max, 501)
+    lam = s.stretch(p)
+    assert np.all(np.diff(lam) > 0.0)
+    for p_i, lam_i in zip(p[::50], lam[::50]):
+        assert_root_within_rounding(s, p_i, lam_i)
+
+
+def test_spent_budget_is_an_honest_value_error(monkeypatch):
+    """A solve that does not finish names the pressure; construction refuses with a ValueError."""
+    s = Stage1(CUBIC, L0, D_EFF, P_MIN, P_MAX)
+    with pytest.raises(RuntimeError, match='did not converge in 1 iterations'):
+        s._solve_newton(np.array([1.0]), max_iter=1)
+    monkeypatch.setattr(Stage1, '_MAX_ITER', 1)
+    with pytest.raises(ValueError, match='cannot be computed: .* -50000 Pa did not converge'):
+        Stage1(CUBIC, L0, D_EFF, P_MIN, P_MAX)
+
+
+@st.composite
+def monotone_k(draw):
+    """``k(lam)`` whose ``h(x) = k(1 + x) x`` has ``h' = a prod((x - r)^2 + s^2) > 0``."""
+    dh = Polynomial([draw(st.floats(1.0, 1e4))])
+    for _ in range(draw(st.integers(1, 3))):
+        r = draw(st.floats(-1.0, 2.0))
+        s = draw(st.floats(0.02, 2.0))
+        dh = dh * Polynomial([r * r + s * s, -2.0 * r, 1.0])
+    h = dh.integ()                                   # h(0) = 0
+    return k_from_x(h.coef[1:])
+
+
+@settings(max_examples=1000, deadline=None)
+@given(coeffs=monotone_k(), lam_lo=st.floats(0.3, 0.99), lam_hi=st.floats(1.01, 2.0),
+       u=st.floats(0.0, 1.0))
+def test_every_monotone_polynomial_solves_to_rounding_level(coeffs, lam_lo, lam_hi, u):
+    """Monotone k of degree 2..6: always accepted, stretches exact to the rounding level."""
+    area = math.pi / 4.0 * D_EFF ** 2
+
+    def pressure(lam):
+        return float(Polynomial(coeffs)(lam) * (lam - 1.0) * L0 / area)
+
+    s = Stage1(coeffs, L0, D_EFF, pressure(lam_lo), pressure(lam_hi))
+    p = min(s.p_min + u * (s.p_max - s.p_min), s.p_max)
+    for p_i, lam_i in zip((s.p_min, s.p_max, p), s.stretch(np.array([s.p_min, s.p_max, p]))):
+        assert_root_within_rounding(s, p_i, lam_i)
+
+
+@settings(max_examples=1000, deadline=None)
+@given(high=st.lists(st.floats(-600.0, 600.0), min_size=1, max_size=4),
+       p_min=st.floats(-400e3, -1.0), p_max=st.floats(1.0, 400e3))
+def test_random_higher_order_terms_accepted_or_refused(high, p_min, p_max):
+    """The default k plus random terms (issue 36's family): a ValueError or exact stretches."""
+    try:
+        s = Stage1((C0, C1) + tuple(high), L0, D_EFF, p_min, p_max)
+    except ValueError as exc:
+        assert 'not monotonic' in str(exc) or 'cannot be reached' in str(exc), str(exc)
+        return
+    for p_i, lam_i in ((s.p_min, s.lam_min), (s.p_max, s.lam_max)):
+        assert_root_within_rounding(s, p_i, lam_i)
