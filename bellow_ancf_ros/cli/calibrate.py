@@ -45,7 +45,8 @@ def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source:
     entry (``frame_id``, ``position_m``, ``quaternion_xyzw``), which the
     nodes use to take measured poses in that frame.  With the nominal file's
     text (``original``), its comments (units, sources) and layout are kept
-    and the fitted values put in their places.  ``name``: the robot's name
+    and the fitted values put in their places, their comments naming this
+    calibration as their source.  ``name``: the robot's name
     (the command passes the output file's; default ``<nominal>_calibrated``).
     """
     d = result.config.to_dict()
@@ -54,9 +55,9 @@ def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source:
                         'position_m': [float(v) for v in np.round(result.translation_m, 9)],
                         'quaternion_xyzw': [float(v) for v in
                                             np.round(result.quaternion_xyzw, 12)]}
+    now = datetime.datetime.now(datetime.timezone.utc)
     lines = [
-        f'Robot description written by `bellow-ancf calibrate` on '
-        f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}',
+        f'Robot description written by `bellow-ancf calibrate` on {now:%Y-%m-%d %H:%M UTC}',
         f'from {result.samples} samples in {data_source}; nominal robot: {nominal_source}.',
         f'Position RMSE {result.rmse_before_mm:.3f} mm -> {result.rmse_after_mm:.3f} mm, '
         f'z-axis RMSE {result.rmse_before_deg:.3f} deg -> {result.rmse_after_deg:.3f} deg '
@@ -72,7 +73,10 @@ def robot_yaml_text(result: CalibrationResult, data_source: str, nominal_source:
                  f'quaternion_xyzw {np.round(q, 6).tolist()}')
     for w in result.warnings:
         lines.append(f'Warning: {w}')
-    return robot_file_text(d, lines, original)
+    note = f'calibrated by bellow-ancf calibrate on {now:%Y-%m-%d} from {data_source}'
+    return robot_file_text(d, lines, original, note,
+                           list(result.keys) + ['mocap_frame.position_m',
+                                                'mocap_frame.quaternion_xyzw'])
 
 
 def plot_residuals(result: CalibrationResult, path: str) -> None:

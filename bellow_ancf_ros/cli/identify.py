@@ -31,6 +31,8 @@ and numeric rows:
 
 from __future__ import annotations
 
+import datetime
+
 import numpy as np
 
 from ..core import Stage1
@@ -95,7 +97,8 @@ def _cmd_identify_stiffness(args):
                 'N/m) come from',
                 f'the fit F(dl) = {ident.poly_text([0.0] + list(fit.f_coeffs), "dl")} '
                 f'(R^2 = {fit.r2:.6f}, RMS = {fit.rms_n:.4g} N);',
-                f'the rest is robot {cfg.name} ({cfg.source}).'])
+                f'the rest is robot {cfg.name} ({cfg.source}).'],
+                'stiffness', args.csv, ['actuator.l0_m', 'actuator.stiffness_coeffs_n_per_m'])
     if args.plot:
         _plot_stiffness(fit, args.plot)
     if args.json:
@@ -144,11 +147,18 @@ def _digits(value):
     return float(f'{value:.6g}')
 
 
-def _write_robot_file(path, cfg, fitted, header):
-    """Write robot ``fitted`` (``cfg`` with identified values) in the layout of ``cfg``'s file."""
+def _write_robot_file(path, cfg, fitted, header, command, csv, keys):
+    """Write robot ``fitted`` (``cfg`` with identified values) in the layout of ``cfg``'s file.
+
+    The comments of ``keys`` (the values ``identify <command>`` fitted from
+    ``csv``) name that fit as their source.
+    """
     d = fitted.to_dict()
     d['name'] = robot_name_for(path)
-    write_text(path, '--yaml-out', robot_file_text(d, header, source_text(cfg.source)))
+    note = (f'identified by bellow-ancf identify {command} on '
+            f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d} from {csv}')
+    write_text(path, '--yaml-out',
+               robot_file_text(d, header, source_text(cfg.source), note, keys))
 
 
 def _plot_stiffness(fit, path):
@@ -202,7 +212,8 @@ def _cmd_identify_deff(args):
                 f'actuator.d_eff_mm comes from the fit F_a = pi/4 D_eff^2 P + c '
                 f'(D_eff = {fit.d_eff_m * 1e3:.4f} mm, {100 * fit.confidence:g} % interval '
                 f'[{lo * 1e3:.4f}, {hi * 1e3:.4f}] mm, R^2 = {fit.r2:.6f});',
-                f'the rest is robot {cfg.name} ({cfg.source}).'])
+                f'the rest is robot {cfg.name} ({cfg.source}).'],
+                'deff', args.csv, ['actuator.d_eff_mm'])
     if args.plot:
         _plot_deff(fit, args.plot)
     if args.json:

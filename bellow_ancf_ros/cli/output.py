@@ -3,7 +3,11 @@
 Robot files written by a command (``identify ... --yaml-out``, ``calibrate
 --out``) are the source robot file's text with the new values put in their
 places (its unit comments and layout stay), provenance comments on top, and
-the output file's name (without ``.yaml``) as the robot's ``name``.
+the output file's name (without ``.yaml``) as the robot's ``name``.  The
+comment of a value the command fitted or changed tells where the new value
+comes from (its old source, a trailing ``(...)``, is dropped: ``l0_m: 0.0963
+# unpressurised actuator length [m] (identified by bellow-ancf identify
+stiffness on 2025-01-31 from test.csv)``).
 Figures use matplotlib's Agg canvas, imported on first use.
 """
 
@@ -62,7 +66,33 @@ def _flow(value) -> str:
     return yaml.safe_dump([value], default_flow_style=True, width=10**6).strip()[1:-1]
 
 
-def values_in_place(original: str, d: dict) -> str | None:
+#: A comment's trailing parenthesis: the source of the value (``(paper V.B)``, ``(assumed)``).
+_SOURCE = re.compile(r'\s*\((?:[^()]|\([^()]*\))*\)\s*$')
+
+
+def _line_key(path: tuple) -> str:
+    """A value line's path as a parameter key: ``segments[0].pitch_radius_mm``, ``payload_kg``."""
+    if len(path) == 3:
+        return f'{path[0]}[{path[1]}].{path[2]}'
+    return '.'.join(path)
+
+
+def _is_fitted(line_key: str, fitted) -> bool:
+    """Whether one of the keys ``fitted`` names this line (an element or ``[*]``: its line)."""
+    for key in fitted:
+        key = re.sub(r'\[\d+\]$', '', key)   # an element of a flow list: the whole line
+        if re.fullmatch(re.escape(key).replace(r'\[\*\]', r'\[\d+\]'), line_key):
+            return True
+    return False
+
+
+def restamped(comment: str, note: str) -> str:
+    """``comment`` (``# what [unit] (old source)``) with ``note`` as its source instead."""
+    return f'{_SOURCE.sub("", comment.rstrip())} ({note})'
+
+
+def values_in_place(original: str, d: dict, note: str | None = None,
+                    fitted=()) -> str | None:
     """``original``'s text (its comments, order, layout) with the values of ``d`` put in.
 
     Handles the robot-file schema: top-level keys, one level of nested
@@ -70,6 +100,13 @@ def values_in_place(original: str, d: dict) -> str | None:
     flow lists, comments after them.  Keys of ``d`` the text lacks are
     appended.  None when the result would not read back as ``d`` (the
     caller then writes a plain dump).
+
+    ``note``: the new values' source (``identified by ... on <date> from
+    <file>``); the comment of every value that changed, or whose key is
+    among ``fitted`` (parameter keys: ``actuator.l0_m``,
+    ``segments[*].top_plate_mass_kg``, ...), gets it in place of its old
+    source (:func:`restamped`), a value without a comment gets one.  The
+    name is never stamped (it is the output file's).
     """
     out, section, seg = [], None, -1
     seen = set()
@@ -111,9 +148,13 @@ def values_in_place(original: str, d: dict) -> str | None:
         new = value if same else _flow(target)
         head = line[:indent] + (item or '') + key + ':' + (gap or ' ')
         text = head + new
+        stamp = not same or _is_fitted(_line_key(path), fitted)
+        space = 1 if comment else 2   # (a new comment: two spaces before it)
+        if note and stamp and path != ('name',):
+            comment = restamped(comment or '#', note)
         if comment:
             width = len(head) + len(value) + len(pad or '')
-            text += ' ' * max(1, width - len(text)) + comment
+            text += ' ' * max(space, width - len(text)) + comment
         out.append(text)
     extra = {k: v for k, v in d.items() if k not in seen}
     text = '\n'.join(out) + '\n'
@@ -143,15 +184,17 @@ def source_text(source) -> str | None:
         return None
 
 
-def robot_file_text(d: dict, header: list[str], original: str | None = None) -> str:
+def robot_file_text(d: dict, header: list[str], original: str | None = None,
+                    note: str | None = None, fitted=()) -> str:
     """A robot file: ``header`` comment lines, then ``d`` in ``original``'s layout.
 
     With the source file's text (``original``), its comments and layout are
     kept and the values of ``d`` put in their places (its own header comment
-    lines are replaced by ``header``); without it, or when its layout cannot
-    be kept, a plain YAML dump of ``d``.
+    lines are replaced by ``header``; the comments of new values name
+    ``note`` as their source, :func:`values_in_place`); without it, or when
+    its layout cannot be kept, a plain YAML dump of ``d``.
     """
-    text = None if original is None else values_in_place(original, d)
+    text = None if original is None else values_in_place(original, d, note, fitted)
     if text is None:
         text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
     return ''.join(f'# {line}\n' if line else '#\n' for line in header) + text

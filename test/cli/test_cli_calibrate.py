@@ -1,6 +1,7 @@
 """``bellow-ancf calibrate``: CSV and bags (sqlite3, mcap) in; robot file, JSON, plot out."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -63,8 +64,18 @@ def test_csv_to_robot_file_json_and_plot(tmp_path, capsys, recorded):
     assert cfg.segments[0].pitch_radius * 1e3 == pytest.approx(
         d['parameters']['segments[0].pitch_radius_mm']['value'], rel=1e-12)
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
-    # the nominal file's unit comments stay, beside the fitted values
-    assert '# cross-sectional diameter for bending [mm] (paper V.C)' in text
+    # the nominal file's unit comments stay; a fitted value's names this calibration as its
+    # source instead of the nominal one (no '(paper V.C)', '(assumed)' beside fitted values)
+    source = (r' \(calibrated by bellow-ancf calibrate on \d{4}-\d\d-\d\d from '
+              + re.escape(str(csv_path)) + r'\)$')
+    line = {ln.split(':')[0].strip(' -'): ln for ln in text.splitlines() if '#' in ln}
+    for key, comment in (('d_a_mm', '# cross-sectional diameter for bending [mm]'),
+                         ('d_eff_mm', '# effective actuation diameter [mm]'),
+                         ('pitch_radius_mm', '# radius of the actuator circle [mm]'),
+                         ('stiffness_coeffs_n_per_m', '[N/m], ascending powers')):
+        assert re.search(re.escape(comment) + source, line[key]), line[key]
+    assert '(paper V.C)' not in text and '(paper V.B)' not in text
+    assert line['linear_density_kg_per_m'].endswith('[kg/m] (assumed)')   # not fitted: as it was
     d_a_line = next(line for line in text.splitlines() if line.strip().startswith('d_a_mm:'))
     assert float(d_a_line.split(':')[1].split('#')[0]) == pytest.approx(
         d['parameters']['actuator.d_a_mm']['value'], rel=1e-12)
@@ -227,3 +238,35 @@ def test_values_in_place_keeps_layout_and_reads_back(one_cfg):
             assert line.split('#', 1)[1] in text
     # a text it cannot follow: None (the caller dumps)
     assert _values_in_place('name: [unexpected\n', d) is None
+
+
+def test_rewritten_robot_file_has_no_stale_comment():
+    """A changed or fitted value's comment names the new source; the others stay as they were."""
+    from bellow_ancf_ros.cli.output import values_in_place as _values_in_place
+
+    cfg = load_robot('two_segment')
+    original = open(cfg.source).read()
+    d = cfg.to_dict()
+    d['name'] = 'lab_arm'
+    d['actuator']['d_eff_mm'] = 8.2                        # changed: '(paper V.B)' is stale
+    d['segments'][1]['top_plate_mass_kg'] = 0.0123         # changed, had no comment
+    note = 'calibrated by bellow-ancf calibrate on 2030-01-02 from rec.csv'
+    text = _values_in_place(original, d, note, ['segments[*].pitch_radius_mm'])  # same values
+    lines = text.splitlines()
+
+    def line(key, n=0):
+        return [ln for ln in lines if ln.strip(' -').startswith(key + ':')][n]
+    assert line('d_eff_mm').endswith('# effective actuation diameter [mm] (' + note + ')')
+    assert '(paper V.B)' not in text
+    assert line('pitch_radius_mm', 0).endswith('# radius of the actuator circle [mm] ('
+                                               + note + ')')   # fitted to the same value
+    assert line('pitch_radius_mm', 1).endswith('0  # (' + note + ')')
+    assert line('top_plate_mass_kg', 1).endswith('0.0123  # (' + note + ')')
+    assert line('top_plate_mass_kg', 0).endswith('# mass of the top plate [kg]')
+    assert line('d_a_mm').endswith('[mm] (paper V.C)')      # neither fitted nor changed
+    assert line('l0_m').endswith('[m] (576.94/5990.4)')
+    assert line('name') == 'name: lab_arm'
+    assert text.count(note) == 4
+    # without a note (no command to name), the comments are the original's
+    plain = _values_in_place(original, d)
+    assert '(paper V.B)' in plain and note not in plain

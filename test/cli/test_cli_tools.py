@@ -8,6 +8,7 @@ numbers are checked and its plot must be a valid PNG.
 
 import csv
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -109,9 +110,22 @@ def test_identify_deff_recovers_8_087_mm(capsys, tmp_path):
 
 
 def _inline_comments(text):
-    """The inline comments (``key: value  # comment``) of a YAML text, in order."""
-    return [line.split('#', 1)[1].strip() for line in text.splitlines()
-            if '#' in line and ':' in line.split('#', 1)[0]]
+    """The inline comments (``key: value  # comment``) of a YAML text: (key, comment), in order."""
+    return [(line.split(':', 1)[0].strip(' -'), line.split('#', 1)[1].strip())
+            for line in text.splitlines() if '#' in line and ':' in line.split('#', 1)[0]]
+
+
+def _check_comments(text, original, stamped):
+    """Every inline comment of ``original`` kept but those of ``stamped`` (key: source)."""
+    new, old = _inline_comments(text), _inline_comments(original)
+    assert [k for k, _ in new] == [k for k, _ in old]
+    for (key, comment), (_, now) in zip(old, new):
+        if key not in stamped:
+            assert now == comment, key
+            continue
+        what = comment.rsplit(' (', 1)[0] if comment.endswith(')') else comment
+        assert re.fullmatch(re.escape(what) + r' \(identified by bellow-ancf identify '
+                            + stamped[key] + r'\)', now), now
 
 
 @pytest.mark.parametrize('robot', ['one_segment', 'two_segment'])
@@ -125,7 +139,11 @@ def test_identify_yaml_out_keeps_the_comments_and_takes_the_file_name(capsys, tm
     assert code == 0, err
     assert "robot 'my_robot'" in out
     text = stiff.read_text()
-    assert _inline_comments(text) == _inline_comments(original)    # every unit comment kept
+    # every unit comment kept; the identified values' name this run as their source
+    # (not '(576.94/5990.4)', the paper's numbers, after a fit to other data)
+    day = r' on \d{4}-\d\d-\d\d from '
+    stiffness = 'stiffness' + day + re.escape(str(DATA / 'tensile_test_segment.csv'))
+    _check_comments(text, original, {'l0_m': stiffness, 'stiffness_coeffs_n_per_m': stiffness})
     assert text.startswith('# Robot description written by `bellow-ancf identify stiffness`')
     cfg = load_robot(str(stiff))
     assert cfg.name == 'my_robot'
@@ -139,7 +157,10 @@ def test_identify_yaml_out_keeps_the_comments_and_takes_the_file_name(capsys, tm
     d = one_json(out)
     assert d['yaml_out'] == str(deff) and d['stage1_ok'] is True
     text = deff.read_text()
-    assert _inline_comments(text) == _inline_comments(original)
+    _check_comments(text, original, {
+        'l0_m': stiffness, 'stiffness_coeffs_n_per_m': stiffness,   # as the stiffness step wrote
+        'd_eff_mm': 'deff' + day + re.escape(str(DATA / 'pressure_force.csv'))})
+    assert '(paper V.B)' not in text
     cfg2 = load_robot(str(deff))
     assert cfg2.name == 'lab robot 2'
     assert cfg2.d_eff == pytest.approx(d['d_eff_m'], rel=1e-5)
@@ -318,8 +339,43 @@ def test_track_unreachable_exits_1(capsys):
 def test_warm_up_compiles_or_loads_and_names_the_cache(capsys):
     from bellow_ancf_ros import cli
     assert cli.main(['warm-up', '--config', 'one_segment']) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert 'numerical kernels' in out and 'cache:' in out
-    assert cli.main(['warm-up', '--config', 'no_such_robot']) == 2
+    # progress on stderr: each kernel group of each robot as it starts, with the time so far
+    lines = err.strip().splitlines()
+    assert len(lines) == 2, err
+    for line, head, group in zip(lines, ('[0/2]', '[1/2]'), ('solver kernels', 'dynamics kernel')):
+        assert line.startswith(f'bellow-ancf: warm-up: {head} one_segment: '), line
+        assert (f'compiling the {group}' in line or f'loading the {group}' in line), line
+        assert line.endswith(' s)'), line
+    assert cli.main(['warm-up', '--config', 'one_segment', '--quiet']) == 0
+    assert capsys.readouterr().err == ''
+    # a bad robot among several: refused before any compilation, on one line
+    assert cli.main(['warm-up', '--config', 'one_segment', 'no_such_robot']) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith('bellow-ancf: error: --config: no_such_robot')
+
+
+def test_warm_up_says_a_long_compilation_still_runs(monkeypatch):
+    """While a kernel group takes longer than the heartbeat, progress lines keep coming."""
+    import threading
+
+    from bellow_ancf_ros.cli import warmup
+    monkeypatch.setattr(warmup, 'HEARTBEAT_S', 0.01)
+    lines, still = [], threading.Event()
+
+    def report(done, total, text):
+        lines.append((done, total, text))
+        if text.endswith(', still'):
+            still.set()
+
+    def work():   # a compilation that lasts until the heartbeat has spoken (or 30 s)
+        still.wait(30.0)
+        return 'model'
+    assert warmup._group(report, 1, 4, 'arm: compiling the dynamics kernel', work) == 'model'
+    assert lines[0] == (1, 4, 'arm: compiling the dynamics kernel')
+    assert (1, 4, 'arm: compiling the dynamics kernel, still') in lines[1:]
+    n = len(lines)   # the heartbeat stops with the group
+    assert warmup._group(report, 2, 4, 'arm: loading', lambda: None) is None
+    assert lines[n] == (2, 4, 'arm: loading') and all(t != 'arm: compiling the dynamics '
+                                                      'kernel, still' for _, _, t in lines[n:])

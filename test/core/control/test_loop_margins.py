@@ -152,3 +152,20 @@ def test_automatic_gain_is_the_safe_gain_and_follows_the_mode(two):
     for bad in ('fast', 0.0, 51.0, float('nan'), True):
         with pytest.raises(ValueError, match="allowed: 'auto' or a number from 0.01 to 50"):
             gain_setting(bad)
+
+
+def test_mode_check_result_shows_the_rule_it_applies():
+    """One rule: ``ok`` and the diagnostics' required margins agree (2.99 is ok only on auto)."""
+    from bellow_ancf_ros.core.control import LoopMargins, ModeCheckResult
+    m = LoopMargins(phase_margin_deg=60.0, gain_margin=2.99, crossover_rad_s=1.0,
+                    max_gain_per_s=2.99, delay_margin_s=1.0)
+    kw = dict(frequency_hz=2.4, damping_ratio=0.05, gain_per_s=1.0, margins=m,
+              safe_gain_per_s=1.0, payload_kg=0.0, moved=False, computed_s=0.01)
+    fixed, auto = ModeCheckResult(**kw), ModeCheckResult(**kw, auto=True)
+    assert not fixed.ok and auto.ok
+    assert fixed.required == (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG)
+    gm, pm = auto.required
+    assert 2.99 > gm > 0.85 * MIN_GAIN_MARGIN and pm < MIN_PHASE_MARGIN_DEG
+    v = auto.values()
+    assert v['loop_margins_ok'] == 'true' and f'gain margin {gm:.3g}' in v['loop_margins_required']
+    assert fixed.values()['loop_margins_required'].startswith('gain margin 3,')
