@@ -17,7 +17,11 @@ rviz2 is installed; otherwise a log line says it is not), and with
 mismatched one-segment robot, ``sim_plant`` realistic or ideal hardware; it
 vents after ``command_timeout_s`` 0.5 s without a command, as a regulator
 driver does).  ``feedback`` and
-``payload_kg`` go to the controller (and the payload to the forward node).
+``payload_kg`` go to the controller (and the payload to the forward node and
+the trajectory publisher, whose lead-in starts at the robot at rest).  The
+trajectory publisher sends its first target once the controller is active
+(``controller_node``, default ``inverse_kinetostatic_node``), so that the
+lead-in (``ramp_in_s``) is not lost while a two-segment controller warms up.
 
 One outcome: a node that ends (a robot file that does not load ends the
 forward node and the trajectory publisher at start-up) ends the whole
@@ -151,7 +155,7 @@ def generate_launch_description():
     trajectory = Node(
         package=PACKAGE, executable='trajectory_publisher', name='trajectory_publisher',
         output='screen',
-        parameters=[params_file, robot, {
+        parameters=[params_file, robot, payload, {
             'trajectory': _typed('trajectory', str),
             'bending_angle_deg': _typed('bending_angle_deg', float),
             'period_s': _typed('period_s', float),

@@ -16,7 +16,10 @@ checked against a list verified by hand (December 2026):
   added by ros/rosdistro PR #32274, ubuntu rule for every release since PR
   #36477);
 * pip keys of ``rosdep/python.yaml``: python3-rosbags-pip (ros/rosdistro PR
-  #37795, PyPI ``rosbags``).
+  #37795, PyPI ``rosbags``);
+* python3-joblib: an entry of ``rosdep/python.yaml`` with an ``ubuntu`` rule
+  (``python3-joblib``; read December 2026), used by the robot family's
+  benchmark and its test.
 
 ``threadpoolctl`` is optional (the core limits BLAS threads with it when it is
 installed) and is not a rosdep dependency.  ``pytest-xdist`` (and its
@@ -40,18 +43,19 @@ ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'ament_index_python', 'geometry_msgs'
                 'launch_ros', 'ament_flake8', 'ament_pep257', 'builtin_interfaces', 'tf2_ros',
                 'std_srvs'}
 SYSTEM_KEYS = {'python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-matplotlib',
-               'python3-pytest', 'python3-hypothesis', 'python3-numba', 'python3-rosbags-pip'}
+               'python3-pytest', 'python3-hypothesis', 'python3-numba', 'python3-rosbags-pip',
+               'python3-joblib'}
 VERIFIED_KEYS = ROS_PACKAGES | SYSTEM_KEYS
 
 #: top-level Python module -> rosdep key
 MODULE_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'pytest': 'python3-pytest',
                'hypothesis': 'python3-hypothesis', 'numba': 'python3-numba',
-               'rosbags': 'python3-rosbags-pip'}
+               'rosbags': 'python3-rosbags-pip', 'joblib': 'python3-joblib'}
 STDLIB_OR_OWN = {'bellow_ancf_ros'}
 #: the test suite's own helper modules (test/, test/data/, bench/)
 LOCAL_TEST_HELPERS = {'conftest', 'reference_beams', 'calibration_data', 'make_solver_baseline',
-                      'update_readme', 'remedies_bench'}
+                      'update_readme', 'remedies_bench', 'family_bench'}
 
 
 def dependencies():

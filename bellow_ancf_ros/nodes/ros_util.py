@@ -51,7 +51,7 @@ __all__ = [
     'diagnostics_qos', 'executor_choice', 'guard_parameters', 'init_rclpy', 'main_for',
     'make_executor', 'monotonic_of', 'node_help', 'pose_message', 'pressure_message',
     'publish_and_wait_acked',
-    'request_stop', 'run_node',
+    'request_stop', 'run_node', 'watch_parent',
 ]
 
 QOS_DEPTH = 5
@@ -414,6 +414,49 @@ def _arm_stop_deadline() -> None:
     timer.start()
 
 
+#: How often a node checks that the process that started it is still there [s].
+PARENT_CHECK_S = 0.2
+
+
+def _parent_gone(parent: int, label: str) -> None:
+    """Stop this node as SIGTERM does, once: its parent ``parent`` has exited."""
+    try:   # the parent held our stderr (launch pipes it): it may be gone with it
+        print(f'[{label}] the process that started it (pid {parent}) has exited: '
+              'stopping as on SIGTERM (vent, then exit)', file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
+    os.kill(os.getpid(), signal.SIGTERM)   # the handler runs in the main thread: _first_signal
+
+
+def watch_parent(parent: int, label: str, period_s: float = PARENT_CHECK_S):
+    """Send this process SIGTERM once its parent ``parent`` has exited; the watching thread.
+
+    ``ros2 launch`` sends its nodes SIGINT on Ctrl-C, but when it is itself
+    killed (SIGKILL) or sent SIGTERM (it exits without signalling them) its
+    nodes get no signal at all and would keep commanding.  An orphan is re-parented (to init or a
+    subreaper), so ``os.getppid()`` changes: a daemon thread checks it every
+    ``period_s`` and then raises SIGTERM in this process, which takes the
+    same path as a SIGTERM from outside (:func:`_first_signal`: the vent,
+    then the exit).  Not ``prctl(PR_SET_PDEATHSIG)``: the kernel sends that
+    when the *thread* that started the child ends, which would stop a node
+    whose launcher is alive and miss that launcher's real exit later.
+    ``parent``: the parent's pid taken as early as possible (a parent that
+    had already exited by then is not noticed); ``parent <= 1`` (started by
+    init, or already an orphan): nothing to watch, returns None.
+    """
+    if parent <= 1:
+        return None
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(period_s)
+        _parent_gone(parent, label)
+
+    thread = threading.Thread(target=watch, name='parent-watch', daemon=True)
+    thread.start()
+    return thread
+
+
 def _first_signal(signum, frame):  # pragma: no cover - signal path
     """First SIGINT/SIGTERM: stop spinning; later ones are only counted.
 
@@ -622,12 +665,16 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
     (:class:`StartupParameterError`, a robot file that does not load, a
     ``--params-file`` rcl refuses) ends the process with one line on stderr,
     prefixed with the node's name, and exit status :data:`STARTUP_ERROR_EXIT`,
-    no traceback.
+    no traceback.  Once rclpy is initialised the process watches its parent
+    (:func:`watch_parent`): when the process that started it (``ros2 launch``,
+    ``ros2 run``, a script) exits, by any signal, the node stops as on
+    SIGTERM: vent, then exit.
     """
     name = node_name or getattr(node_class, 'NODE_NAME', node_class.__name__)
     make = factory or node_class
 
     def main(args=None) -> None:
+        parent = os.getppid()   # before anything slow: a parent gone since is still seen
         argv = sys.argv if args is None else list(args)
         if asks_for_help(argv[1:]):
             doc = sys.modules[node_class.__module__].__doc__
@@ -640,6 +687,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
         except _ParamsFileError as exc:
             print(f'[{name}] cannot start: {exc}', file=sys.stderr, flush=True)
             sys.exit(STARTUP_ERROR_EXIT)
+        watch_parent(parent, name)   # with the signal handlers in place (init_rclpy)
         try:
             executor_choice()
             if not numba_cache.is_compiled():   # say at once what the blank terminal is

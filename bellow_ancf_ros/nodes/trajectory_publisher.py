@@ -20,8 +20,21 @@ with minimum-jerk timing, instead of a jump; the path's clock starts after
 it), ``spin_up_s`` (default 0: the path's speed rises from zero over this
 long, :func:`~bellow_ancf_ros.core.experiments.spin_up`, so that a fast path
 does not start with a jump of velocity that rings a robot's first mode).
-Where it is (for the lead-in): the target another node holds it at
-(``target_pose``), else its ``measured_pose``, else the controller's ``commanded_pose``.
+The lead-in starts once the controller can follow it: when the lifecycle node
+``controller_node`` (default ``inverse_kinetostatic_node``, asked through its
+``get_state`` service) is active, or a ``commanded_pose`` or
+``predicted_pose`` shows a controller at work, or after
+``controller_timeout_s`` (default 300 s, a warning); a controller that
+starts slowly (two segments: loading the compiled kernels, warm-up) would
+otherwise miss the lead-in and see the path's start as its first target.
+The lead-in's first point is then held until the controller's
+``commanded_pose`` answers one of them (by its stamp; at most
+:data:`ANSWER_WAIT_S`): a controller just active may not have discovered
+this publisher yet, and would otherwise start further along the lead-in.
+Where the robot is (for the lead-in): the target another node holds it at
+(``target_pose``), else its ``measured_pose``, else the controller's
+``commanded_pose``, else the forward node's ``predicted_pose``; with none of
+them seen, the robot at rest: vented (0 Pa gauge), carrying ``payload_kg``.
 ``preview_s`` (default 0) publishes, at every tick, the pose wanted that far
 ahead, stamped with the time it is wanted at (a stamp in the future): the
 inverse node commands it at once, so that the robot, behind its regulators'
@@ -45,14 +58,16 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
+from lifecycle_msgs.srv import GetState
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
 
-from ..core import ConfigError, load_robot
+from ..core import ConfigError, RobotModel, load_robot, solve_forward
 from ..core.experiments import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
                                 trajectory_parameters)
 from ..core import geometry
+from . import contract
 from .diagnostics import Heartbeat
 from .measured_feedback import measured_pose_qos
 from .ros_util import (
@@ -70,6 +85,13 @@ from .ros_util import (
 __all__ = ['TrajectoryPublisher', 'main']
 
 _TRAJ_PARAMS = ('trajectory', 'period_s', 'radius_m', 'height_m', 'bending_angle_deg')
+#: Shortest wait for a pose of the robot before the lead-in [s]: a live controller
+#: republishes its ``commanded_pose`` at its ``command_rate_hz`` (20 Hz by default).
+POSE_WAIT_S = 0.5
+#: Time between two questions to the controller about its lifecycle state [s].
+CONTROLLER_POLL_S = 0.5
+#: Longest hold of the lead-in's first point until the controller answers it [s].
+ANSWER_WAIT_S = 5.0
 
 
 D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
@@ -107,9 +129,21 @@ PARAMETERS = (
         '(compensates the regulators\' known lag: their dead time + time constant + half '
         'a control period); 0 = the pose wanted now.', D, lo=0.0, hi=2.0, read_only=True)),
     Param('ramp_in_s', 2.0, descriptor(
-        'Lead the target from the commanded pose the controller holds (commanded_pose) '
-        'onto the path over this long [s], instead of a jump; 0 = off.', D, lo=0.0,
-        hi=60.0, read_only=True)),
+        'Lead the target from where the robot is (a held target_pose, measured_pose, '
+        'commanded_pose, predicted_pose, else the robot at rest, vented) onto the path over '
+        'this long [s], instead of a jump, once the controller is active; 0 = off.', D,
+        lo=0.0, hi=60.0, read_only=True)),
+    Param('controller_node', 'inverse_kinetostatic_node', descriptor(
+        'Lifecycle node the lead-in waits for (its get_state service): the first target goes '
+        'out once it is active (or a commanded_pose or predicted_pose is seen, or '
+        'controller_timeout_s has passed); empty: no wait.', S, read_only=True)),
+    Param('controller_timeout_s', 300.0, descriptor(
+        'Longest wait for controller_node to be active before the lead-in [s] (a first start '
+        'compiles the kernels: about a minute on 2 cores); then it starts anyway, with a '
+        'warning.', D, lo=0.0, hi=3600.0, read_only=True)),
+    Param('payload_kg', 0.0, descriptor(
+        'Payload the robot carries [kg]: where the robot rests, vented, when no pose of it '
+        'is seen (the lead-in starts there).', D, lo=0.0, hi=contract.PAYLOAD_MAX_KG)),
     Param('spin_up_s', 0.0, descriptor(
         'Start the path with a speed that rises from zero to full over this long [s] '
         '(minimum-jerk timing), instead of at full speed: a robot with a lightly damped '
@@ -120,8 +154,10 @@ TOPICS = (
     Topic('publishes', 'target_pose', 'geometry_msgs/PoseStamped',
           'the trajectory in base_frame at rate_hz'),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz heartbeat'),
-    Topic('subscribes', 'target_pose, measured_pose, commanded_pose',
+    Topic('subscribes', 'target_pose, measured_pose, commanded_pose, predicted_pose',
           'geometry_msgs/PoseStamped', 'where the robot is, for the lead-in (ramp_in_s)'),
+    Topic('calls', '<controller_node>/get_state', 'lifecycle_msgs/GetState',
+          'the lead-in waits for the controller to be active'),
 )
 
 
@@ -157,7 +193,8 @@ class TrajectoryPublisher(Node):
                                    lambda: self.cfg.name)
         self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
         # where the robot is, newest of each source: (position, z-axis, arrival time)
-        self._seen = {'target_pose': None, 'measured_pose': None, 'commanded_pose': None}
+        self._seen = {'target_pose': None, 'measured_pose': None, 'commanded_pose': None,
+                      'predicted_pose': None}
         self._ramp = None      # (start position, start z-axis, duration), False: none
         self._waited = 0.0     # time spent waiting for a pose of the robot before the path
         self._subs = [self.create_subscription(PoseStamped, topic,
@@ -165,7 +202,26 @@ class TrajectoryPublisher(Node):
                                                qos)
                       for topic, qos in (('target_pose', command_qos()),
                                          ('measured_pose', measured_pose_qos()),
-                                         ('commanded_pose', command_qos()))]
+                                         ('commanded_pose', command_qos()),
+                                         ('predicted_pose', command_qos()))]
+        # the controller the lead-in waits for: its lifecycle state, asked every CONTROLLER_POLL_S
+        controller = self.get_parameter('controller_node').value.strip().rstrip('/')
+        try:
+            self._state_client = (self.create_client(GetState, f'{controller}/get_state')
+                                  if controller else None)
+        except Exception as exc:  # noqa: BLE001 - rclpy's InvalidServiceNameException
+            raise StartupParameterError(
+                'controller_node', controller, "a node name (e.g. 'inverse_kinetostatic_node') "
+                "or '' (no wait)", type(exc).__name__) from None
+        self._controller = (self._state_client.service_name.rsplit('/get_state', 1)[0]
+                            if controller else '')
+        self._controller_state = ''          # its lifecycle state as last answered
+        self._state_future, self._state_asked = None, -math.inf
+        self._said_waiting = False
+        self._expect_answer = False   # a controller answers our targets on commanded_pose
+        self._hold_since = None       # holding the lead-in's first point since (monotonic)
+        self._hold_stamp_ns = None    # the stamp of its first copy
+        self._answered = False        # a commanded_pose answered one of them
         self.published = 0
         self.finished = False
         rate = float(self.get_parameter('rate_hz').value)
@@ -179,7 +235,9 @@ class TrajectoryPublisher(Node):
         values = {'robot': self.cfg.name, 'trajectory': self._kwargs['name'],
                   'targets_published': self.published, 'finished': str(self.finished).lower(),
                   'parameters': self._describe()}
-        message = 'finished (loop is false)' if self.finished else 'publishing'
+        message = ('finished (loop is false)' if self.finished
+                   else f'waiting for {self._controller} to be active'
+                   if self._ramp is None and self._said_waiting else 'publishing')
         return DiagnosticStatus.OK, message, values
 
     def _effective(self) -> dict:
@@ -240,6 +298,9 @@ class TrajectoryPublisher(Node):
         return float(self._effective()['period'])
 
     def _on_pose(self, topic: str, msg: PoseStamped) -> None:
+        if topic == 'commanded_pose' and self._hold_stamp_ns is not None and (
+                msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec >= self._hold_stamp_ns):
+            self._answered = True   # the controller's pose for one of our targets (its stamp)
         if self._ramp is not None or msg.header.frame_id != self.get_parameter('base_frame').value:
             return   # decided already (target_pose: then also our own), or another frame
         p, o = msg.pose.position, msg.pose.orientation
@@ -251,49 +312,168 @@ class TrajectoryPublisher(Node):
         if np.all(np.isfinite(pos)):
             self._seen[topic] = (pos, z, time.monotonic())
 
+    #: The sources of where the robot is, in order, with the age [s] up to which each counts.
+    _SOURCES = (('target_pose', math.inf), ('measured_pose', 1.0), ('commanded_pose', 2.0),
+                ('predicted_pose', 2.0))
+
+    def _fresh(self, topic: str) -> bool:
+        seen, max_age = self._seen[topic], dict(self._SOURCES)[topic]
+        return seen is not None and time.monotonic() - seen[2] <= max_age
+
     def _held_pose(self):
-        """Where the robot is: the target another node holds it at, else measured, else commanded.
+        """Where the robot is, seen on a topic: ``(topic, (position, z-axis, time))`` or None.
 
         The held target first (the controller, closed loop or not, keeps the
         robot there); the measured pose (fresh) when no target was sent; the
-        controller's commanded pose (fresh) last.  None: nothing known.
+        controller's commanded pose (fresh); the forward node's prediction for
+        the pressures commanded (fresh) last.  None: nothing seen.
         """
-        now = time.monotonic()
-        for topic, max_age in (('target_pose', math.inf), ('measured_pose', 1.0),
-                               ('commanded_pose', 2.0)):
-            seen = self._seen[topic]
-            if seen is not None and now - seen[2] <= max_age:
-                return seen
+        for topic, _ in self._SOURCES:
+            if self._fresh(topic):
+                return topic, self._seen[topic]
         return None
 
-    def _ramp_in(self, t: float):
-        """Decide once, at the first target: lead in from the held pose (if fresh and off).
+    def _rest_pose(self):
+        """The robot at rest: vented (0 Pa gauge), carrying ``payload_kg``; None if unsolved.
 
-        None: undecided yet (no pose seen; wait up to 0.5 s for one: a live controller
-        republishes its ``commanded_pose`` at its ``command_rate_hz``).
+        ``(position, z-axis, time)`` as :meth:`_held_pose` gives it.  The forward
+        solve has its iteration budget and reports failure.
+        """
+        model = RobotModel(self.cfg)
+        payload = float(self.get_parameter('payload_kg').value)
+        fw = solve_forward(model, contract.vent_pressures(model.A, self.cfg.p_min,
+                                                          self.cfg.p_max), payload_kg=payload)
+        if not fw.success:
+            self.get_logger().warning(f'the robot at rest (vented, payload {payload:g} kg) '
+                                      f'was not solved ({fw.message})')
+            return None
+        return fw.position, fw.z_axis, time.monotonic()
+
+    def _poll_controller(self) -> None:
+        """Ask ``controller_node`` its lifecycle state (one question at a time, throttled)."""
+        fut = self._state_future
+        if fut is not None:
+            if not fut.done():
+                return
+            self._state_future = None
+            res = fut.result()
+            if res is not None:
+                self._controller_state = res.current_state.label
+                if self._controller_state == 'active':
+                    return
+        now = time.monotonic()
+        if now - self._state_asked >= CONTROLLER_POLL_S and self._state_client.service_is_ready():
+            self._state_asked = now
+            self._state_future = self._state_client.call_async(GetState.Request())
+
+    def _controller_subscribed(self) -> bool:
+        """Whether ``controller_node``'s subscription of our targets has been discovered."""
+        namespace, _, name = self._controller.rpartition('/')
+        return any(i.node_name == name and i.node_namespace == (namespace or '/')
+                   for i in self.get_subscriptions_info_by_topic(self._pub.topic_name))
+
+    def _controller_ready(self, t: float) -> bool:
+        """Whether a controller follows targets now (else wait, up to ``controller_timeout_s``).
+
+        Ready: ``controller_node`` answered that it is active (and its
+        subscription of ``target_pose`` is discovered), or a fresh
+        ``commanded_pose`` or ``predicted_pose`` shows a controller at work, or
+        no controller is named.  After ``controller_timeout_s`` of waiting: a
+        warning, and ready.  Sets ``_expect_answer`` when a controller will
+        answer the targets on ``commanded_pose`` (:meth:`_hold_first_point`).
+        """
+        self._expect_answer = self._fresh('commanded_pose')
+        if self._state_client is None or self._expect_answer or self._fresh('predicted_pose'):
+            return True
+        self._poll_controller()
+        if self._controller_state == 'active' and self._controller_subscribed():
+            if self._said_waiting:
+                self.get_logger().info(f'{self._controller} is active (after {t:.1f} s)')
+            self._expect_answer = True
+            return True
+        timeout = float(self.get_parameter('controller_timeout_s').value)
+        if t >= timeout:
+            state = self._controller_state or 'no answer to get_state'
+            self.get_logger().warning(
+                f'{self._controller} not active after {timeout:g} s ({state}): leading in '
+                'anyway; targets sent before it is active are ignored by it')
+            return True
+        if not self._said_waiting:
+            self._said_waiting = True
+            self.get_logger().info(
+                f'waiting for {self._controller} to be active before the first target (at most '
+                f'{timeout:g} s, controller_timeout_s), so that it follows the lead-in')
+        return False
+
+    def _ramp_in(self, t: float):
+        """Decide once, at the first target: lead in from where the robot is (if off the path).
+
+        None: undecided yet.  Waits :data:`POSE_WAIT_S` for a pose of the robot
+        (unless one was seen) and for the controller (:meth:`_controller_ready`);
+        then leads in from :meth:`_held_pose`, else from :meth:`_rest_pose`.
         """
         duration = float(self.get_parameter('ramp_in_s').value)
-        held = self._held_pose()
-        start, z_start = self.pose_at(0.0)
         if duration <= 0:
             return False
-        if held is None:
-            if t < 0.5:
-                return None
-            self.get_logger().info('no pose of the robot seen (target_pose, measured_pose, '
-                                   'commanded_pose): the path starts without a lead-in')
+        if self._held_pose() is None and t < POSE_WAIT_S:
+            return None
+        if not self._controller_ready(t):
+            return None
+        held = self._held_pose()
+        if held is not None:
+            where, pose = f'the pose on {held[0]}', held[1]
+        else:
+            where, pose = 'the robot at rest (vented; no pose of it seen)', self._rest_pose()
+            if pose is None:
+                self.get_logger().info('the path starts without a lead-in')
+                return False
+        start, _ = self.pose_at(0.0)
+        distance = np.linalg.norm(pose[0] - start)
+        if distance < 0.5e-3:
             return False
-        if np.linalg.norm(held[0] - start) < 0.5e-3:
-            return False
-        self.get_logger().info(
-            f'leading in from the held pose over {duration:g} s '
-            f'({np.linalg.norm(held[0] - start) * 1e3:.1f} mm to the path)')
-        return (held[0], held[1], duration)
+        self.get_logger().info(f'leading in from {where} over {duration:g} s '
+                               f'({distance * 1e3:.1f} mm to the path)')
+        return (pose[0], pose[1], duration)
 
     @staticmethod
     def _stamp(now, ahead_s: float):
         """``now`` plus ``ahead_s``, as a message stamp."""
         return (now + Duration(nanoseconds=int(ahead_s * 1e9))).to_msg()
+
+    def _publish_lead_in(self, fraction: float, stamp) -> None:
+        """The lead-in's target at ``fraction`` (0: where the robot is, 1: the path's start)."""
+        p0, z0, _ = self._ramp
+        end, q_end = self.pose_at(0.0)
+        multi = self.cfg.n_segments >= 2
+        pos, z = lead_in(p0, z0 if multi else None, end,
+                         geometry.z_axis_from_quaternion(q_end) if multi else None, fraction)
+        q = geometry.quaternion_from_z_axis(z) if multi else np.array([0, 0, 0, 1.0])
+        self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value, stamp))
+
+    def _hold_first_point(self, now, preview: float) -> bool:
+        """Publish the lead-in's first point until the controller answers one (True: held).
+
+        A controller that has just become active may not have discovered this
+        publisher yet: the targets sent meanwhile are lost to it, and its
+        first would be one further along the lead-in (a jump).  Its
+        ``commanded_pose`` stamped with one of ours says that it follows.  At
+        most :data:`ANSWER_WAIT_S` (then a warning); False: the lead-in moves on now.
+        """
+        waited = time.monotonic() - self._hold_since
+        if not self._answered and waited < ANSWER_WAIT_S:
+            stamp = self._stamp(now, preview)
+            if self._hold_stamp_ns is None:
+                self._hold_stamp_ns = stamp.sec * 10**9 + stamp.nanosec
+            self._publish_lead_in(0.0, stamp)
+            return True
+        if self._answered:
+            self.get_logger().info(f'the controller answered the lead-in\'s first point after '
+                                   f'{waited:.2f} s: leading in')
+        else:
+            self.get_logger().warning(f'no commanded_pose answered the lead-in\'s first point '
+                                      f'within {ANSWER_WAIT_S:g} s: leading in all the same')
+        self._hold_since = None
+        return False
 
     def _tick(self) -> None:
         # one instant for the path's clock and the stamp: the pose is the one wanted at it
@@ -305,20 +485,21 @@ class TrajectoryPublisher(Node):
             decision = self._ramp_in(t)
             if decision is None:
                 return
-            self._ramp, self._waited = decision, t   # the lead-in (or the path) starts now
+            # the lead-in (or the path) starts now: after the decision (a forward solve)
+            now, t = self.get_clock().now(), time.monotonic() - self._t0
+            self._ramp, self._waited = decision, t
+            if decision and self._expect_answer:
+                self._hold_since = time.monotonic()
         preview = float(self.get_parameter('preview_s').value)
+        if self._hold_since is not None:
+            if self._hold_first_point(now, preview):
+                return
+            self._waited = t   # the lead-in's clock starts now
         t += preview - self._waited   # the pose wanted `preview` from now
         if self._ramp:
-            p0, z0, duration = self._ramp
+            duration = self._ramp[2]
             if t < duration:
-                end, q_end = self.pose_at(0.0)
-                multi = self.cfg.n_segments >= 2
-                pos, z = lead_in(p0, z0 if multi else None, end,
-                                 geometry.z_axis_from_quaternion(q_end) if multi else None,
-                                 t / duration)
-                q = geometry.quaternion_from_z_axis(z) if multi else np.array([0, 0, 0, 1.0])
-                self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
-                                               self._stamp(now, preview)))
+                self._publish_lead_in(t / duration, self._stamp(now, preview))
                 return
             t -= duration
         t = spin_up(t, float(self.get_parameter('spin_up_s').value))

@@ -89,6 +89,7 @@ def test_simulate_release_json_csv_plot(capsys, tmp_path, one):
     np.testing.assert_allclose(s[0]['position_m'], held.position, atol=1e-12)
     assert s[0]['position_m'][0] > 2e-3 and min(x['position_m'][0] for x in s) < -0.5e-3
     assert d['success'] and d['status'] == 0 and d['max_constraint_violation_m'] < 1e-9
+    assert d['check_s'] == 0.01 and 0 < d['energy_end_j'] < d['energy_start_j']   # damped
     assert d['step_s'] == pytest.approx(0.01 / round(0.01 / d['step_s']), rel=1e-12)
     with open(out_csv) as fh:
         rows = list(csv.reader(fh))

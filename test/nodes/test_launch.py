@@ -287,7 +287,7 @@ def test_issue_example_launch_arguments_win_over_the_params_file(domain_id, tmp_
         assert got == expected, exe
     assert results['trajectory_publisher'][1] == {
         'robot_config': 'two_segment', 'base_frame': 'base', 'trajectory': 'bending_circle',
-        'bending_angle_deg': 10.0, 'period_s': 20.0}
+        'bending_angle_deg': 10.0, 'period_s': 20.0, 'payload_kg': 0.0}
     for exe in ('inverse_kinetostatic_node', 'forward_kinetostatic_node'):
         got = dict(results[exe][1])
         assert got.pop('payload_kg') == 0.0 and got.pop('feedback', 'none') == 'none'
@@ -403,6 +403,7 @@ def test_sim_feedback_and_payload_arguments(domain_id, tmp_path):
     assert results['inverse_kinetostatic_node'][1]['feedback'] == 'integral'
     assert results['inverse_kinetostatic_node'][1]['payload_kg'] == 0.02
     assert results['forward_kinetostatic_node'][1]['payload_kg'] == 0.02
+    assert results['trajectory_publisher'][1]['payload_kg'] == 0.02   # the robot at rest
     sim = results['simulated_robot_node'][1]
     assert sim['robot_config'] == 'one_segment_mismatched' and sim['command_timeout_s'] == 0.5
 

@@ -464,3 +464,75 @@ def test_ros_wiring_check_short_run_two_segments(tmp_path):
     assert 'inverse solve time (from /diagnostics): median' in out
     assert 'vent' in out and '[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]' in out
     assert plot.is_file() and plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_two_segment_launch_leads_in_from_the_robot_at_rest(tmp_path, monkeypatch):
+    """The README's ``robot_config:=two_segment trajectory:=bending_circle`` launch leads in.
+
+    The nodes start as the launch starts them, the trajectory publisher up
+    first; the two-segment controller takes seconds more to be active (its
+    process start, the compiled kernels loaded, the warm-up).  The trajectory
+    publisher waits for it (its lifecycle state), holds the robot at rest
+    (vented) until the controller answers that target, then leads in over
+    ``ramp_in_s`` (2 s): its first targets are at the robot, not at the
+    path's start 26.9 mm away.
+    """
+    domain = random.choice([d for d in range(102)
+                            if d != int(os.environ.get('ROS_DOMAIN_ID', '-1'))])
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env = dict(os.environ)
+    env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
+    env['PYTHONUNBUFFERED'] = '1'
+    from bellow_ancf_ros.core import RobotModel
+    from bellow_ancf_ros.core.experiments import trajectory
+    cfg = load_robot('two_segment')
+    model = RobotModel(cfg)
+    rest = solve_forward(model, np.zeros(model.A)).position
+    path = {'trajectory': 'bending_circle', 'bending_angle_deg': 10.0, 'period_s': 20.0}
+    start = trajectory('bending_circle', 0.0, cfg, bending_angle_deg=10.0, period=20.0)[0][0]
+    distance = np.linalg.norm(start - rest)
+    assert distance > 20e-3                                # the jump the lead-in avoids
+    client = Client(domain)
+    robot = {'robot_config': 'two_segment', 'pressure_unit': 'kPa'}
+    traj = NodeProcess('trajectory_publisher', env, tmp_path,
+                       {'robot_config': 'two_segment', **path}).start()
+    procs = [traj]
+    try:
+        wait_for(lambda: 'publishing' in traj.log(), STARTUP_TIMEOUT, 'the trajectory publisher')
+        procs += [NodeProcess(m, env, tmp_path, robot).start()
+                  for m in ('inverse_kinetostatic_node', 'forward_kinetostatic_node')]
+        # the lead-in (20 targets at 10 Hz) and the path's start, and the first predictions
+        wait_for(lambda: client.count('target_pose') >= 25 and client.count('predicted_pose'),
+                 120.0, 'the lead-in, its commands and predictions')
+    finally:
+        codes = [p.stop() for p in reversed(procs)]
+        client.close()
+    log = traj.log()
+    assert codes == [0, 0, 0], (codes, log)
+    msgs = [m for _, m in client.since('target_pose', 0)]
+    targets = np.array([position(m) for m in msgs])
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in msgs])
+    assert np.linalg.norm(targets[0] - rest) < 0.1e-3, (targets[0], rest, log)  # from the robot
+    # held there until the controller answered it, then on: no faster than the minimum-jerk
+    # peak (1.875 * distance / ramp_in_s) plus the path's own speed, per the time between
+    held = int(np.argmax(np.linalg.norm(targets - targets[0], axis=1) > 1e-9))
+    assert held >= 1 and np.linalg.norm(targets[:held] - rest, axis=1).max() < 0.1e-3
+    speed = np.linalg.norm(np.diff(targets, axis=0), axis=1) / np.maximum(np.diff(stamps), 1e-3)
+    limit = 1.875 * distance / 2.0 + 2 * np.pi * np.linalg.norm(start[:2]) / 20.0
+    assert speed.max() < 1.2 * limit, (speed.max(), limit)
+    assert np.linalg.norm(targets - start, axis=1).min() < 0.5e-3              # onto the path
+    order = ['waiting for /inverse_kinetostatic_node to be active',
+             '/inverse_kinetostatic_node is active', 'leading in from the robot at rest',
+             "the controller answered the lead-in's first point"]
+    assert all(line in log for line in order), log
+    assert [log.index(line) for line in order] == sorted(log.index(line) for line in order), log
+    # for the record: the first command this process received, by the model (the commands
+    # before it went out before this process had discovered the controller, if any)
+    cmd = client.since('pressure_command', 0)[0][1]
+    first = solve_forward(model, 1e3 * np.asarray(cmd.data)).position   # kPa -> Pa
+    print(f'\nlead-in: first target {np.linalg.norm(targets[0] - rest) * 1e3:.4f} mm from the '
+          f'robot at rest ({distance * 1e3:.1f} mm from the path\'s start), held for {held} '
+          f'targets; first command received {np.linalg.norm(first - rest) * 1e3:.4f} mm from '
+          f'it; fastest target {speed.max() * 1e3:.1f} mm/s (limit {limit * 1e3:.1f}), largest '
+          f'step {np.abs(np.diff(targets, axis=0)).max() * 1e3:.2f} mm')

@@ -16,13 +16,11 @@ declares exactly the parameters, defaults and descriptors its help prints.
 import ast
 import importlib
 import os
-from pathlib import Path
 import random
 import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import pytest
@@ -31,15 +29,13 @@ rclpy = pytest.importorskip('rclpy')
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+from ros_processes import node_process_env, REPO, SpunClient  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 HELP_TIMEOUT_S = 60.0   # eight interpreters at once on two shared cores (9-13 s measured)
 #: every topic a node of the package publishes, with its type
 TOPICS = {
@@ -82,40 +78,24 @@ def node_class(module):
 
 @pytest.fixture(scope='module')
 def env():
-    e = dict(os.environ)
-    e['ROS_DOMAIN_ID'] = str(random.randint(0, 101))
-    e['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    e['PYTHONPATH'] = str(REPO) + os.pathsep + e.get('PYTHONPATH', '')
-    e['PYTHONUNBUFFERED'] = '1'
-    return e
+    return node_process_env()
 
 
-class Listener:
+class Listener(SpunClient):
     """A real rclpy subscriber of every topic in :data:`TOPICS`, spun in a thread."""
 
     def __init__(self, domain):
-        self.ctx = Context()
-        rclpy.init(context=self.ctx, domain_id=domain)
-        self.node = rclpy.create_node('help_test_listener', context=self.ctx)
         self.got = []
-        self.lock = threading.Lock()
+        super().__init__(domain, 'help_test_listener')
+
+    def setup(self, node):
         for topic, mtype in TOPICS.items():
-            self.node.create_subscription(mtype, topic, lambda m, t=topic: self._add(t),
-                                          command_qos())
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+            node.create_subscription(mtype, topic, lambda m, t=topic: self._add(t),
+                                     command_qos())
 
     def _add(self, topic):
         with self.lock:
             self.got.append(topic)
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - shut down
-            pass
 
     def received(self):
         with self.lock:
@@ -123,12 +103,6 @@ class Listener:
 
     def other_nodes(self):
         return [n for n in self.node.get_node_names() if n != 'help_test_listener']
-
-    def close(self):
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(5.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
 
 
 def _help_default(text):
@@ -229,9 +203,10 @@ def test_help_answers_before_ros_and_publishes_nothing(env, tmp_path):
                 assert t.name in out, (t.name, out)
         print('help answered in ' + ', '.join(f'{k} {v:.1f} s' for k, v in ended.items()))
 
-        # the listener hears a node that does start: its silence above is a real one
-        proc, log = _start('bellow_ancf_ros.nodes.trajectory_publisher', [], env,
-                           tmp_path / 'control.log')
+        # the listener hears a node that does start: its silence above is a real one (no
+        # lead-in: it would wait for a controller first)
+        proc, log = _start('bellow_ancf_ros.nodes.trajectory_publisher',
+                           ['--ros-args', '-p', 'ramp_in_s:=0.0'], env, tmp_path / 'control.log')
         procs['control'] = (proc, log)
         deadline = time.monotonic() + HELP_TIMEOUT_S
         while 'target_pose' not in listener.received() and time.monotonic() < deadline:

@@ -12,9 +12,7 @@ import random
 import signal
 import subprocess
 import sys
-import threading
 import time
-from pathlib import Path
 
 import pytest
 
@@ -26,15 +24,14 @@ from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from bellow_ancf_ros.core.model import shipped_robot_names  # noqa: E402
 from bellow_ancf_ros.nodes import ros_util  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+from ros_processes import node_process_env, REPO, SpunClient  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 STARTUP_TIMEOUT = 30.0
 TIMEOUT = 15.0
 INVERSE = '/inverse_kinetostatic_node'
@@ -90,42 +87,26 @@ class Proc:
 
 @pytest.fixture(scope='module')
 def env():
-    e = dict(os.environ)
-    e['ROS_DOMAIN_ID'] = str(random.randint(0, 101))
-    e['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    e['PYTHONPATH'] = str(REPO) + os.pathsep + e.get('PYTHONPATH', '')
-    e['PYTHONUNBUFFERED'] = '1'
-    return e
+    return node_process_env()
 
 
-class Client:
+class Client(SpunClient):
     """rclpy in this process on the nodes' domain: records commands and diagnostics."""
 
     def __init__(self, domain):
-        self.ctx = Context()
-        rclpy.init(context=self.ctx, domain_id=domain)
-        self.node = rclpy.create_node('startup_test_client', context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.lock = threading.Lock()
         self.cmds, self.diags = [], []
-        self.node.create_subscription(Float64MultiArray, 'pressure_command',
-                                      lambda m: self._add(self.cmds, m), command_qos())
-        self.node.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda m: self._add(self.diags, m), command_qos())
-        self.targets = self.node.create_publisher(PoseStamped, 'target_pose', command_qos())
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        super().__init__(domain, 'startup_test_client')
+
+    def setup(self, node):
+        node.create_subscription(Float64MultiArray, 'pressure_command',
+                                 lambda m: self._add(self.cmds, m), command_qos())
+        node.create_subscription(DiagnosticArray, '/diagnostics',
+                                 lambda m: self._add(self.diags, m), command_qos())
+        self.targets = node.create_publisher(PoseStamped, 'target_pose', command_qos())
 
     def _add(self, lst, m):
         with self.lock:
             lst.append(m)
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - shut down
-            pass
 
     def statuses(self, name_part):
         with self.lock:
@@ -150,12 +131,6 @@ class Client:
         req = ChangeState.Request()
         req.transition.id = tid
         return self.call(ChangeState, INVERSE + '/change_state', req).success
-
-    def close(self):
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(5.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
 
 
 @pytest.fixture

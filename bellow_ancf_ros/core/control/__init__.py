@@ -27,7 +27,12 @@
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
   its gain and holds its correction);
 * :class:`LoopSimulation`: controller and simulated robot in simulated time
-  (tests, benchmark);
+  (tests, benchmark); :func:`held_case`, :func:`circle_case`,
+  :func:`step_case`: the closed loop's goals measured on it, at the inverse
+  node's defaults (:func:`default_loop`);
+* :func:`draw_robot`: a robot of the documented family
+  (:data:`FAMILY_RANGES`: mode, damping, regulators, creep, motion capture,
+  stiffness and geometry), what the loop's defaults are measured on;
 * :class:`TipForceEstimator`, :class:`ForceEstimate`: the tip force (or an
   unknown payload) from measured poses and the applied pressures.
 The ROS nodes only feed these.
@@ -39,6 +44,7 @@ from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, 
 from ._dynamic_feedforward import DynamicFeedforward, StreamFeedforward, dynamic_path
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
+from ._loop_cases import STEP_M, circle_case, default_loop, held_case, step_case
 from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeCheck,
                           ModeCheckResult, gain_setting)
 from ._motion_capture import MocapSample, MotionCapture
@@ -46,6 +52,7 @@ from ._notch import NOTCH_MISMATCH, NOTCH_POLE_DAMPING, ModeNotch
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._play import PlayCompensation
 from ._regulators import BellowCreep, PressureRegulators
+from ._robot_family import FAMILY_RANGES, RobotDraw, draw_robot, first_mode
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._simulated_robot import SimulatedRobot
 from ._target_filter import TargetFilter
@@ -62,5 +69,6 @@ __all__ = [
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
     "DynamicFeedforward", "StreamFeedforward", "dynamic_path", "TargetFilter",
     "ModeNotch", "NOTCH_MISMATCH", "NOTCH_POLE_DAMPING", "PlayCompensation", "mode_variants",
-    "robust_margins",
+    "robust_margins", "STEP_M", "circle_case", "default_loop", "held_case", "step_case",
+    "FAMILY_RANGES", "RobotDraw", "draw_robot", "first_mode",
 ]

@@ -47,6 +47,7 @@ own error (step halving, docs/dynamics.md: some 1e-7 m at these steps).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -58,7 +59,7 @@ from ..model import RobotModel, TipLoad, as_tip_load
 from ..status import DynamicsStatus
 from ._inertia import Inertia
 from ._kernels import (chord_iterations, compact_factors, refactor, split_factors,
-                       symbolic_factors)
+                       state_checks, symbolic_factors)
 
 __all__ = ["DynamicState", "GeneralizedAlpha", "StepReport", "DynamicsError",
            "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step",
@@ -188,6 +189,7 @@ class GeneralizedAlpha:
         self._mass_cache, self._load_cache = {}, {}
         self._mass_values = (None, None)
         self._hist = None   # the predictor's history (_extrapolation)
+        self._stretch_kept = None   # (pressures, their stretches): _stretch_input
         self.counters = {"steps": 0, "iterations": 0, "factorizations": 0}
 
     # ------------------------------------------------------------ pattern
@@ -448,33 +450,22 @@ class GeneralizedAlpha:
         Returns a :class:`StepReport`; on failure the state is the last
         converged step and ``status`` says why.
         """
-        if self.state is None:
+        st = self.state
+        if st is None:
             raise RuntimeError("call start(fw) first")
-        stage1 = self.model.stage1
         rep = StepReport()
         t0 = time.perf_counter()
-        c0 = dict(self.counters)
-
-        def stretch_at(t):
-            if pressures_pa is not None:
-                p = pressures_pa(t) if callable(pressures_pa) else pressures_pa
-                return np.asarray(stage1.stretch(np.asarray(p, dtype=float)), dtype=float)
-            if stretch is not None:
-                return np.asarray(stretch(t) if callable(stretch) else stretch, dtype=float)
-            return self.state.stretch
-
-        def load_at(t):
-            if load is None:
-                return self.state.load
-            return as_tip_load(load(t) if callable(load) else load)
-
+        counters = self.counters
+        c0 = (counters["steps"], counters["iterations"], counters["factorizations"])
+        stretch_at = self._stretch_input(stretch, pressures_pa)
+        load_at = self._load_input(load)
         # equal steps of about step_s (up to 10 % longer rather than one more step: a physics
         # tick of one step's length, with its jitter, stays one step); a span that repeats
         # repeats the step, and the factorisation made for it is reused
-        span = t_end - self.state.t
-        n = max(1, int(np.ceil(span / self.step_s - 0.1)))
+        span = t_end - st.t
+        n = max(1, math.ceil(span / self.step_s - 0.1))
         h = span / n
-        start = self.state.t
+        start = st.t
         for k in range(n if span > 0 else 0):
             if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
                 rep.status = DynamicsStatus.TIME_BUDGET
@@ -487,13 +478,48 @@ class GeneralizedAlpha:
             if status != DynamicsStatus.COMPLETED:
                 rep.status = status
                 break
-        rep.steps = self.counters["steps"] - c0["steps"]
-        rep.iterations = self.counters["iterations"] - c0["iterations"]
-        rep.factorizations = self.counters["factorizations"] - c0["factorizations"]
+        rep.steps = counters["steps"] - c0[0]
+        rep.iterations = counters["iterations"] - c0[1]
+        rep.factorizations = counters["factorizations"] - c0[2]
         rep.wall_s = time.perf_counter() - t0
         rep.message = rep.status.message if rep.success else (
             f"{rep.status.message} at t = {self.state.t:.6g} s")
         return rep
+
+    def _stretch_input(self, stretch, pressures_pa):
+        """``f(t)``: the stretches at ``t`` (:meth:`advance`); constant pressures map once.
+
+        The stretches of the last constant pressures are kept (a run advanced
+        sample by sample maps them once, not at every step); each call gets
+        its own copy, which the states of its steps share.
+        """
+        if pressures_pa is not None:
+            stage1 = self.model.stage1
+            if callable(pressures_pa):
+                return lambda t: np.asarray(
+                    stage1.stretch(np.asarray(pressures_pa(t), dtype=float)), dtype=float)
+            p = np.asarray(pressures_pa, dtype=float)
+            key = (p.shape, p.tobytes())
+            kept = self._stretch_kept
+            if kept is None or kept[0] is not stage1 or kept[1] != key:
+                kept = self._stretch_kept = (stage1, key, np.array(stage1.stretch(p), dtype=float))
+            lam = kept[2].copy()
+            return lambda t: lam
+        if stretch is not None:
+            if callable(stretch):
+                return lambda t: np.asarray(stretch(t), dtype=float)
+            lam = np.asarray(stretch, dtype=float)
+            return lambda t: lam
+        return lambda t: self.state.stretch
+
+    def _load_input(self, load):
+        """``f(t)``: the payload and tip force at ``t`` (:meth:`advance`)."""
+        if load is None:
+            return lambda t: self.state.load
+        if callable(load):
+            return lambda t: as_tip_load(load(t))
+        fixed = as_tip_load(load)
+        return lambda t: fixed
 
     def _step_halving(self, h, stretch_at, load_at, rep, depth=0) -> DynamicsStatus:
         t = self.state.t
@@ -524,28 +550,42 @@ class GeneralizedAlpha:
 
     def end_effector(self, state: DynamicState | None = None):
         """End-effector position and rotation (columns x, y, z) of the state."""
-        return self.model.end_effector(self.static_coordinates(state))
+        st = state or self.state
+        # the plates' coordinates are the same in both conventions (Inertia.scale: 1 on them)
+        return self.model.end_effector(st.q)
+
+    def checks(self, state: DynamicState | None = None) -> tuple[dict, float]:
+        """:meth:`energy` and :meth:`constraint_violation` of the state in one compiled call."""
+        st = state or self.state
+        load = as_tip_load(st.load)
+        lam = np.ascontiguousarray(st.stretch, dtype=float)
+        kin, pot, worst = state_checks(st.q, st.v, st.mu, self._inputs(lam, load),
+                                       self.model.kernel_args,
+                                       self._mass_arrays(float(load.payload_kg))[0])
+        return {"kinetic_j": kin, "potential_j": pot, "total_j": kin + pot}, worst
 
     def constraint_violation(self, state: DynamicState | None = None) -> float:
         """Largest constraint residual ``max |C(q)|`` (metres for the attachments)."""
-        st = state or self.state
-        xs = np.concatenate([self.static_coordinates(st), st.mu])
-        r = self.model.evaluate(xs, st.stretch, 1.0, st.load, jacobian=False).residual
-        return float(np.max(np.abs(r[self.model.nq:])))
+        return self.checks(state)[1]
 
     def energy(self, state: DynamicState | None = None) -> dict:
-        """Kinetic, potential (elastic plus gravity and loads, eqs. 15-17) and total energy [J]."""
-        st = state or self.state
-        kin = self.inertia.kinetic_energy(st.v, st.load)
-        pot = float(self.model.potential(self.static_coordinates(st), st.stretch, 1.0, st.load))
-        return {"kinetic_j": kin, "potential_j": pot, "total_j": kin + pot}
+        """Kinetic, potential (elastic plus gravity and loads, eqs. 15-17) and total energy [J].
+
+        ``Inertia.kinetic_energy`` plus ``RobotModel.potential`` at the static
+        coordinates, computed by a compiled kernel (``_kernels.state_checks``).
+        """
+        return self.checks(state)[0]
 
 
 def warm_up_dynamics(model: RobotModel) -> None:
-    """Compile (or load) the integrator's kernel: two short steps from the vent equilibrium."""
+    """Compile (or load) the integrator's kernels: two short steps from the vent equilibrium.
+
+    Then the read-outs' kernel (:meth:`GeneralizedAlpha.checks`).
+    """
     from ..solve import solve_forward  # noqa: PLC0415 (the vent equilibrium, once)
     fw = solve_forward(model, np.zeros(model.A), check_stability=False)
     if fw.converged:
         ig = GeneralizedAlpha(model, step_s=1e-3)
         ig.start(fw)
         ig.advance(2e-3)
+        ig.checks()

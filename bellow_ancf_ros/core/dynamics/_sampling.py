@@ -1,8 +1,9 @@
 """A sampled simulation: the end effector's motion at fixed instants (docs/dynamics.md).
 
 :func:`sample_motion` advances a started :class:`GeneralizedAlpha` to the
-end time and records the end effector (position, z-axis) and the energy at
-the start and at every ``sample_s``.  The samples fall on steps: when the
+end time and records the end effector (position, z-axis) at the start and at
+every ``sample_s``, and the energy and the constraint violation at every
+``check_s`` (default: every sample).  The samples fall on steps: when the
 sampling interval is not a whole number of steps, the step is shortened to
 ``sample_s / ceil(sample_s / step_s)`` (a constant step keeps the
 integrator's factorisation).  A failed step ends the run at the last
@@ -33,9 +34,11 @@ class SampledMotion:
 
     ``times_s`` (n,), ``positions_m`` (n, 3), ``z_axes`` (n, 3) (the end
     effector's z-axis, base frame), ``pressures_pa`` (n, A) (the input at
-    each sample), ``energy_j`` (n,) (total energy, eqs. 15-17 plus kinetic),
-    ``constraint_violation`` (largest ``|C(q)|`` over the samples); the
-    pressures are NaN when the run was given no pressures;
+    each sample), ``energy_j`` (n,) (total energy, eqs. 15-17 plus kinetic,
+    at the checked samples: NaN between checks), ``constraint_violation``
+    (largest ``|C(q)|`` over the checked samples); the first and the last
+    sample are always checked; the pressures are NaN when the run was given
+    no pressures;
     ``report``: the integrator's :class:`StepReport` of the whole run;
     ``step_s``: the step used; ``step_wall_s``: wall time of each step (the
     mean over its sample interval).
@@ -97,8 +100,8 @@ def piecewise_linear(times_s, values):
 
 
 def sample_motion(integrator: GeneralizedAlpha, t_end: float, sample_s: float | None = None,
-                  pressures_pa=None, load=None, time_budget_s: float | None = None
-                  ) -> SampledMotion:
+                  pressures_pa=None, load=None, time_budget_s: float | None = None,
+                  check_s: float | None = None) -> SampledMotion:
     """Advance a started ``integrator`` to ``t_end`` and sample the end effector (module doc).
 
     Parameters
@@ -109,6 +112,11 @@ def sample_motion(integrator: GeneralizedAlpha, t_end: float, sample_s: float | 
         step is shortened to :func:`sampling_step` when needed.
     pressures_pa, load : the inputs, as :meth:`GeneralizedAlpha.advance` takes them.
     time_budget_s : wall-clock budget of the whole run.
+    check_s : interval [s] of the energy and constraint checks
+        (:meth:`GeneralizedAlpha.checks`: some 17 us each for one segment,
+        where a step takes some 80 us): at the first and the last sample and
+        at the first sample at or after each further multiple of ``check_s``;
+        default: every sample.
 
     Returns
     -------
@@ -119,54 +127,82 @@ def sample_motion(integrator: GeneralizedAlpha, t_end: float, sample_s: float | 
     ig = integrator
     if ig.state is None:
         raise RuntimeError("call start(fw) first")
+    if check_s is not None and not (math.isfinite(check_s) and check_s > 0):
+        raise ValueError(f"check_s = {check_s!r} is not allowed; allowed: a positive time [s]")
     ig.step_s = sampling_step(ig.step_s, sample_s)
     every = ig.step_s if sample_s is None else float(sample_s)
     model = ig.model
+    last = [None, None]
 
-    def p_at(t):
-        if pressures_pa is None:  # the stretches are given, not the pressures
-            return np.full(model.A, np.nan)
-        return np.asarray(pressures_pa(t) if callable(pressures_pa) else pressures_pa,
-                          dtype=float)
+    def asked_once(t):   # the input at a step's end is the sample's: asked once
+        if t != last[0]:
+            last[0], last[1] = t, np.asarray(pressures_pa(t), dtype=float)
+        return last[1]
 
-    times, pos, zax, pres, energy, walls = [], [], [], [], [], []
-    worst = 0.0
+    inputs, fixed = pressures_pa, None
+    if pressures_pa is None:  # the stretches are given, not the pressures
+        fixed = np.full(model.A, np.nan)
+    elif callable(pressures_pa):
+        inputs = asked_once
+    else:
+        fixed = np.asarray(pressures_pa, dtype=float)
 
-    def record():
-        nonlocal worst
-        x, rot = ig.end_effector()
-        times.append(ig.state.t)
+    times, pos, zax, pres, energy, walls, violations = [], [], [], [], [], [], []
+
+    def record(check):
+        st = ig.state
+        x, rot = ig.end_effector(st)
+        times.append(st.t)
         pos.append(x)
         zax.append(rot[:, 2])
-        pres.append(p_at(ig.state.t))
-        energy.append(ig.energy()["total_j"])
-        worst = max(worst, ig.constraint_violation())
+        pres.append(fixed if fixed is not None else inputs(st.t))
+        if check:
+            e, c = ig.checks(st)
+            energy.append(e["total_j"])
+            violations.append(c)
+        else:
+            energy.append(math.nan)
 
     total = StepReport()
+    c0 = dict(ig.counters)
     t0 = time.perf_counter()
-    record()
+    record(True)
+    t_start = times[0]
+    gap = every if check_s is None else float(check_s)
+    next_check = t_start + gap
     n = max(0, int(round((t_end - ig.state.t) / every)))
     for k in range(1, n + 1):
-        t_next = min(times[0] + k * every, t_end) if k < n else t_end
+        t_next = min(t_start + k * every, t_end) if k < n else t_end
         budget = None if time_budget_s is None else time_budget_s - (time.perf_counter() - t0)
         if budget is not None and budget <= 0:
             total.status = DynamicsStatus.TIME_BUDGET
             break
         w0 = time.perf_counter()
-        rep = ig.advance(t_next, pressures_pa=pressures_pa, load=load, time_budget_s=budget)
-        walls.extend([(time.perf_counter() - w0) / max(rep.steps, 1)] * max(rep.steps, 1))
-        for key in ("steps", "iterations", "factorizations", "halvings"):
-            setattr(total, key, getattr(total, key) + getattr(rep, key))
+        rep = ig.advance(t_next, pressures_pa=inputs, load=load, time_budget_s=budget)
+        steps = max(rep.steps, 1)
+        walls.extend([(time.perf_counter() - w0) / steps] * steps)
+        total.halvings += rep.halvings
         if not rep.success:
             total.status = rep.status
             if ig.state.t > times[-1]:
-                record()
+                record(True)
             break
-        record()
+        t = ig.state.t + 1e-9 * every   # a sample at a multiple of check_s, give or take roundoff
+        due = k == n or t >= next_check
+        if due:
+            next_check = t_start + gap * (math.floor((t - t_start) / gap) + 1)
+        record(due)
+    if math.isnan(energy[-1]):   # the last sample is checked too (a time budget ran out)
+        e, c = ig.checks()
+        energy[-1] = e["total_j"]
+        violations.append(c)
     total.wall_s = time.perf_counter() - t0
+    for key in ("steps", "iterations", "factorizations"):
+        setattr(total, key, ig.counters[key] - c0[key])
     total.message = total.status.message if total.success else (
         f"{total.status.message} at t = {ig.state.t:.6g} s")
     return SampledMotion(times_s=np.array(times), positions_m=np.array(pos),
                          z_axes=np.array(zax), pressures_pa=np.array(pres),
-                         energy_j=np.array(energy), constraint_violation=float(worst),
+                         energy_j=np.array(energy),
+                         constraint_violation=float(np.max(violations)),
                          report=total, step_s=float(ig.step_s), step_wall_s=np.array(walls))

@@ -276,6 +276,11 @@ class Stage1:
             # h -> -inf, so dh/dx has a positive root: the companion matrix lost
             # it to round-off (coefficients of very different sizes).
             above = self._first_turn()
+        elif above.size:
+            # roots of coefficients of very different sizes may be spurious (far out) while
+            # the first turn is lost: a grid up to the first root, or to p_max, confirms it
+            above = np.append(above, self._first_turn(float(above.min()),
+                                                      self.p_max / self._p_per_h))
         below = crit[(crit < 0.0) & (crit > -1.0)]
         below = np.append(below, self._last_turn(below.max() if below.size else -1.0))
         self._x_hi = float(above.min()) if above.size else math.inf
@@ -302,25 +307,30 @@ class Stage1:
                 f'{where}: p_min = {self.p_min / 1e3:.6g} kPa cannot be reached on the '
                 f'monotonic pressure-to-stretch branch: {reason}')
 
-    def _first_turn(self) -> np.ndarray:
+    def _first_turn(self, x_stop: float = 1e300, h_stop: float = math.inf) -> np.ndarray:
         """The first ``x > 0`` with ``dh/dx <= 0`` on a grid, refined by bisection.
 
-        Used only when the roots of ``dh/dx`` missed a turning point that its
-        negative leading coefficient proves.  Grids of 256 steps over
-        ``[0, 1], [1, 2], [2, 4], ...``; empty if none is found below 1e300 (then
-        the stretch search reports the failure).  A dip of ``dh/dx`` between two
-        grid points inside ``[p_min, p_max]`` is still refused by
+        Used when the roots of ``dh/dx`` missed a turning point that its
+        negative leading coefficient proves, and to confirm the first positive
+        root (coefficients of very different sizes give spurious roots).
+        Grids of 256 steps over ``[0, 1], [1, 2], [2, 4], ...``, up to
+        ``x_stop`` or the first grid whose end has ``h`` past ``h_stop`` (the
+        pressure limit: a turn beyond it does not matter); empty if none is
+        found (then the stretch search reports a failure).  A dip of ``dh/dx``
+        between two grid points inside ``[p_min, p_max]`` is still refused by
         :meth:`_check_monotone`.
         """
         a, b = 0.0, 1.0
         with np.errstate(over='ignore', invalid='ignore'):  # inf - inf: not positive
-            while b < 1e300:
+            while a < min(x_stop, 1e300):
                 xs = np.linspace(a, b, 257)
                 ok = self._dh_val(xs) > 0.0
                 ok[0] = True                            # dh(0) = k(1) > 0; a: last grid's
                 bad = np.flatnonzero(~ok)
                 if bad.size:
                     return np.array([self._turn(float(xs[bad[0] - 1]), float(xs[bad[0]]))])
+                if self._h_val(np.array(b)) > h_stop:
+                    break
                 a, b = b, 2.0 * b
         return np.empty(0)
 

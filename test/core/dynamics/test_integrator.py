@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import DynamicsStatus, solve_forward
+from bellow_ancf_ros.core import DynamicsStatus, TipLoad, solve_forward
 from bellow_ancf_ros.core.dynamics import GeneralizedAlpha, default_step, natural_modes
 from bellow_ancf_ros.core.fit import fit_free_vibration
 
@@ -78,6 +78,68 @@ def test_undamped_energy_is_conserved_and_constraints_hold(one):
         worst_c = max(worst_c, ig.constraint_violation())
     assert worst_e < 1e-3 * e0
     assert worst_c < 1e-9
+
+
+@pytest.mark.parametrize("robot", ["one", "two"])
+def test_compiled_checks_are_the_models_energy_and_constraints(robot, request):
+    """``checks`` (one compiled call) equals the numpy read-outs at a moving, loaded state."""
+    model = request.getfixturevalue(robot)
+    p = np.zeros(model.A)
+    p[0] = 40e3
+    fw = solve_forward(model, p, payload_kg=0.02, tip_force_n=[0.05, -0.03, 0.0])
+    ig = GeneralizedAlpha(model, mass_damping_per_s=0.5)
+    ig.start_released(fw, load_after=TipLoad(0.02, (0.0, 0.01, 0.0)))
+    p2 = p.copy()
+    p2[-1] = 25e3
+    assert ig.advance(0.03, pressures_pa=p2).success
+    st = ig.state
+    energy, violation = ig.checks()
+    qs = ig.static_coordinates()
+    kinetic = ig.inertia.kinetic_energy(st.v, st.load)
+    potential = float(model.potential(qs, st.stretch, 1.0, st.load))
+    assert kinetic > 1e-6
+    assert energy["kinetic_j"] == pytest.approx(kinetic, rel=1e-12)
+    assert energy["potential_j"] == pytest.approx(potential, rel=1e-12, abs=1e-15)
+    assert energy["total_j"] == pytest.approx(kinetic + potential, rel=1e-12)
+    assert ig.energy() == energy
+    res = model.evaluate(np.concatenate([qs, st.mu]), st.stretch, 1.0, st.load,
+                         jacobian=False).residual
+    assert violation == ig.constraint_violation() == pytest.approx(
+        np.abs(res[model.nq:]).max(), rel=1e-9, abs=1e-17)
+    # a state off the constraints shows its violation
+    off = st.copy()
+    off.q = off.q + 1e-4
+    res = model.evaluate(np.concatenate([ig.static_coordinates(off), off.mu]), off.stretch,
+                         1.0, off.load, jacobian=False).residual
+    assert ig.constraint_violation(off) == pytest.approx(np.abs(res[model.nq:]).max(),
+                                                         rel=1e-12)
+    # the end effector read straight from the material coordinates
+    pos, rot = ig.end_effector()
+    ref_pos, ref_rot = model.end_effector(qs)
+    np.testing.assert_array_equal(pos, ref_pos)
+    np.testing.assert_array_equal(rot, ref_rot)
+
+
+def test_constant_pressures_are_mapped_once_and_follow_a_change(one):
+    """Constant pressures give the same steps as the same pressures as a function of time."""
+    fw = solve_forward(one, np.zeros(3), tip_force_n=[0.05, 0.0, 0.0])
+    a = GeneralizedAlpha(one, step_s=0.002)
+    b = GeneralizedAlpha(one, step_s=0.002)
+    a.start_released(fw)
+    b.start_released(fw)
+    p1, p2 = np.array([30e3, 0.0, 0.0]), np.array([0.0, 20e3, 0.0])
+    for k in range(1, 6):
+        assert a.advance(0.004 * k, pressures_pa=p1).success
+    p1[0] = 99e3   # the caller's array changes: the next call maps it afresh
+    for k in range(6, 9):
+        assert a.advance(0.004 * k, pressures_pa=p1).success
+    for k in range(9, 12):
+        assert a.advance(0.004 * k, pressures_pa=p2).success
+    for k in range(1, 12):
+        q = [30e3, 0.0, 0.0] if k < 6 else [99e3, 0.0, 0.0] if k < 9 else [0.0, 20e3, 0.0]
+        assert b.advance(0.004 * k, pressures_pa=lambda t, q=q: q).success
+    np.testing.assert_array_equal(a.state.q, b.state.q)
+    np.testing.assert_array_equal(a.state.stretch, one.stage1.stretch(p2))
 
 
 def test_second_order_by_step_halving(one):

@@ -51,6 +51,31 @@ def test_samples_are_the_integrators_states_at_the_sample_times(one):
     assert set(s[0]) == {"t_s", "position_m", "z_axis"} and len(s) == 6
 
 
+def test_energy_and_constraints_are_checked_at_their_own_interval(one):
+    """``check_s``: checks at the first and last sample and every ``check_s``; NaN between."""
+    fw = solve_forward(one, np.zeros(3), tip_force_n=[0.05, 0.0, 0.0])
+    every = GeneralizedAlpha(one, step_s=0.002, rho_inf=1.0, damping_time_s=0.0)
+    every.start_released(fw)
+    ref = sample_motion(every, 0.1, pressures_pa=np.zeros(3))
+    ig = GeneralizedAlpha(one, step_s=0.002, rho_inf=1.0, damping_time_s=0.0)
+    ig.start_released(fw)
+    run = sample_motion(ig, 0.1, pressures_pa=np.zeros(3), check_s=0.03)
+    np.testing.assert_array_equal(run.positions_m, ref.positions_m)
+    checked = np.flatnonzero(np.isfinite(run.energy_j))
+    np.testing.assert_allclose(run.times_s[checked],
+                               [0.0, 0.03, 0.06, 0.09, 0.1], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(run.energy_j[checked], ref.energy_j[checked])
+    assert np.all(np.isfinite(ref.energy_j))
+    assert run.constraint_violation <= ref.constraint_violation < 1e-9
+    # undamped: the checked energies stay those of the release
+    drift = np.abs(run.energy_j[checked] - run.energy_j[0]).max()
+    vibration = ref.energy_j[0] - float(one.potential(solve_forward(one, np.zeros(3)).q,
+                                                      fw.stretch))
+    assert 0 < drift < 1e-3 * vibration
+    with pytest.raises(ValueError, match="check_s = 0 is not allowed"):
+        sample_motion(ig, 0.2, check_s=0)
+
+
 def test_a_failed_run_keeps_what_was_computed(one):
     fw = solve_forward(one, np.zeros(3))
     ig = GeneralizedAlpha(one, step_s=0.002, tol=0.0, max_iter=2, max_halvings=1)

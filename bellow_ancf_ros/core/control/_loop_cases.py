@@ -1,0 +1,138 @@
+"""The closed loop's goals, case by case, on any simulated robot (no ROS).
+
+Each case runs a fresh :class:`~._loop_simulation.LoopSimulation` of the
+inverse node's closed loop at its defaults (``feedback: integral``,
+``feedback_gain_per_s: auto`` with the node's loop lag and delay, no
+shaping, no dynamic feedforward) around a robot, with targets stamped when
+they are wanted (nobody previewed them: ``preview_s`` 0), and measures what
+the goals name, on the robot's true pose:
+
+* :func:`held_case`: a held target, the RMSE (and the largest error) over
+  its last half;
+* :func:`circle_case`: the paper's circle (two segments: the bending circle
+  of 10 deg) at a speed factor (1x: 20 s period), entered with a 1 s
+  spin-up, the RMSE over its second period at full speed;
+* :func:`step_case`: a 10 mm step target in ``y`` after a held one: the
+  overshoot along the step, the largest error from 1.5 s after the step on,
+  and how far the commands went beyond their settled change.
+
+Every case also reports the watchdog's trips and the commands refused by
+the safety gate (out of the limits or not finite; never sent).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from ..experiments import spin_up, trajectory_target
+from ..model import RobotModel
+from ..solve import solve_forward
+from ._dynamic_feedforward import StreamFeedforward
+from ._feedback import FeedbackSettings
+from ._loop_simulation import LoopSimulation
+from ._mode_check import AUTO_GAIN, ModeCheck
+from ._simulated_robot import SimulatedRobot
+
+__all__ = ['LOOP_DELAY_S', 'LOOP_LAG_S', 'STEP_M', 'circle_case', 'default_loop', 'held_case',
+           'step_case']
+
+#: The inverse node's ``feedback_loop_lag_s`` and ``feedback_loop_delay_s`` defaults.
+LOOP_LAG_S, LOOP_DELAY_S = 0.06, 0.05
+#: The step target's size [m].
+STEP_M = 0.010
+#: A settled command: its mean over the last second of the step case.
+_SETTLED_S = 1.0
+#: Smallest change a command's excess is measured against [Pa] (a command that barely moves).
+_MIN_CHANGE_PA = 1.0e3
+
+Loop = Callable[[RobotModel, SimulatedRobot, float], LoopSimulation]
+
+
+def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
+                 dynamic_feedforward: bool = False) -> LoopSimulation:
+    """The inverse node's closed loop at its defaults around ``robot`` (targets not previewed).
+
+    ``dynamic_feedforward``: as the node's ``dynamic_feedforward: true``.
+    """
+    ff = (StreamFeedforward(1.0, 0.0, lag_s=LOOP_LAG_S) if dynamic_feedforward else None)
+    return LoopSimulation(model, robot, FeedbackSettings(), preview_s=0.0,
+                          physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=payload_kg,
+                          mode_check=ModeCheck(AUTO_GAIN, LOOP_LAG_S, LOOP_DELAY_S),
+                          feedforward=ff)
+
+
+def _rest_pose(model: RobotModel, payload_kg: float):
+    """The held pose of the cases: actuator 1 at 30 kPa, the others vented."""
+    p = np.zeros(model.A)
+    p[0] = 30e3
+    fw = solve_forward(model, p, payload_kg=payload_kg)
+    if not fw.success:
+        raise RuntimeError(f'no equilibrium for the held pose: {fw.message}')
+    return fw.position, fw.z_axis
+
+
+def _health(sim: LoopSimulation, rec) -> dict:
+    wd = sim.feedback.watchdog if sim.feedback is not None else None
+    return {'trips': 0 if wd is None else int(wd.trips), 'refused': int(rec.out_of_limits),
+            'gain_per_s': None if sim.feedback is None else float(sim.feedback.gain_per_s)}
+
+
+def held_case(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
+              duration_s: float = 8.0, loop: Loop = default_loop) -> dict:
+    """A held target: RMSE and largest error over the last half of ``duration_s``."""
+    sim = loop(model, robot, payload_kg)
+    p, z = _rest_pose(model, payload_kg)
+    t0 = robot.time_s
+    rec = sim.run(duration_s, lambda t: (p, z))
+    return {**rec.summary(t0 + duration_s / 2), **_health(sim, rec)}
+
+
+def circle_case(model: RobotModel, robot: SimulatedRobot, speed: float,
+                payload_kg: float = 0.0, loop: Loop = default_loop, settle_s: float = 3.0,
+                spin_up_s: float = 1.0) -> dict:
+    """The paper's circle at ``speed`` times its speed: RMSE over the second full period."""
+    sim = loop(model, robot, payload_kg)
+    cfg = model.cfg
+    period = 20.0 / speed
+    path = (trajectory_target('planar_circle', cfg, period=period) if cfg.n_segments == 1
+            else trajectory_target('bending_circle', cfg, period=period,
+                                   bending_angle_deg=10.0))
+    sim.run(settle_s, lambda t: path(0.0))
+    t0 = robot.time_s
+    rec = sim.run(spin_up_s + 2 * period, lambda t: path(spin_up(t - t0, spin_up_s)))
+    start = t0 + spin_up_s + period
+    return {**rec.summary(start, start + period), **_health(sim, rec)}
+
+
+def step_case(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
+              loop: Loop = default_loop, hold_s: float = 5.0, after_s: float = 4.0) -> dict:
+    """A 10 mm step target after ``hold_s`` of the held one.
+
+    ``overshoot_mm``: the largest excursion past the new target along the
+    step; ``late_mm``: the largest distance from it from 1.5 s after the step
+    on; ``command_excess``: the largest command change beyond the settled
+    one (mean over the last second), as a fraction of that settled change
+    (at least 1 kPa).
+    """
+    sim = loop(model, robot, payload_kg)
+    p, z = _rest_pose(model, payload_kg)
+    u = np.array([0.0, 1.0, 0.0])
+    goal = p + STEP_M * u
+    rec = sim.run(hold_s, lambda t: (p, z))
+    ts = robot.time_s
+    rec = sim.run(after_s, lambda t: (p if t < ts else goal, z), record=rec)
+    a = rec.arrays()
+    t = a['t']
+    after = t >= ts
+    over = float(np.max((a['true_p'][after] - goal) @ u))
+    late = float(np.linalg.norm(a['true_p'][t >= ts + 1.5] - goal, axis=1).max())
+    cmd = a['command_pa']
+    c0 = cmd[t < ts][-1]
+    change = cmd[t > t[-1] - _SETTLED_S].mean(axis=0) - c0
+    beyond = (cmd[after] - c0) * np.sign(change) - np.abs(change)
+    excess = float(np.max(beyond.max(axis=0) / np.maximum(np.abs(change), _MIN_CHANGE_PA)))
+    return {'overshoot_mm': max(over, 0.0) * 1e3, 'overshoot_frac': max(over, 0.0) / STEP_M,
+            'late_mm': late * 1e3, 'command_excess': max(excess, 0.0),
+            **_health(sim, rec)}

@@ -1,0 +1,67 @@
+"""The closed loop's goal cases measure what they name (core, simulated time)."""
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core import RobotModel, load_robot
+from bellow_ancf_ros.core.control import (STEP_M, LoopSimulation, PlantEffects, SimulatedRobot,
+                                          circle_case, default_loop, held_case, step_case)
+from bellow_ancf_ros.core.experiments import trajectory_target
+
+#: the model's own robot, quasi-static, regulators that follow at once, a clean motion capture
+EXACT = PlantEffects(regulator_time_constant_s=0.0, regulator_dead_time_s=0.0,
+                     regulator_hysteresis_pa=0.0, regulator_slew_rate_pa_per_s=1e12,
+                     creep_fraction=0.0, mocap_latency_s=0.0, position_noise_m=0.0,
+                     angle_noise_rad=0.0, outlier_probability=0.0, dropout_duration_s=0.0,
+                     dynamics=False)
+
+
+def _feedforward(model, robot, payload_kg):
+    return LoopSimulation(model, robot, None, payload_kg=payload_kg)
+
+
+@pytest.fixture(scope='module')
+def model():
+    return RobotModel(load_robot('one_segment'))
+
+
+def _exact_robot():
+    return SimulatedRobot('one_segment', n_elements=6, effects=EXACT, seed=0)
+
+
+def test_step_on_the_exact_robot_under_feedforward_is_clean(model):
+    """The model's own robot, following at once: no overshoot, no late error, no excess."""
+    r = step_case(model, _exact_robot(), loop=_feedforward, hold_s=1.0, after_s=2.0)
+    assert r['overshoot_mm'] < 1e-3 and r['late_mm'] < 1e-3
+    assert r['command_excess'] < 1e-6
+    assert r['trips'] == 0 and r['refused'] == 0 and r['gain_per_s'] is None
+
+
+def test_held_on_the_exact_robot_is_exact(model):
+    r = held_case(model, _exact_robot(), duration_s=1.0, loop=_feedforward)
+    assert r['rmse_mm'] < 1e-6 and r['max_mm'] < 1e-6
+
+
+def test_circle_under_feedforward_lags_by_one_control_period(model):
+    """At 10x the exact robot is recorded one control period behind: RMSE = speed x 20 ms."""
+    r = circle_case(model, _exact_robot(), 10.0, loop=_feedforward, settle_s=0.5)
+    path = trajectory_target('planar_circle', model.cfg, period=2.0)
+    ts = np.linspace(0.0, 2.0, 401)
+    lag = np.array([np.linalg.norm(path(t)[0] - path(t - 0.02)[0]) for t in ts])
+    assert r['rmse_mm'] == pytest.approx(np.sqrt(np.mean(lag ** 2)) * 1e3, rel=0.05)
+
+
+def test_default_loop_is_the_nodes_closed_loop(model):
+    sim = default_loop(model, _exact_robot())
+    assert sim.feedback is not None and sim.preview_s == 0.0 and sim.feedforward is None
+    assert sim.mode_check is not None
+    assert default_loop(model, _exact_robot(), dynamic_feedforward=True).feedforward is not None
+
+
+def test_step_overshoot_is_measured_along_the_step(model):
+    """The regulators' lag with the closed loop's integral: the figure is the excursion past."""
+    robot = SimulatedRobot('one_segment_mismatched', seed=1)
+    r = step_case(model, robot, hold_s=3.0, after_s=3.0)
+    assert STEP_M == 0.010
+    assert 0.0 <= r['overshoot_frac'] * 10.0 == pytest.approx(r['overshoot_mm'])
+    assert r['late_mm'] >= 0.0 and r['command_excess'] >= 0.0

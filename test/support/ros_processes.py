@@ -1,0 +1,59 @@
+"""Shared by the tests that run nodes as processes: their environment and a spun client.
+
+Imports rclpy: only for tests that already skipped without it.
+"""
+
+import os
+from pathlib import Path
+import random
+import threading
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def node_process_env() -> dict:
+    """The environment of a node process: an isolated domain, this checkout, unbuffered."""
+    e = dict(os.environ)
+    e['ROS_DOMAIN_ID'] = str(random.randint(0, 101))
+    e['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    e['PYTHONPATH'] = str(REPO) + os.pathsep + e.get('PYTHONPATH', '')
+    e['PYTHONUNBUFFERED'] = '1'
+    return e
+
+
+class SpunClient:
+    """An rclpy node in this process on ``domain``, spun in a daemon thread until ``close``.
+
+    A subclass creates its subscriptions and publishers in ``setup(node)``,
+    which runs before the spinning starts.
+    """
+
+    def __init__(self, domain: int, name: str):
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.ctx)
+        self.lock = threading.Lock()
+        self.setup(self.node)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def setup(self, node) -> None:
+        """Create the subscriptions and publishers (nothing here)."""
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: BLE001 - shut down
+            pass
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(5.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)

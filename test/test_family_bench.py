@@ -1,0 +1,56 @@
+"""bench/family_bench.py: the family's tables say what the runs say (median, p95, driver)."""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+import family_bench  # noqa: E402
+
+
+def _run(seed, overshoot, lag):
+    """A synthetic robot: its step overshoot grows with its regulators' lag."""
+    case = {'rmse_mm': 0.05, 'max_mm': 0.1, 'trips': 0, 'refused': 0, 'gain_per_s': 5.0}
+    return {'robot': 'one_segment', 'seed': seed,
+            'values': {'regulator_time_constant_s': lag, 'creep_fraction': 0.1},
+            'cases': {'held': dict(case), 'circle_10x': dict(case),
+                      'step': {'overshoot_mm': overshoot, 'late_mm': 0.1,
+                               'command_excess': 5.0, 'trips': 0, 'refused': 0}}}
+
+
+def test_table_gives_median_p95_worst_and_the_driver_of_a_miss():
+    lags = np.linspace(0.02, 0.12, 20)
+    runs = [_run(i, 10.0 * lag, lag) for i, lag in enumerate(lags)]
+    rows = {r['goal']: r for r in family_bench.table(runs, 'one_segment')}
+    step = rows['step overshoot [mm]']
+    v = 10.0 * lags
+    assert step['median'] == pytest.approx(np.median(v))
+    assert step['p95'] == pytest.approx(np.percentile(v, 95))
+    assert step['worst'] == pytest.approx(v.max()) and step['n'] == 20
+    assert step['met'] == int(np.sum(v <= 0.5))
+    assert step['driver'].startswith('regulator_time_constant_s (rank correlation +1.00')
+    held = rows['held position RMSE [mm]']
+    assert held['met'] == 20 and held['driver'] == ''
+    # one segment has no angle goals; no 1x runs: no 1x rows
+    assert not any('angle' in g or '1x' in g for g in rows)
+    text = family_bench.render(runs)
+    assert 'one_segment: 20 robots' in text and 'regulator_time_constant_s' in text
+
+
+def test_one_real_robot_of_the_family_runs_every_case():
+    run = family_bench.evaluate('one_segment', 0, slow=False)
+    assert set(run['cases']) == {'held', 'circle_10x', 'step'}
+    assert run['first_mode_hz'] == pytest.approx(run['values']['mode_scale']
+                                                 * run['model_mode_hz'], rel=0.03)
+    for case in run['cases'].values():
+        assert case['refused'] == 0
+    assert all(np.isfinite(v) for c in run['cases'].values() for v in c.values()
+               if v is not None)
+
+
+def test_bad_robot_count_is_refused(capsys):
+    assert family_bench.main(['--robots', '0']) == 2
+    assert '--robots: 0 is not allowed' in capsys.readouterr().err
