@@ -78,10 +78,12 @@ the robot's first mode (``feedback_gain_per_s: auto``, the default).
 
 Targets for a robot that swings
 -------------------------------
-Parameters ``target_shaping`` (``none``, ``zv``, ``zvd``) and
-``dynamic_feedforward`` (:class:`~bellow_ancf_ros.nodes.target_link.TargetLink`):
-each target is shaped at the first mode, or shifted by the inertial,
-damping and lag loads of its motion, before the closed loop's correction.
+Parameters ``target_shaping`` (``smooth``: a jump becomes a minimum-jerk move
+at the slowest mode the robot may have, the default; ``none``, ``zv``,
+``zvd``) and ``dynamic_feedforward``
+(:class:`~bellow_ancf_ros.nodes.target_link.TargetLink`): each target is
+shaped at the first mode, or shifted by the inertial, damping and lag loads
+of its motion, before the closed loop's correction.
 The first mode at the held equilibrium comes from one thread
 (:class:`~bellow_ancf_ros.nodes.mode_watch.ModeWatch`), computed at
 configure for the vented robot with its payload and again as it moves.
@@ -143,7 +145,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_problem,
                     precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
-from ..core.control import SHAPERS, PlayCompensation, gain_setting
+from ..core.control import TARGET_SHAPINGS, PlayCompensation, gain_setting
 from . import contract, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
@@ -354,9 +356,9 @@ class InverseKinetostaticNode(LifecycleNode):
                 gain_setting(param.value)
             except ValueError as exc:
                 return f'feedback_gain_per_s: {exc}'
-        if param.name == 'target_shaping' and param.value not in SHAPERS:
+        if param.name == 'target_shaping' and param.value not in TARGET_SHAPINGS:
             return (f'target_shaping = {param.value!r} is not allowed; allowed: '
-                    f'{", ".join(map(repr, SHAPERS))}')
+                    f'{", ".join(map(repr, TARGET_SHAPINGS))}')
         if not getattr(self, '_configured', False):   # (declaring parameters in __init__)
             return ''
         if param.name == 'payload_kg':
@@ -736,7 +738,8 @@ class InverseKinetostaticNode(LifecycleNode):
             # shaped and shifted for the robot's mode, then corrected by the closed loop
             # (which measures against the shaped pose wanted, not the shifted command)
             cmd, ref = self._targets.targets(item, monotonic_of(self, stamp, future=True))
-            pos, z = self._feedback.correct(ref[0], ref[1], stamp, command=cmd)
+            pos, z = self._feedback.correct(ref[0], ref[1], stamp, command=cmd,
+                                            hold_until=self._targets.hold_until())
             with self._solve_lock:
                 inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
                                     time_budget_s=self._time_budget(), tip_force_n=force)

@@ -295,13 +295,15 @@ class FeedbackLink:
         return self._monotonic(stamp, future=False)
 
     def correct(self, position: np.ndarray, z_axis: np.ndarray | None, stamp=None,
-                command: tuple | None = None):
+                command: tuple | None = None, hold_until: float | None = None):
         """The target to hand to the inverse (``command``, or the target, when feedback is off).
 
         ``stamp``: the target's stamp, the time it is wanted at (zero: now; in
         the future: a target that previews the robot's lag).  ``command``:
         the target to correct when it is not the pose wanted (a dynamic
-        feedforward's shift).  A change between integrating and holding the
+        feedforward's shift).  ``hold_until``: the correction is held for
+        measurements captured before it (monotonic s; a jump's move).  A
+        change between integrating and holding the
         correction through a dropout is logged, not only reported on
         ``/diagnostics``.
         """
@@ -310,7 +312,7 @@ class FeedbackLink:
                 return (position, z_axis) if command is None else command
             out = self._law.corrected_target(time.monotonic(), position, z_axis,
                                              wanted_at=self._monotonic(stamp, future=True),
-                                             command=command)
+                                             command=command, hold_until=hold_until)
             degraded, state = self._law.blind, self._law.state
             wd = self._law.watchdog
             trip = None

@@ -21,6 +21,25 @@ from test_ros_nodes import diag_statuses, kv, pose_of, target_msg, wait_for  # n
 h = _rn.h   # the harness fixture (the isolated ROS context comes from conftest)
 
 
+def _step_after_held(h, one):
+    """Hold a target until it is commanded, then publish one 10 mm away: ``(a, b, n0, t)``.
+
+    ``n0``: the commanded poses before the step, ``t``: when it was published
+    (monotonic).  (The first target is taken as it is.)
+    """
+    a = solve_forward(one, [40e3, 20e3, 0.0]).position
+    b = a + np.array([0.01, 0.0, 0.0])
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    pub.publish(target_msg(a))
+    wait_for(lambda: h.count('commanded_pose') > 0
+             and np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - a) < 1e-6,
+             what='at the first target')
+    n0, t = h.count('commanded_pose'), time.monotonic()
+    pub.publish(target_msg(b))
+    return a, b, n0, t
+
+
 def test_a_zvd_shaped_step_reaches_the_robot_as_the_shapers_staircase(h, one):
     """10 mm step: the commanded poses sit on the ZVD levels, then on the target.
 
@@ -33,16 +52,7 @@ def test_a_zvd_shaped_step_reaches_the_robot_as_the_shapers_staircase(h, one):
     st = node._targets.status()
     f = float(st['target_mode_hz'])
     assert 9.0 < f < 11.0 and st['target_shaping'] == 'zvd'   # 10.6 Hz vented
-    a = solve_forward(one, [40e3, 20e3, 0.0]).position
-    b = a + np.array([0.01, 0.0, 0.0])
-    pub = h.publisher(PoseStamped, 'target_pose')
-    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
-    pub.publish(target_msg(a))
-    wait_for(lambda: h.count('commanded_pose') > 0
-             and np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - a) < 1e-6,
-             what='at the first target')
-    n0 = h.count('commanded_pose')
-    pub.publish(target_msg(b))
+    a, b, n0, _ = _step_after_held(h, one)
     wait_for(lambda: np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - b) < 1e-6,
              what='at the step target')
     with h.lock:
@@ -56,6 +66,33 @@ def test_a_zvd_shaped_step_reaches_the_robot_as_the_shapers_staircase(h, one):
     assert kv(st)['target_shaping'] == 'zvd' and float(kv(st)['target_mode_hz']) == f
     delay = float(node._targets.status()['target_shaping_delay_s'])
     assert delay == pytest.approx(float(amps @ times), abs=1e-3)
+
+
+def test_by_default_a_step_is_moved_through_smoothly(h, one):
+    """target_shaping smooth (default): a 10 mm step's commands move along it, then arrive.
+
+    Over two periods of 0.7x the first mode (one segment, vented: 10.6 Hz,
+    0.27 s), re-solved at 50 Hz, never past the target.
+    """
+    h.record(PoseStamped, 'commanded_pose')
+    node = h.add(InverseKinetostaticNode, name='smooth')
+    st = node._targets.status()
+    f = float(st['target_mode_hz'])
+    assert st['target_shaping'] == 'smooth' and 9.0 < f < 11.0
+    dur = node._targets._filter.jumps.duration_s
+    assert dur == pytest.approx(2.0 / (0.7 * f), rel=1e-3)   # (f as the status rounds it)
+    a, b, n0, t0 = _step_after_held(h, one)
+    wait_for(lambda: np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - b) < 1e-6,
+             what='at the step target')
+    took = time.monotonic() - t0
+    with h.lock:
+        got = [pose_of(m)[0] for _, m in h.msgs['commanded_pose'][n0:]]
+    frac = [float((p - a) @ (b - a) / ((b - a) @ (b - a))) for p in got]
+    inner = [x for x in frac if 1e-6 < x < 1 - 1e-6]
+    assert len(inner) >= 5, frac                       # it moved through, at the re-solve rate
+    assert all(-1e-9 <= x <= 1 + 1e-9 for x in frac)    # never past the target
+    assert inner == sorted(inner)                      # monotonic
+    assert took >= 0.9 * dur, (took, dur)
 
 
 def test_dynamic_feedforward_shifts_a_moving_stream_not_a_held_target(h, one):
@@ -87,7 +124,7 @@ def test_dynamic_feedforward_shifts_a_moving_stream_not_a_held_target(h, one):
 
 def test_bad_target_shaping_refused(h):
     with pytest.raises(ValueError, match="parameter target_shaping = 'zvdd' is not allowed; "
-                       "allowed: a string, one of: 'none', 'zv', 'zvd'"):
+                       "allowed: a string, one of: 'smooth', 'none', 'zv', 'zvd'"):
         h.add(InverseKinetostaticNode, target_shaping='zvdd')
 
 

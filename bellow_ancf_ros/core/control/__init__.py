@@ -12,8 +12,11 @@
   :class:`PressureRegulators` with dead time, hysteresis and lag; bellows
   creep :class:`BellowCreep`; :class:`MotionCapture` with noise, latency,
   outliers and dropouts);
-* :class:`TargetShaper`, :func:`shaped`: ZV/ZVD input shaping of the target
-  stream at the first mode (a step leaves no residual swing);
+* :class:`JumpTransition`: a jump of the target stream becomes a
+  minimum-jerk move over two periods of the slowest mode the robot may have
+  (``target_shaping: smooth``, the default; the closed loop holds through
+  it); :class:`TargetShaper`, :func:`shaped`: ZV/ZVD input shaping of the
+  target stream at the first mode (a step leaves no residual swing);
 * :class:`DynamicFeedforward`, :func:`dynamic_path`,
   :class:`StreamFeedforward`: the target shifted by the inertial and damping
   loads of its motion through the first mode and the regulators' lag
@@ -55,7 +58,8 @@ from ._regulators import BellowCreep, PressureRegulators
 from ._robot_family import FAMILY_RANGES, RobotDraw, draw_robot, first_mode
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._simulated_robot import SimulatedRobot
-from ._target_filter import TargetFilter
+from ._target_filter import TARGET_SHAPINGS, TargetFilter
+from ._jumps import JumpTransition
 from ._watchdog import OscillationWatchdog, WatchdogTrip
 
 __all__ = [
@@ -70,5 +74,6 @@ __all__ = [
     "DynamicFeedforward", "StreamFeedforward", "dynamic_path", "TargetFilter",
     "ModeNotch", "NOTCH_MISMATCH", "NOTCH_POLE_DAMPING", "PlayCompensation", "mode_variants",
     "robust_margins", "STEP_M", "circle_case", "default_loop", "held_case", "step_case",
-    "FAMILY_RANGES", "RobotDraw", "draw_robot", "first_mode",
+    "FAMILY_RANGES", "RobotDraw", "draw_robot", "first_mode", "TARGET_SHAPINGS",
+    "JumpTransition",
 ]

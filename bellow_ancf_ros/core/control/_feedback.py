@@ -59,6 +59,10 @@ Safeguards
 * **Reset**: a target jump larger than ``reset_jump_m`` (or
   ``reset_jump_rad``) clears the correction (the old one belongs elsewhere
   in the workspace).
+* **A move of the controller's own**: a jump of the target stream made a
+  smooth move (:class:`~._jumps.JumpTransition`) is not a mismatch: the
+  caller passes ``hold_until`` and measurements captured before it are not
+  integrated (state ``MOVING``); the correction stays applied.
 * **Outliers** (a swapped or ghost marker): a measurement farther than
   ``outlier_gate_m`` (or ``outlier_gate_rad``) from the median of the last
   :data:`OUTLIER_WINDOW` received measurements is not integrated; the
@@ -133,6 +137,7 @@ STALE = 'holding the correction: measured_pose too old (dropout)'
 OUTLIER = 'holding the correction: newest measured_pose is an outlier'
 HELD = 'frozen: no command went out for the corrected target'
 OSCILLATING = 'holding the correction: oscillation seen, gain cut'
+MOVING = 'holding the correction: a target jump is being moved through'
 
 
 @dataclass(frozen=True)
@@ -207,6 +212,7 @@ class IntegralFeedback:
         self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
         self.gain_scale = 1.0       # cut by the watchdog on every trip
         self._hold_until = -math.inf
+        self._move_until = -math.inf   # a jump's move (and its settling) ends then
 
     # ------------------------------------------------------------ state
     def reset(self) -> None:
@@ -263,8 +269,8 @@ class IntegralFeedback:
 
     @property
     def frozen(self) -> bool:
-        """True while the integrator holds its correction (dropout, outlier, no command)."""
-        return self.state in (STALE, OUTLIER, HELD)
+        """True while the integrator holds its correction (dropout, outlier, no command, move)."""
+        return self.state in (STALE, OUTLIER, HELD, MOVING)
 
     # ------------------------------------------------------------ inputs
     def watch(self, frequency_hz: float, damping_ratio: float | None = None) -> None:
@@ -342,7 +348,8 @@ class IntegralFeedback:
 
     # ------------------------------------------------------------ control step
     def corrected_target(self, t: float, position: Any, z_axis: Any = None,
-                         wanted_at: float | None = None, command: tuple | None = None):
+                         wanted_at: float | None = None, command: tuple | None = None,
+                         hold_until: float | None = None):
         """The target to hand to the inverse at time ``t``: ``(position, z_axis or None)``.
 
         ``wanted_at``: the time the target is wanted at (default ``t``; later
@@ -350,9 +357,13 @@ class IntegralFeedback:
         ``(position, z_axis)`` to correct and hand on, when it is not the pose
         wanted (a dynamic feedforward shifts the command by the motion's
         loads; the measured pose is still compared with the pose wanted).
+        ``hold_until``: measurements captured before this time are not
+        integrated (a jump's move is running, :class:`~._jumps.JumpTransition`).
         Integrates the newest accepted measurement first (unless a safeguard
         says otherwise); see the module docstring.
         """
+        if hold_until is not None and hold_until > self._move_until:
+            self._move_until = float(hold_until)
         s = self.settings
         p_t = np.asarray(position, dtype=float).reshape(3)
         z_t = None
@@ -388,6 +399,9 @@ class IntegralFeedback:
             self._last_t, self._used_meas_t = float(t), self._meas_t   # nothing to catch up
         elif self._meas_t != self._used_meas_t and self._meas_t < self._hold_until:
             self.state = OSCILLATING   # the watchdog tripped: hold, then integrate slower
+            self._last_t, self._used_meas_t = float(t), self._meas_t
+        elif self._meas_t != self._used_meas_t and self._meas_t < self._move_until:
+            self.state = MOVING
             self._last_t, self._used_meas_t = float(t), self._meas_t
         elif self._meas_t != self._used_meas_t:
             # each measurement is integrated once, over the time since the last integration

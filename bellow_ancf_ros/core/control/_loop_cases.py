@@ -2,8 +2,9 @@
 
 Each case runs a fresh :class:`~._loop_simulation.LoopSimulation` of the
 inverse node's closed loop at its defaults (``feedback: integral``,
-``feedback_gain_per_s: auto`` with the node's loop lag and delay, no
-shaping, no dynamic feedforward) around a robot, with targets stamped when
+``feedback_gain_per_s: auto`` with the node's loop lag and delay, a jump of
+the targets moved through smoothly: ``target_shaping: smooth``, no dynamic
+feedforward) around a robot, with targets stamped when
 they are wanted (nobody previewed them: ``preview_s`` 0), and measures what
 the goals name, on the robot's true pose:
 
@@ -31,6 +32,7 @@ from ..model import RobotModel
 from ..solve import solve_forward
 from ._dynamic_feedforward import StreamFeedforward
 from ._feedback import FeedbackSettings
+from ._jumps import JumpTransition
 from ._loop_simulation import LoopSimulation
 from ._mode_check import AUTO_GAIN, ModeCheck
 from ._simulated_robot import SimulatedRobot
@@ -51,16 +53,18 @@ Loop = Callable[[RobotModel, SimulatedRobot, float], LoopSimulation]
 
 
 def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
-                 dynamic_feedforward: bool = False) -> LoopSimulation:
+                 dynamic_feedforward: bool = False, smooth_jumps: bool = True) -> LoopSimulation:
     """The inverse node's closed loop at its defaults around ``robot`` (targets not previewed).
 
-    ``dynamic_feedforward``: as the node's ``dynamic_feedforward: true``.
+    ``dynamic_feedforward``: as the node's ``dynamic_feedforward: true``;
+    ``smooth_jumps``: as its ``target_shaping: smooth`` (the default; False:
+    ``none``).
     """
     ff = (StreamFeedforward(1.0, 0.0, lag_s=LOOP_LAG_S) if dynamic_feedforward else None)
     return LoopSimulation(model, robot, FeedbackSettings(), preview_s=0.0,
                           physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=payload_kg,
                           mode_check=ModeCheck(AUTO_GAIN, LOOP_LAG_S, LOOP_DELAY_S),
-                          feedforward=ff)
+                          feedforward=ff, jumps=JumpTransition() if smooth_jumps else None)
 
 
 def _rest_pose(model: RobotModel, payload_kg: float):

@@ -124,13 +124,17 @@ class LoopSimulation:
     play_compensation_pa : the regulators' play the commands are compensated
         for (:class:`~._play.PlayCompensation`, as the inverse node's
         ``regulator_play_kpa``); 0: none.
+    jumps : a :class:`~._jumps.JumpTransition`: a jump of the (previewed)
+        target becomes a minimum-jerk move at the first mode of
+        ``mode_check``, and the feedback holds its correction through it (the
+        inverse node's ``target_shaping: smooth``).
     """
 
     def __init__(self, model: RobotModel, robot: SimulatedRobot,
                  feedback: FeedbackSettings | None = None, control_rate_hz: float = 50.0,
                  physics_rate_hz: float = 200.0, preview_s: float = 0.0,
                  payload_kg: float | None = None, mode_check=None, feedforward=None,
-                 play_compensation_pa: float = 0.0) -> None:
+                 play_compensation_pa: float = 0.0, jumps=None) -> None:
         """Set up the loop at the robot's current time; nothing is commanded yet."""
         for name, v in (('control_rate_hz', control_rate_hz),
                         ('physics_rate_hz', physics_rate_hz)):
@@ -153,6 +157,7 @@ class LoopSimulation:
         self._outlier_since = False
         self.mode_check = mode_check
         self.feedforward = feedforward
+        self.jumps = jumps
         self.gains: list = []                 # (time, gain) whenever the automatic gain changed
         cfg = model.cfg
         self.play = (PlayCompensation(cfg.n_actuators_total, play_compensation_pa, cfg.p_min,
@@ -165,13 +170,18 @@ class LoopSimulation:
         p, z = target(t + self.preview_s)
         p = np.asarray(p, dtype=float)
         z = None if (z is None or not self.use_orientation) else np.asarray(z, dtype=float)
-        command = None
+        command, hold = None, None
+        if self.jumps is not None:   # a jump becomes a move: commanded and compared with
+            self.jumps.push(t + self.preview_s, p, z)
+            p, z = self.jumps.at(t + self.preview_s)
+            hold = self.jumps.hold_until
         if self.feedforward is not None:   # the command shifted; the loop compares the wanted
             self.feedforward.push(t + self.preview_s, p, z)
             command = self.feedforward.target()
         fb = self.feedback
         if fb is not None:
-            p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s, command=command)
+            p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s, command=command,
+                                       hold_until=hold)
         elif command is not None:
             p, z = command
         inv = solve_inverse(self.model, p, z, payload_kg=self.payload_kg,
@@ -213,13 +223,16 @@ class LoopSimulation:
     def _check_modes(self, t: float, fw) -> None:
         """The first mode at the newest equilibrium: the watchdog's band, the automatic gain."""
         chk, fb = self.mode_check, self.feedback
-        if chk is None or (fb is None and self.feedforward is None) or not chk.due(fw, t):
+        if (chk is None or (fb is None and self.feedforward is None and self.jumps is None)
+                or not chk.due(fw, t)):
             return
         res = chk.update(fw, t)
         if res is None:
             return
         if self.feedforward is not None:
             self.feedforward.set_mode(res.frequency_hz, res.damping_ratio)
+        if self.jumps is not None:
+            self.jumps.set_mode(res.frequency_hz)
         if fb is None:
             return
         fb.watch(res.frequency_hz, res.damping_ratio)

@@ -3,11 +3,16 @@
 What the inverse node does to each target before its (optional) closed-loop
 correction and the static inverse (eq. 28):
 
-* ``shaping`` (``none``, ``zv``, ``zvd``: :class:`~._shaping.TargetShaper`):
-  a step target is replaced by the shaper's staircase, so that it leaves no
-  residual swing at the first mode; the output moves for the shaper's
-  duration after each new target, so the caller re-solves while
-  :meth:`TargetFilter.busy`;
+* ``shaping``: ``smooth`` (the inverse node's default,
+  :class:`~._jumps.JumpTransition`): a jump of the target stream becomes a
+  minimum-jerk move over two periods of the slowest mode the robot may have,
+  a smooth stream passes unchanged; ``zv``, ``zvd``
+  (:class:`~._shaping.TargetShaper`): a step target is replaced by the
+  shaper's staircase, so that it leaves no residual swing at the first mode
+  (known to +-20 %), and a stream is delayed by the shaper; ``none``.  The
+  output moves for a while after a new target, so the caller re-solves
+  while :meth:`TargetFilter.busy`, and a closed loop holds its correction
+  until :attr:`TargetFilter.hold_until`;
 * ``dynamic_feedforward`` (:class:`~._dynamic_feedforward.StreamFeedforward`):
   a moving target is shifted by the inertial and damping loads of its motion
   through the first mode, and by the regulators' lag (``lag_s``); a step is
@@ -25,9 +30,13 @@ from __future__ import annotations
 import numpy as np
 
 from ._dynamic_feedforward import StreamFeedforward
+from ._jumps import JumpTransition
 from ._shaping import SHAPERS, TargetShaper
 
-__all__ = ['TargetFilter']
+__all__ = ['TARGET_SHAPINGS', 'TargetFilter']
+
+#: Values of the inverse node's ``target_shaping``.
+TARGET_SHAPINGS = ('smooth',) + SHAPERS
 
 
 class TargetFilter:
@@ -35,11 +44,12 @@ class TargetFilter:
 
     def __init__(self, shaping: str = 'none', dynamic_feedforward: bool = False,
                  lag_s: float = 0.0) -> None:
-        if shaping not in SHAPERS:
+        if shaping not in TARGET_SHAPINGS:
             raise ValueError(f'target_shaping = {shaping!r} is not allowed; allowed: '
-                             f'{list(SHAPERS)}')
+                             f'{list(TARGET_SHAPINGS)}')
         self.shaping = shaping
-        self.shaper = None if shaping == 'none' else TargetShaper(shaping)
+        self.shaper = None if shaping in ('none', 'smooth') else TargetShaper(shaping)
+        self.jumps = JumpTransition() if shaping == 'smooth' else None
         self.feedforward = (StreamFeedforward(1.0, 0.0, lag_s=lag_s, window_s=0.1)
                             if dynamic_feedforward else None)
         self.mode: tuple[float, float] | None = None
@@ -48,13 +58,16 @@ class TargetFilter:
 
     @property
     def enabled(self) -> bool:
-        """True when shaping or dynamic feedforward is on."""
-        return self.shaper is not None or self.feedforward is not None
+        """True when shaping (smooth jumps included) or dynamic feedforward is on."""
+        return (self.shaper is not None or self.jumps is not None
+                or self.feedforward is not None)
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shape and shift for this first mode from now on."""
         if self.shaper is not None:
             self.shaper.set_mode(frequency_hz, damping_ratio)
+        if self.jumps is not None:
+            self.jumps.set_mode(frequency_hz)
         if self.feedforward is not None:
             self.feedforward.set_mode(frequency_hz, damping_ratio)
         self.mode = (float(frequency_hz), float(damping_ratio))
@@ -64,10 +77,17 @@ class TargetFilter:
         """The shaper's added delay (the centroid of its impulses) [s]; 0 without one."""
         return 0.0 if self.shaper is None or self.mode is None else self.shaper.delay_s
 
+    @property
+    def hold_until(self) -> float | None:
+        """Until when a closed loop holds its correction (a jump's move) [s]; None: never."""
+        return None if self.jumps is None else self.jumps.hold_until
+
     def reset(self) -> None:
         """Forget the stream (the next target is taken as it is)."""
         if self.shaper is not None:
             self.shaper.reset()
+        if self.jumps is not None:
+            self.jumps.reset()
         if self.feedforward is not None:
             self.feedforward.reset()
         self._newest = None
@@ -80,13 +100,17 @@ class TargetFilter:
             self.reset()   # a stream that goes back in time starts again
         if self.shaper is not None:   # (the first target is taken as it is: a stream's start)
             self.shaper.push(t, p, z)
+        if self.jumps is not None:
+            self.jumps.push(t, p, z)
         if self.feedforward is not None:
             self.feedforward.push(t, p, z)
         self._newest = (float(t), p, z)
         self._arrived = False
 
     def busy(self, now: float) -> bool:
-        """True until a :meth:`target` for a time past the shaper's last impulse (re-solve)."""
+        """True until the output stops moving: past the shaper's last impulse, a move's end."""
+        if self.jumps is not None:
+            return self.jumps.busy(now)
         return self.shaper is not None and self.mode is not None and not self._arrived
 
     def target(self, now: float):
@@ -109,6 +133,8 @@ class TargetFilter:
             t = max(now, t_new)
             ref_p, ref_z = self.shaper.at(t)
             self._arrived = t >= t_new + self.shaper.duration_s
+        elif self.jumps is not None:
+            ref_p, ref_z = self.jumps.at(max(now, t_new))
         out_p, out_z = ref_p, ref_z
         if self.feedforward is not None:
             fp, fz = self.feedforward.target()

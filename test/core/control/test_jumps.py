@@ -1,0 +1,116 @@
+"""JumpTransition: a jump of the targets becomes a minimum-jerk move leaving the family at rest."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bellow_ancf_ros.core.control import FeedbackSettings, IntegralFeedback, JumpTransition
+from bellow_ancf_ros.core.control._jumps import CYCLES, MODE_SPREAD, SETTLE_S
+
+F = 2.4    # the two-segment model's first mode [Hz]
+DT = 0.02  # a 50 Hz stream
+
+
+def _stream(jt, ts, path):
+    out = []
+    for t in ts:
+        p, z = path(t)
+        jt.push(t, p, z)
+        out.append(jt.at(t))
+    return out
+
+
+def test_a_held_or_smooth_stream_passes_unchanged():
+    jt = JumpTransition(F)
+    ts = np.arange(0.0, 4.0, DT)
+
+    def circle(t):   # 10 mm radius at 2 s period: 0.63 mm between targets
+        return np.array([0.01 * math.cos(math.pi * t), 0.01 * math.sin(math.pi * t), 0.2]), None
+    for t, (p, _) in zip(ts, _stream(jt, ts, circle)):
+        np.testing.assert_array_equal(p, circle(t)[0])
+    assert jt.moves == 0 and jt.hold_until == -math.inf
+
+
+def test_a_step_becomes_a_minimum_jerk_move_of_two_slowest_periods():
+    jt = JumpTransition(F)
+    dur = CYCLES / (MODE_SPREAD * F)
+    assert jt.duration_s == pytest.approx(dur)
+    a, b = np.array([0.0, 0.0, 0.2]), np.array([0.0, 0.01, 0.2])
+    jt.push(0.0, a)
+    jt.push(1.0, b)
+    assert jt.moves == 1 and jt.hold_until == pytest.approx(1.0 + dur + SETTLE_S)
+    np.testing.assert_allclose(jt.at(1.0)[0], a, atol=1e-15)
+    np.testing.assert_allclose(jt.at(1.0 + dur / 2)[0], (a + b) / 2, atol=1e-12)
+    np.testing.assert_allclose(jt.at(1.0 + dur)[0], b, atol=1e-15)
+    ys = np.array([jt.at(t)[0][1] for t in np.linspace(1.0, 1.0 + dur, 200)])
+    assert np.all(np.diff(ys) >= 0) and ys.min() >= 0 and ys.max() <= 0.01   # never past it
+    assert jt.busy(1.0 + 0.9 * dur) and not jt.busy(1.0 + dur)
+
+
+def test_the_move_leaves_every_mode_of_the_family_nearly_at_rest():
+    """An undamped mode at 0.7-1.4x the model's, driven by the move: residual at most 4.1 %."""
+    jt = JumpTransition(F)
+    jt.push(0.0, np.zeros(3))
+    jt.push(0.0 + 1e-9, np.array([1.0, 0.0, 0.0]))
+    dt = 1e-4
+    ts = np.arange(0.0, jt.duration_s + 1e-12, dt)
+    u = np.array([jt.at(t)[0][0] for t in ts])
+    for scale in np.linspace(MODE_SPREAD, 1.4, 15):   # (f T from 2 to 4)
+        w = 2 * math.pi * F * scale
+        # exact response of x'' = w^2 (u - x) to the piecewise-linear input, sampled finely
+        x, v = 0.0, 0.0
+        for k in range(len(ts) - 1):
+            a = w * w * (0.5 * (u[k] + u[k + 1]) - x)
+            v += a * dt
+            x += v * dt
+        residual = math.hypot(x - 1.0, v / w)
+        assert residual < 0.042, (scale, residual)
+
+
+def test_a_new_jump_during_a_move_starts_where_the_output_is():
+    jt = JumpTransition(F)
+    jt.push(0.0, np.zeros(3))
+    jt.push(0.1, np.array([0.01, 0.0, 0.0]))
+    mid = jt.at(0.3)[0]
+    jt.push(0.3, np.array([0.0, 0.01, 0.0]))
+    np.testing.assert_allclose(jt.at(0.3)[0], mid, atol=1e-15)   # continuous
+    assert jt.moves == 2
+    np.testing.assert_allclose(jt.at(0.3 + jt.duration_s)[0], [0.0, 0.01, 0.0], atol=1e-15)
+
+
+def test_no_move_before_the_mode_is_known_and_a_z_axis_jump_is_one():
+    jt = JumpTransition()
+    jt.push(0.0, np.zeros(3))
+    jt.push(0.02, np.array([0.01, 0.0, 0.0]))
+    np.testing.assert_array_equal(jt.at(0.02)[0], [0.01, 0.0, 0.0])
+    jt.set_mode(F)
+    z0, z1 = np.array([0.0, 0.0, 1.0]), np.array([math.sin(0.1), 0.0, math.cos(0.1)])
+    jt.push(0.04, np.array([0.01, 0.0, 0.0]), z0)
+    jt.push(0.06, np.array([0.01, 0.0, 0.0]), z1)   # 5.7 deg: a jump of the z-axis
+    _, z = jt.at(0.06 + jt.duration_s / 2)
+    assert jt.moves == 1 and z == pytest.approx(((z0 + z1) / np.linalg.norm(z0 + z1)))
+    with pytest.raises(ValueError, match='frequency > 0'):
+        jt.set_mode(0.0)
+
+
+def test_the_feedback_holds_its_correction_through_a_move():
+    fb = IntegralFeedback(FeedbackSettings(gain_per_s=5.0))
+    target = np.array([0.0, 0.0, 0.2])
+    for k in range(10):   # a constant 1 mm error is integrated
+        t = 0.02 * k
+        fb.measurement(t, target + [0.001, 0.0, 0.0])
+        fb.corrected_target(t, target)
+    c = fb.correction_m.copy()
+    assert np.linalg.norm(c) > 0
+    for k in range(10, 20):   # the same error during a move: held, state MOVING
+        t = 0.02 * k
+        fb.measurement(t, target + [0.005, 0.0, 0.0])
+        fb.corrected_target(t, target, hold_until=0.5)
+        assert fb.state.startswith('holding the correction: a target jump') and fb.frozen
+    np.testing.assert_array_equal(fb.correction_m, c)
+    for k in range(26, 30):   # captured after it: integrated again
+        t = 0.02 * k
+        fb.measurement(t, target + [0.001, 0.0, 0.0])
+        fb.corrected_target(t, target, hold_until=0.5)
+    assert np.linalg.norm(fb.correction_m) > np.linalg.norm(c)
