@@ -66,7 +66,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/dynamics_bench.py
 	$(VENV)/bin/python bench/remedies_bench.py
 	# the closed loop on 100 robots of the family per segment count (about 25 min on 2 cores)
-	$(VENV)/bin/python bench/family_bench.py
+	$(VENV)/bin/python bench/family_bench.py --doc
 
 # puts bench/speed_table.md (from the last `make bench`) into README.md between its markers
 readme-speed:

@@ -1,5 +1,6 @@
 """bench/family_bench.py: the family's tables say what the runs say (median, p95, driver)."""
 
+import json
 import os
 import sys
 
@@ -54,3 +55,12 @@ def test_one_real_robot_of_the_family_runs_every_case():
 def test_bad_robot_count_is_refused(capsys):
     assert family_bench.main(['--robots', '0']) == 2
     assert '--robots: 0 is not allowed' in capsys.readouterr().err
+
+
+def test_the_docs_show_the_table_of_the_last_full_run():
+    """docs/closed_loop.md's family table is bench/family.json's, not typed by hand."""
+    with open(os.path.join(ROOT, "bench", "family.json")) as f:
+        data = json.load(f)
+    assert data['robots_per_count'] >= 100
+    assert len(data['runs']) == len(family_bench.ROBOTS) * data['robots_per_count']
+    assert family_bench.doc_block() == family_bench.markdown(data)

@@ -109,8 +109,8 @@ class TargetFilter:
 
     def busy(self, now: float) -> bool:
         """True until the output stops moving: past the shaper's last impulse, a move's end."""
-        if self.jumps is not None:
-            return self.jumps.busy(now)
+        if self.jumps is not None:   # (until a target at the move's end was given out)
+            return self.mode is not None and not self._arrived
         return self.shaper is not None and self.mode is not None and not self._arrived
 
     def target(self, now: float):
@@ -134,7 +134,9 @@ class TargetFilter:
             ref_p, ref_z = self.shaper.at(t)
             self._arrived = t >= t_new + self.shaper.duration_s
         elif self.jumps is not None:
-            ref_p, ref_z = self.jumps.at(max(now, t_new))
+            t = max(now, t_new)
+            ref_p, ref_z = self.jumps.at(t)
+            self._arrived = not self.jumps.busy(t)
         out_p, out_z = ref_p, ref_z
         if self.feedforward is not None:
             fp, fz = self.feedforward.target()

@@ -81,3 +81,19 @@ def test_the_reference_is_shaped_not_shifted():
     (cmd, _), (ref, _) = tf.targets(t)
     np.testing.assert_allclose(ref, tf.shaper.at(t)[0])
     assert np.linalg.norm(cmd - ref) > 1e-4   # the shift is on the command only
+
+
+def test_smooth_stays_busy_until_the_moves_end_was_given_out():
+    """A caller that re-solves while busy gets the target itself last, not a point short of it."""
+    tf = TargetFilter('smooth')
+    a, b = np.array([0.0, 0.0, 0.2]), np.array([0.0, 0.01, 0.2])
+    tf.push(0.0, a)
+    assert not tf.busy(0.0)                 # no mode yet: targets as they come
+    tf.set_mode(10.0, 0.05)
+    tf.push(1.0, b)
+    dur = tf.jumps.duration_s
+    assert tf.busy(1.0) and tf.target(1.0 + dur / 2)[0][1] < 0.01
+    assert tf.busy(1.0 + 2 * dur)           # time alone does not end it ...
+    np.testing.assert_array_equal(tf.target(1.0 + dur)[0], b)
+    assert not tf.busy(1.0 + dur)           # ... the target at the end given out does
+    assert tf.hold_until == pytest.approx(1.0 + dur + 0.5)
