@@ -184,6 +184,9 @@ class ExcitationPublisher(Node):
         if t < 0:
             return
         step = int(t // self.dwell)
+        if step > self.step + 1:   # a stall (a busy CPU) would skip a step: each is sent, and
+            step = self.step + 1   # held for its whole dwell from when it went out
+            self._t0 = time.monotonic() - step * self.dwell
         if step >= len(self.sequence):
             self.vent('excitation finished')
             self.finished = True

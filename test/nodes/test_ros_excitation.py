@@ -72,3 +72,30 @@ def test_steps_through_the_sequence_then_vents(ros_context, unit, capfd):
         capfd.readouterr().err)
     node.destroy_node()
     client.destroy_node()
+
+
+def test_a_stall_skips_no_step_and_keeps_each_dwell(ros_context):
+    """A tick late by several dwells (a busy CPU) sends the next step, held for its dwell."""
+    ns = f'/exc{random.randint(0, 99999)}'
+    params = [Parameter('robot_config', value='two_segment'), Parameter('dwell_s', value=0.05),
+              Parameter('rate_hz', value=0.1), Parameter('points_per_scheme', value=2),
+              Parameter('n_random', value=3), Parameter('seed', value=7),
+              Parameter('start_delay_s', value=0.0)]
+    node = ExcitationPublisher(namespace=ns, context=ros_context, parameter_overrides=params)
+    sent = []
+    node._publish = lambda p, vent=False: sent.append(np.array(p, dtype=float))
+    try:
+        node._tick()                   # the first step goes out
+        assert node.step == 0
+        time.sleep(0.2)                # four dwells without a tick
+        node._tick()
+        assert node.step == 1          # the next step, not the fourth
+        node._tick()
+        assert node.step == 1          # held for its dwell from when it went out
+        time.sleep(0.06)
+        node._tick()
+        assert node.step == 2
+        expected = excitation_sequence(load_robot('two_segment'), 2, 3, 7)
+        np.testing.assert_allclose(sent[1], expected[1])
+    finally:
+        node.destroy_node()
