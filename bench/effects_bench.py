@@ -28,8 +28,7 @@ import numpy as np
 
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 from bellow_ancf_ros.core.control import (EFFECTS, FeedbackSettings, LoopSimulation,
-                                          PlantEffects, SimulatedRobot)
-from bellow_ancf_ros.core.experiments import trajectory_target
+                                          PlantEffects, SimulatedRobot, paper_circle)
 
 PAPER_PERIOD_S = 20.0
 CONTROL_HZ = 50.0
@@ -46,13 +45,6 @@ def _rows():
     return rows
 
 
-def _circle(cfg, period):
-    """The paper's circle for this robot (two segments: bending at 10 deg) as target(t)."""
-    if cfg.n_segments == 1:
-        return trajectory_target('planar_circle', cfg, period=period)
-    return trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0)
-
-
 def run_one(job):
     """One row at one speed: the loop's errors over the second period, outliers, dropouts."""
     robot_name, speed, label, effects, frame, feedback = job
@@ -63,7 +55,7 @@ def run_one(job):
                          FeedbackSettings(correction_frame=frame) if feedback else None,
                          control_rate_hz=CONTROL_HZ, preview_s=effects.preview_s(CONTROL_HZ))
     period = PAPER_PERIOD_S / speed
-    circle = _circle(model.cfg, period)
+    circle = paper_circle(model.cfg, period)
     t_wall = time.perf_counter()
     sim.run(1.0, lambda t: circle(0.0))           # lead-in at the path's first point
     t0 = robot.time_s

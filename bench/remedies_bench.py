@@ -43,7 +43,7 @@ from bellow_ancf_ros.core import (RobotModel, limit_blas_threads, load_robot, so
                                   solve_inverse)
 from bellow_ancf_ros.core.control import (AUTO_GAIN, FeedbackSettings, LoopSimulation, ModeCheck,
                                           PlantEffects, SimulatedRobot, StreamFeedforward,
-                                          shaped, shaper_impulses)
+                                          paper_circle, shaped, shaper_impulses)
 from bellow_ancf_ros.core.dynamics import natural_modes
 from bellow_ancf_ros.core.experiments import trajectory_target
 
@@ -142,8 +142,7 @@ def circle_10x(name, dynamic):
     period = 2.0
     model = RobotModel(load_robot(name))
     cfg = model.cfg
-    circ = (trajectory_target('planar_circle', cfg, period=period) if cfg.n_segments == 1
-            else trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0))
+    circ = paper_circle(cfg, period)
     p0, z0 = circ(0.0)
     mode = natural_modes(solve_inverse(model, p0, z0 if cfg.n_segments > 1 else None).forward,
                          1).first

@@ -50,8 +50,8 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, FeedbackSettings, IntegralFeedback,
-                            ModeCheck, gain_setting)
+from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, LOOP_DELAY_S, LOOP_LAG_S,
+                            FeedbackSettings, IntegralFeedback, ModeCheck, gain_setting)
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
@@ -103,9 +103,9 @@ FEEDBACK_PARAMETER_TABLE = (
     ('feedback_rate_hz', 20.0,
      'Rate at which the newest target is re-solved with a fresh correction [Hz].',
      0.1, 1000.0),
-    ('feedback_loop_lag_s', 0.06,
+    ('feedback_loop_lag_s', LOOP_LAG_S,
      "The regulators' time constant, for the loop's margins [s].", 0.0, 10.0),
-    ('feedback_loop_delay_s', 0.05,
+    ('feedback_loop_delay_s', LOOP_DELAY_S,
      "The loop's delay for its margins: regulator dead time, mocap latency, half a "
      'control and half a measurement period [s].', 0.0, 10.0))) + (
     Param('feedback_correction_frame', _DEF.correction_frame, descriptor(

@@ -47,7 +47,8 @@ from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, 
 from ._dynamic_feedforward import DynamicFeedforward, StreamFeedforward, dynamic_path
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
-from ._loop_cases import STEP_M, circle_case, default_loop, held_case, step_case
+from ._loop_cases import (LOOP_DELAY_S, LOOP_LAG_S, STEP_M, circle_case, default_loop,
+                          held_case, paper_circle, step_case)
 from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeCheck,
                           ModeCheckResult, gain_setting)
 from ._motion_capture import MocapSample, MotionCapture
@@ -74,6 +75,7 @@ __all__ = [
     "DynamicFeedforward", "StreamFeedforward", "dynamic_path", "TargetFilter",
     "ModeNotch", "NOTCH_MISMATCH", "NOTCH_POLE_DAMPING", "PlayCompensation", "mode_variants",
     "robust_margins", "STEP_M", "circle_case", "default_loop", "held_case", "step_case",
+    "LOOP_LAG_S", "LOOP_DELAY_S", "paper_circle",
     "FAMILY_RANGES", "RobotDraw", "draw_robot", "first_mode", "TARGET_SHAPINGS",
     "JumpTransition",
 ]

@@ -38,9 +38,10 @@ from ._mode_check import AUTO_GAIN, ModeCheck
 from ._simulated_robot import SimulatedRobot
 
 __all__ = ['LOOP_DELAY_S', 'LOOP_LAG_S', 'STEP_M', 'circle_case', 'default_loop', 'held_case',
-           'step_case']
+           'paper_circle', 'step_case']
 
-#: The inverse node's ``feedback_loop_lag_s`` and ``feedback_loop_delay_s`` defaults.
+#: The loop's lag and delay for its margins: the inverse node's ``feedback_loop_lag_s`` and
+#: ``feedback_loop_delay_s`` defaults.
 LOOP_LAG_S, LOOP_DELAY_S = 0.06, 0.05
 #: The step target's size [m].
 STEP_M = 0.010
@@ -65,6 +66,16 @@ def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0
                           physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=payload_kg,
                           mode_check=ModeCheck(AUTO_GAIN, LOOP_LAG_S, LOOP_DELAY_S),
                           feedforward=ff, jumps=JumpTransition() if smooth_jumps else None)
+
+
+def paper_circle(cfg, period: float):
+    """The paper's circle for this robot as ``target(t)``.
+
+    Planar for one segment; for two or more, the bending circle at 10 deg.
+    """
+    if cfg.n_segments == 1:
+        return trajectory_target('planar_circle', cfg, period=period)
+    return trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0)
 
 
 def _rest_pose(model: RobotModel, payload_kg: float):
@@ -98,11 +109,8 @@ def circle_case(model: RobotModel, robot: SimulatedRobot, speed: float,
                 spin_up_s: float = 1.0) -> dict:
     """The paper's circle at ``speed`` times its speed: RMSE over the second full period."""
     sim = loop(model, robot, payload_kg)
-    cfg = model.cfg
     period = 20.0 / speed
-    path = (trajectory_target('planar_circle', cfg, period=period) if cfg.n_segments == 1
-            else trajectory_target('bending_circle', cfg, period=period,
-                                   bending_angle_deg=10.0))
+    path = paper_circle(model.cfg, period)
     sim.run(settle_s, lambda t: path(0.0))
     t0 = robot.time_s
     rec = sim.run(spin_up_s + 2 * period, lambda t: path(spin_up(t - t0, spin_up_s)))

@@ -16,17 +16,10 @@ from bellow_ancf_ros.core.control import (
     LoopSimulation,
     PlantEffects,
     SimulatedRobot,
+    paper_circle,
 )
-from bellow_ancf_ros.core.experiments import trajectory_target
 
 PREVIEW_S = 0.09     # regulator dead time + lag + half a control period
-
-
-def _circle(cfg, period):
-    """The paper's circle for this robot (two segments: bending at 10 deg) as target(t)."""
-    if cfg.n_segments == 1:
-        return trajectory_target('planar_circle', cfg, period=period)
-    return trajectory_target('bending_circle', cfg, period=period, bending_angle_deg=10.0)
 
 
 def _loop(name, feedback=True, seed=1, effects=None, preview=PREVIEW_S):
@@ -67,7 +60,7 @@ def test_circle_at_four_times_the_papers_speed(name, goal_mm, goal_deg):
     out = {}
     for fb in (False, True):
         sim = _loop(name, feedback=fb)
-        circle = _circle(sim.model.cfg, period)
+        circle = paper_circle(sim.model.cfg, period)
         start = circle(0.0)
         sim.run(1.0, lambda t: start)            # lead-in at the path's first point
         t0 = sim.robot.time_s
@@ -128,7 +121,7 @@ def test_azimuthal_frame_learns_the_mismatch_once_base_frame_lags():
                                                           angle_noise_rad=0.0))
         sim = LoopSimulation(model, robot, FeedbackSettings(correction_frame=frame),
                              preview_s=0.1)
-        circle = _circle(model.cfg, 5.0)
+        circle = paper_circle(model.cfg, 5.0)
         sim.run(1.0, lambda t: circle(0.0))
         t0 = robot.time_s
         rec = sim.run(10.0, lambda t: circle(t - t0))
@@ -177,7 +170,7 @@ def _ten_x(name, payload_kg, notch):
     sim = LoopSimulation(model, robot, FeedbackSettings(notch=notch), preview_s=PREVIEW_S,
                          physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=payload_kg,
                          mode_check=ModeCheck('auto', 0.06, 0.05, notch=notch))
-    circle = _circle(model.cfg, 2.0)
+    circle = paper_circle(model.cfg, 2.0)
     sim.run(3.0, lambda t: circle(0.0))
     t0 = robot.time_s
     rec = sim.run(6.0, lambda t: circle(spin_up(t - t0, 2.0)))
