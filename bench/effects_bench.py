@@ -26,6 +26,7 @@ from multiprocessing import Pool
 
 import numpy as np
 
+from bellow_ancf_ros.cli.output import number
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 from bellow_ancf_ros.core.control import (EFFECTS, FeedbackSettings, LoopSimulation,
                                           PlantEffects, SimulatedRobot, paper_circle)
@@ -111,7 +112,7 @@ def main(argv=None) -> int:
             for label, *_ in _rows():
                 o = results[(r, v, label)]
                 line = (f'  {label:30s} {o["rmse_mm"]:8.3f} {o["max_mm"]:7.3f} '
-                        f'{o["rmse_mm"] - base:+8.3f}')
+                        f'{number(o["rmse_mm"] - base, "+8.3f")}')
                 if two:
                     line += f' {o["rmse_deg"]:8.3f} {o["max_deg"]:7.3f}'
                 step = o['step_after_outlier_kpa']

@@ -43,6 +43,34 @@ def fmt(value, spec='.4g', none='n/a'):
     return format(value, spec)
 
 
+def number(value, spec='.3f') -> str:
+    """``value`` formatted with ``spec``, never as a negative zero.
+
+    A value that rounds to zero prints as zero, at the same width and with a
+    ``+`` if ``spec`` asks for one: ``number(-1e-5, '+.3f')`` is ``'+0.000'``,
+    not ``'-0.000'``.
+    """
+    text = format(value, spec)
+    if '-' in text:
+        try:
+            zero = float(text.strip().rstrip('%')) == 0
+        except ValueError:
+            zero = False
+        if zero:
+            return format(0.0, spec)
+    return text
+
+
+def numbers(values, spec='.3f') -> str:
+    """A bracketed list of :func:`number` texts: ``'[0.000, 0.100, -0.294]'``."""
+    return '[' + ', '.join(number(v, spec) for v in values) + ']'
+
+
+def count(n, noun, plural=None) -> str:
+    """``n`` and the noun, singular for one: ``'1 dropout'``, ``'0 dropouts'``."""
+    return f'{n} {noun if n == 1 else (plural or noun + "s")}'
+
+
 # ------------------------------------------------------------- files
 def open_out(path, option):
     """Open an output file for ``option``; failure is a :class:`UsageError`."""

@@ -27,8 +27,8 @@ import numpy as np
 from ..core import RobotModel, solve_forward, solve_inverse
 from .batch import CsvRows, require_json, row_numbers, run_batch
 from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_loads, call_solver, config_help,
-                     element_count, emit_json, finite_float, is_number, load_model, print_lines,
-                     warn)
+                     element_count, emit_json, finite_float, load_model, print_lines, warn)
+from .output import count, number
 
 INVERSE_POSITION_COLUMNS = ('x', 'y', 'z')
 INVERSE_AXIS_COLUMNS = ('zx', 'zy', 'zz')
@@ -53,16 +53,10 @@ def check_pressures_kpa(model: RobotModel, values_kpa) -> np.ndarray:
 
 
 # --------------------------------------------------- human summaries
-def _vec(values, fmt='{:9.3f}') -> str:
+def _vec(values, spec='9.3f') -> str:
     if values is None:
         return '(none)'
-    texts = []
-    for v in values:
-        text = fmt.format(v)
-        if is_number(text) and float(text) == 0:
-            text = text.replace('-', ' ')  # no "-0.000"
-        texts.append(text)
-    return ' '.join(texts)
+    return ' '.join(number(v, spec) for v in values)
 
 
 def _yes_no(value) -> str:
@@ -82,13 +76,13 @@ def _forward_summary(model: RobotModel, d: dict, seconds: float) -> list[str]:
         _robot_line(model),
         'payload        ' + ('n/a' if d.get('payload_kg') is None else f"{d['payload_kg']:g} kg"),
         'tip force      ' + ('none' if not any(d.get('tip_force_n') or ())
-                             else f"{_vec(d['tip_force_n'], '{:g}')}  N (x y z, base frame)"),
+                             else f"{_vec(d['tip_force_n'], 'g')}  N (x y z, base frame)"),
         f"pressures      {_vec(np.asarray(d['pressures_pa']) / 1e3)}  kPa",
-        f"stretch        {_vec(d['stretch'], '{:9.5f}')}",
+        f"stretch        {_vec(d['stretch'], '9.5f')}",
         f"tip position   {_vec(None if pos is None else np.asarray(pos) * 1e3)}  mm (x y z)",
-        f"tip z-axis     {_vec(d.get('z_axis'), '{:9.5f}')}",
+        f"tip z-axis     {_vec(d.get('z_axis'), '9.5f')}",
         f"converged      {_yes_no(d.get('converged'))}, stable {_yes_no(d.get('stable'))}, "
-        f"{d.get('iterations')} iterations, {seconds:.3f} s",
+        f"{count(d.get('iterations'), 'iteration')}, {seconds:.3f} s",
         f"status         {d.get('status')}: {d.get('message')}",
     ]
     return lines
@@ -109,7 +103,7 @@ def _inverse_summary(model: RobotModel, d: dict, seconds: float) -> list[str]:
     ang_err = d.get('angle_error_rad')
     extra = [f"target         {_vec(target)}  mm (x y z)"]
     if d.get('target_z_axis') is not None:
-        extra.append(f"target z-axis  {_vec(d['target_z_axis'], '{:9.5f}')}")
+        extra.append(f"target z-axis  {_vec(d['target_z_axis'], '9.5f')}")
     extra += [
         f"reachable      {_yes_no(d.get('reachable'))} (success {_yes_no(d.get('success'))})",
         'position error ' + ('n/a' if pos_err is None or not math.isfinite(pos_err)

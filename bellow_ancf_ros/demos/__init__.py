@@ -2,7 +2,8 @@
 
 Each runs as ``python -m bellow_ancf_ros.demos.<module>``:
 
-* :mod:`.closed_loop` -- ``make demo``, the main job (about 2 min): the nodes
+* :mod:`.closed_loop` -- ``make demo``, the main job (about 14 min on a quiet
+  2-core machine, longer on a busy one): the nodes
   as separate processes against a mismatched simulated robot, feedforward
   then integral feedback, one and two segments, next to the paper's
   figures; a plot.
@@ -10,7 +11,7 @@ Each runs as ``python -m bellow_ancf_ros.demos.<module>``:
   :mod:`.closed_loop`, about 40 s): an unannounced payload and a push on the
   simulated robot, the force estimator's reading against the truth, and
   tracking with integral feedback alone and with force compensation.
-* :mod:`.calibration` -- ``make demo-calibrate`` (about 2.5 min): excitation
+* :mod:`.calibration` -- ``make demo-calibrate`` (about 3 min): excitation
   -> simulated robot seen by an offset motion capture -> rosbag2 ->
   ``bellow-ancf calibrate`` -> tracking with the nominal and the
   calibrated robot files.

@@ -1,8 +1,9 @@
 """Calibration end to end (``make demo-calibrate``): excite, record, calibrate, use.
 
 1. ``simulated_robot_node`` plays the real robot: the mismatched robot file
-   (``config/<robot>_mismatched.yaml``: pitch radius, ``D_a``, stiffness and
-   masses off by 10 %, a finer mesh).  Its ``measured_pose`` (base frame) is
+   (``config/<robot>_mismatched.yaml``: pitch radius, ``D_a`` and stiffness
+   10 % below the default's for one segment, 6-8 % above for two, masses 10 %
+   above, a finer mesh).  Its ``measured_pose`` (base frame) is
    re-expressed by this process in a motion-capture frame offset by
    centimetres and degrees (:data:`MOCAP_T`, :data:`MOCAP_ROTVEC_DEG`, unknown
    to the calibration) and republished on ``measured_pose``, as a mocap
@@ -46,6 +47,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..cli.output import numbers
 from .pipeline import NodeProcess, SpunNode, child_env, record_qos, tidy, wait_until
 
 #: pose of the base frame in the demo's motion-capture frame (unknown to the calibration)
@@ -180,9 +182,8 @@ def _calibrate(args, env, bag, robot_file, res_png) -> dict:
         print(f'  {key:32s} {p["nominal"]:10.5g} -> {p["value"]:10.5g} +- {p["std_error"]:.3g}')
     fr = cal['frame']
     rv = np.degrees(Rotation.from_quat(fr['quaternion_xyzw']).as_rotvec())
-    t_mm = np.round(np.array(fr['translation_m']) * 1e3, 2).tolist()
-    print(f'  mocap frame found: base at {t_mm} mm, '
-          f'rotation vector {np.round(rv, 3).tolist()} deg')
+    t_mm = numbers(np.array(fr['translation_m']) * 1e3, '.2f')
+    print(f'  mocap frame found: base at {t_mm} mm, rotation vector {numbers(rv)} deg')
     print(f'  samples {cal["samples"]}: position RMSE {cal["rmse_before_mm"]:.3f} -> '
           f'{cal["rmse_after_mm"]:.3f} mm, z-axis {cal["rmse_before_deg"]:.3f} -> '
           f'{cal["rmse_after_deg"]:.3f} deg; {robot_file}, {res_png}')

@@ -75,6 +75,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli.output import count, numbers
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
@@ -107,7 +108,6 @@ class Case:
     payload_kg: float = 0.0          #: carried by the robot and declared to the controller
     modes: tuple = MODES             #: the controllers run (``feedback`` / feedforward kind)
     speeds: tuple | None = None      #: its speeds (None: every speed asked for)
-    notch: bool = False              #: the closed loop's ``feedback_notch``
     hold_s: float | None = None      #: its hold after the path (None: ``--hold``)
 
     @property
@@ -120,9 +120,7 @@ CASES = (
     Case('one_segment', 'planar_circle', None, 'one segment, planar circle'),
     Case('two_segment', 'bending_circle', 10.0, 'two segments, bending circle at 10 deg'),
     # a 16 s hold: the automatic gain with 50 g (0.41 /s, a 2.4 s time constant) relearns
-    # the rest pose after a 10x path slowly (held 1.16 mm over 2-4 s, 0.68 mm over 4-8 s);
-    # with the notch (1.75 /s) 0.21 mm after 4 s, but the 10x circle measured 1.43-1.77 mm
-    # against 1.16-1.19 mm without it
+    # the rest pose after a 10x path slowly (held 1.16 mm over 2-4 s, 0.68 mm over 4-8 s)
     Case('two_segment', 'bending_circle', 10.0, 'two segments carrying 50 g (declared)',
          payload_kg=0.05, modes=('integral',), speeds=(1.0, 10.0), hold_s=16.0),
 )
@@ -206,7 +204,7 @@ class Run:
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
             'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
             'dynamic_feedforward': mode == 'dynamic', 'payload_kg': case.payload_kg,
-            'regulator_play_kpa': play_kpa(args.plant), 'feedback_notch': case.notch},
+            'regulator_play_kpa': play_kpa(args.plant)},
             self.env, log_dir, tag=self.tag)
         self.procs['forward'] = NodeProcess('forward_kinetostatic_node', {
             'robot_config': case.robot, 'max_rate_hz': 5.0}, self.env, log_dir,
@@ -669,15 +667,15 @@ def main(argv=None) -> int:
             print(f'    {MODE_NAMES[mode]:12s} RMSE {_fmt(r, two)}; held target: {steady}; '
                   f'{r["n_measured"]} samples; model vs robot {model}')
             after = r['step_after_outlier_kpa']
-            print(f'    {"":12s} mocap: {r["outliers"]} outliers (largest command step after '
-                  'one: ' + ('none' if after is None else f'{after:.2f} kPa')
+            print(f'    {"":12s} mocap: {count(r["outliers"], "outlier")} (largest command '
+                  'step after one: ' + ('none' if after is None else f'{after:.2f} kPa')
                   + f', normal steps p99 {r["step_normal_p99_kpa"] or 0.0:.2f} kPa), '
-                  f'{r["dropouts"]} dropouts (error 2 s after: '
+                  f'{count(r["dropouts"], "dropout")} (error 2 s after: '
                   + (', '.join(f'{e:.3f}' for e in r['error_2s_after_dropouts_mm']) or 'n/a')
                   + ' mm)')
             print(f'    {"":12s} {r["n_commands"]} pressure commands, all finite and within '
                   f'the limits: {"yes" if r["safe"] else "NO"}; last (vent): '
-                  f'{[round(v, 3) for v in r["vent"]] if r["vent"] else None}; inverse '
+                  + (numbers(r['vent']) if r['vent'] else 'None') + '; inverse '
                   f'diagnostics {r["levels"][0]} OK / {r["levels"][1]} WARN / '
                   f'{r["levels"][2]} ERROR')
             passed &= r['safe']

@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli.output import numbers
 from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until, wait_up
 
 PLANT, MODEL = 'one_segment_mismatched', 'one_segment'
@@ -239,8 +240,8 @@ def main(argv=None) -> int:
             within = (np.all(np.abs(est[:2] - truth[:2]) <= LATERAL_TOL_N)
                       and abs(est[2] - truth[2]) <= VERTICAL_TOL_N)
             good &= bool(within)
-            print(f'    estimator, {label}: {np.round(est, 3).tolist()} N against the truth '
-                  f'{np.round(truth, 3).tolist()} N ({"within" if within else "NOT within"} '
+            print(f'    estimator, {label}: {numbers(est)} N against the truth '
+                  f'{numbers(truth)} N ({"within" if within else "NOT within"} '
                   f'{LATERAL_TOL_N:g} N sideways, {VERTICAL_TOL_N:g} N vertically)')
         ok &= good
     print('PASS' if ok else 'FAIL')

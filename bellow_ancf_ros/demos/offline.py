@@ -1,4 +1,4 @@
-"""Demonstration of the model (``make demo``, ``python -m bellow_ancf_ros.demos.offline``).
+"""Demonstration of the model (``make demo-offline``, ``python -m bellow_ancf_ros.demos.offline``).
 
 Solves forward and inverse problems on the shipped one- and two-segment
 robots and prints readable tables with timings (a few seconds in total).
@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from ..cli.output import count, number
 from ..core import RobotModel, load_robot, solve_forward, solve_inverse
 from ..core.geometry import angle_between
 
@@ -22,11 +23,11 @@ def _timed(func, *args, **kwargs):
 
 
 def _kpa(pressures_pa) -> str:
-    return ' '.join(f'{p / 1e3:7.1f}' for p in pressures_pa)
+    return ' '.join(number(p / 1e3, '7.1f') for p in pressures_pa)
 
 
 def _mm(position_m) -> str:
-    return ' '.join(f'{v * 1e3 + 0.0:7.2f}' for v in np.round(position_m, 6))
+    return ' '.join(number(v * 1e3, '7.2f') for v in position_m)
 
 
 def _tilt_deg(z_axis) -> float:
@@ -171,7 +172,8 @@ def main(argv=None) -> int:
 
     total = time.perf_counter() - start
     print(f'\ndemo finished in {total:.1f} s'
-          + ('' if not demo.failures else f'; {demo.failures} case(s) did not behave as expected'))
+          + ('' if not demo.failures
+             else f'; {count(demo.failures, "case")} did not behave as expected'))
     return 0 if demo.failures == 0 else 1
 
 

@@ -22,7 +22,7 @@ from .ros_util import WARN_THROTTLE_S
 __all__ = [
     'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
     'ThrottledStatus', 'diagnostic_status', 'inverse_values', 'publish_diagnostic',
-    'solve_values',
+    'solve_outcome', 'solve_values',
 ]
 
 #: Minimum interval between two WARN diagnostics of the same refusal reason [s].
@@ -147,6 +147,40 @@ def inverse_values(inv, dt: float, payload: float, unit: str) -> dict:
         'payload_kg': payload,
         'pressure_unit': unit,
     }
+
+
+def solve_outcome(inv, usable: bool, budget: bool, more: bool, unsafe=None,
+                  feedback_state: str | None = None) -> tuple:
+    """What one inverse solve means: ``(level, message, counter or None, logged)``.
+
+    ``usable``: the solve gave an equilibrium; ``budget``: it ended on its
+    time or iteration budget (``more``: its next slice is queued);
+    ``unsafe``: why the safety gate refused its pressures, or None;
+    ``feedback_state``: the closed loop's state when it ran without fresh
+    measured poses, or None.  ``counter``: the node's counter to count it
+    in; ``logged``: the message also goes to the log (WARN or ERROR, as
+    ``level``).
+    """
+    ok, warn, error = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+    going = ', continuing' if more else ''
+    if not usable and budget:
+        return (warn if more else error, f'no usable answer within the solve budget, last '
+                f'command kept{going}: {inv.message}', None if more else 'failed', True)
+    if not usable:
+        return error, f'solve failed ({inv.message}); last command kept', 'failed', True
+    if unsafe is not None:
+        return (error, f'solver output refused by the safety gate ({unsafe}); last command '
+                'kept', 'failed', True)
+    if budget:
+        return (warn, f'solve budget used up, best in-limit pressures so far sent{going}: '
+                f'{inv.message}', 'over_budget', True)
+    if inv.reachable and feedback_state is not None:
+        return (warn, f'target reached without fresh measured poses: feedback '
+                f'{feedback_state}', None, False)
+    if inv.reachable:
+        return ok, 'target reached', None, False
+    return (warn, f'target unreachable, best reachable pressures sent: {inv.message}',
+            'unreachable', True)
 
 
 class Refusals:

@@ -1,131 +1,31 @@
-"""Inverse-kinetostatic feedforward controller (managed / lifecycle node).
+"""Inverse-kinetostatic controller (managed / lifecycle node): target poses -> pressures.
 
-``target_pose`` (geometry_msgs/PoseStamped) -> inverse kinetostatics (core
-:func:`~bellow_ancf_ros.core.solve_inverse`) -> ``pressure_command``
-(std_msgs/Float64MultiArray).
+``target_pose`` (geometry_msgs/PoseStamped in ``base_frame``; one segment:
+the position; two or more: the position and the local z-axis) -> the
+target's shaping for the robot's mode (:class:`~.target_link.TargetLink`)
+-> the closed loop's correction from ``measured_pose``, with ``feedback:
+integral`` (:class:`~.measured_feedback.FeedbackLink`) -> inverse
+kinetostatics (core :func:`~bellow_ancf_ros.core.solve_inverse`) -> the
+safety gate (:func:`~.contract.safe_pressures`: never NaN, inf or outside
+``[p_min, p_max]``) -> ``pressure_command`` (std_msgs/Float64MultiArray, one
+gauge pressure per actuator, in Pa or kPa as its layout label says) and
+``commanded_pose`` (the model's pose for it); ``/diagnostics``: a status per
+solve and a 1 Hz heartbeat in every lifecycle state.
 
-Topics
-------
-subscribes
-    ``target_pose`` (geometry_msgs/PoseStamped) in ``base_frame``.  One
-    segment: the position only (the orientation is ignored, said once in the
-    log).  Two or more segments: the position and the local z-axis of the
-    orientation (the rotation about that axis cannot be controlled and is
-    ignored).
-publishes
-    ``pressure_command`` (std_msgs/Float64MultiArray): one gauge pressure per
-    actuator, segment by segment, actuator 1, 2, ... within a segment;
-    ``layout.dim[0]`` has ``label = 'actuator_pressure_gauge_pa'`` (or
-    ``..._kpa``), ``size = stride =`` number of actuators.  Unit Pa (REP-103)
-    unless ``pressure_unit`` is ``kPa``.
-    ``commanded_pose`` (geometry_msgs/PoseStamped): the end-effector pose the
-    model predicts for the command (stamp = the target's stamp, or the solve
-    time if the target had none).
-    ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): a status per solve
-    (solve time, iterations, residual, reachable, active pressure limits;
-    a new level or message at once, an unchanged one at most at 10 Hz with
-    the newest values, :class:`~bellow_ancf_ros.nodes.diagnostics.ThrottledStatus`),
-    per refused target (WARN, throttled), and a 1 Hz heartbeat
-    ``'<node>: status'`` in every lifecycle state (lifecycle state, robot, age
-    of the last solve, solve-time statistics, counters;
-    :class:`~bellow_ancf_ros.nodes.diagnostics.Heartbeat`: other parts of the
-    node add their fields with ``self.heartbeat.add_source(fn)``).
+The newest target only is solved, on a worker thread
+(:class:`~.worker.LatestWorker`), at most ``max_rate_hz`` times a second,
+each solve within a wall-clock budget of ``BUDGET_PERIODS / max_rate_hz``:
+a solve that needs more sends the best in-limit pressures so far and goes on
+in the next slice (at most ``MAX_CONTINUATIONS``).  Pressures go out only
+while active; deactivate, shutdown, Ctrl-C, SIGTERM, the end of the process
+that started it and another publisher of ``pressure_command``
+(:mod:`.ownership`) each bring the vent command (0 Pa gauge), once, and
+shutdown waits for its acknowledgement.  A bad target, an unreachable one,
+a failed solve: a throttled log line and a diagnostics status, the last
+good command stands, the node keeps serving.
 
-QoS
----
-``target_pose`` and ``pressure_command``/``commanded_pose``: reliable,
-keep-last, depth 5 (:data:`QOS_DEPTH`): a slow consumer loses old samples,
-never the newest, and nothing queues without bound.  ``/diagnostics``:
-reliable, keep-last 10.
-
-Latest target only
-------------------
-The subscription callback only validates a target and stores it in a
-one-item slot (:class:`~bellow_ancf_ros.nodes.worker.LatestWorker`); a worker
-thread solves the newest stored target, warm-started from the previous
-solution, with solve starts at least ``1/max_rate_hz`` apart.  Targets that
-arrive while a solve runs overwrite each other: stale ones are dropped,
-memory is bounded, and the output rate is at most ``max_rate_hz``.
-
-Every solve has a wall-clock budget of ``BUDGET_PERIODS / max_rate_hz``
-(50 ms at the default 100 Hz), so the node never freezes on a hard target:
-when it runs out, the best in-limit equilibrium found so far is sent with a
-WARN diagnostic ("solve budget used up"), and the solve continues from it in
-the next slice unless a newer target has arrived (at most
-``MAX_CONTINUATIONS`` slices per target; then the best answer stands).  The
-result of a slice carries the solve's progress (core
-:func:`~bellow_ancf_ros.core.solve_inverse`, "Budgets"), so the slices end
-at the answer one unbudgeted solve would give; a slice may overrun its budget
-until it has made progress (at most four budgets).  The corners of the
-pressure box and the cold start, which the first unreachable target and a
-retried solve need, are solved at configure for the configured payload.
-
-Closed loop
------------
-Parameter ``feedback`` (``none``, the default, the paper's feedforward; or
-``integral``): with ``integral`` the node also subscribes ``measured_pose``
-(geometry_msgs/PoseStamped in ``base_frame``) and hands the inverse a target
-shifted by an integral correction of the measured task-space error
-(:mod:`bellow_ancf_ros.core.control`, wired by
-:class:`~bellow_ancf_ros.nodes.measured_feedback.FeedbackLink`); the newest
-target is re-solved at ``feedback_rate_hz``.  ``commanded_pose`` is then the
-model's pose for the shifted target.  A target's stamp is the time it is
-wanted at (a stamp in the future: a source that previews the regulators'
-lag); each measured pose is compared with the target wanted when it was
-captured.  Outliers are never integrated; through a dropout the correction
-is held (integrator frozen, diagnostics WARN).  The integral gain follows
-the robot's first mode (``feedback_gain_per_s: auto``, the default).
-
-Targets for a robot that swings
--------------------------------
-Parameters ``target_shaping`` (``smooth``: a jump becomes a minimum-jerk move
-at the slowest mode the robot may have, the default; ``none``, ``zv``,
-``zvd``) and ``dynamic_feedforward``
-(:class:`~bellow_ancf_ros.nodes.target_link.TargetLink`): each target is
-shaped at the first mode, or shifted by the inertial, damping and lag loads
-of its motion, before the closed loop's correction.
-The first mode at the held equilibrium comes from one thread
-(:class:`~bellow_ancf_ros.nodes.mode_watch.ModeWatch`), computed at
-configure for the vented robot with its payload and again as it moves.
-
-Lifecycle and safety
---------------------
-* Pressures are published only while the node is *active*; targets that
-  arrive while inactive are ignored.  On deactivate and on shutdown (also on
-  Ctrl-C / SIGTERM) the node publishes the vent command, 0 Pa gauge on every
-  actuator, once.  On shutdown it then waits (at most
-  ``VENT_ACK_TIMEOUT_S``, 4 s) until every matched subscriber has
-  acknowledged the vent, so that it arrives before the process exits; a
-  missing acknowledgement is logged.  (Fast DDS acknowledges on its
-  heartbeat, every 3 s by default: Ctrl-C takes up to about 3 s.)
-  ``autostart`` (default true) configures and activates the node at
-  start-up, so a plain ``ros2 run`` works.
-* One owner of ``pressure_command`` (:mod:`bellow_ancf_ros.nodes.ownership`):
-  when another node publishes it, the node vents once and deactivates
-  itself; only ``activate`` resumes (refused while the other node is there).
-* ``robot_config`` is read on configure: a change is refused while the node
-  is configured (inactive or active), with the way out in the reason
-  (deactivate, cleanup, set, configure, activate).  A configure that fails
-  (e.g. a robot file that does not load) leaves the node unconfigured and
-  says so, with the recovery commands, in the log and in the heartbeat.
-* A bad start-up parameter (outside its range, wrong type, unknown unit) ends
-  the process with one line naming the parameter, the value and what is
-  allowed (exit status 2).
-* Every published pressure passes :func:`~bellow_ancf_ros.nodes.contract.safe_pressures`:
-  never NaN, inf or outside ``[p_min, p_max]`` of the robot file.
-* Refused targets (wrong frame, NaN/inf position, zero or non-finite
-  quaternion when the orientation is used): throttled warning, diagnostics
-  WARN, last command unchanged, the node keeps running.
-* Unreachable target with a converged, stable best fit: the best reachable
-  in-limit pressures are published, diagnostics WARN.  Failed or unstable
-  solve (or any exception in the solver): nothing new is published (the last
-  good command stands), diagnostics ERROR, the node keeps serving.
-* No tf2 (not installable from PyPI): targets must already be in
-  ``base_frame``.
-
-Signals: ``main`` initialises rclpy without its signal handlers; SIGINT/SIGTERM
-end the spin loop cleanly (a flag, never an exception inside rclpy), so that the
-context is still valid when the vent command goes out.
+Behaviour, parameters and their reasons: docs/ros.md ("The inverse node's
+behaviour"); ``--help`` lists the parameters and topics.
 """
 
 from __future__ import annotations
@@ -137,7 +37,6 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 from std_msgs.msg import Float64MultiArray
@@ -148,19 +47,18 @@ from ..core import geometry
 from ..core.control import TARGET_SHAPINGS, PlayCompensation, gain_setting
 from . import contract, worker
 from .external_force import ExternalForce
-from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FEEDBACK_PARAMETERS, FeedbackLink
+from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FeedbackLink
 from .mode_watch import ModeWatch
 from .target_link import TARGET_PARAMETER_TABLE, TargetLink
 from .ownership import TopicOwner
+from . import diagnostics
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
+from .inverse_interface import CONFIGURE_PARAMETERS, PARAMETERS, TOPICS
 from .ros_util import (
     VENT_ACK_TIMEOUT_S,
     WARN_THROTTLE_S,
-    Param,
-    Topic,
     command_qos,
     declare_all,
-    descriptor,
     diagnostics_qos,
     guard_parameters,
     main_for,
@@ -172,84 +70,11 @@ from .ros_util import (
 
 __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_S', 'main']
 
-#: Parameters read on configure, or that change what a command means: a change needs
-#: cleanup + configure (refused while configured, with the way out)
-CONFIGURE_PARAMETERS = (('robot_config', 'pressure_unit', 'base_frame') + FEEDBACK_PARAMETERS
-                        + tuple(p.name for p in TARGET_PARAMETER_TABLE))
 BUDGET_PERIODS = 5.0   # wall-clock budget of one solve, in periods of max_rate_hz
 PAYLOAD_CHECK_BUDGET_S = 1.0  # wall-clock budget of the buckling check of a new payload_kg
 BUDGET_STATUSES = (InverseStatus.TIME_BUDGET, InverseStatus.ITERATION_BUDGET)
 MAX_CONTINUATIONS = 40  # budget slices one target may take before the node gives up on it
 OWNER_CHECK_PERIOD_S = 0.1  # the ownership check while configured (ownership.py)
-
-
-# ------------------------------------------------------------------- the node
-D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-           ParameterType.PARAMETER_BOOL)
-#: The node's parameters: what it declares and what ``--help`` prints.
-PARAMETERS = (
-    Param('robot_config', 'one_segment', descriptor(
-        'Robot description: a shipped robot name (one_segment, two_segment, three_segment, '
-        '...: the files in '
-        'share/bellow_ancf_ros/config) or a path to a robot YAML file. Read on configure: '
-        'change it in the unconfigured state (deactivate, cleanup, set, configure).', S,
-        constraints='a shipped robot name or a robot YAML path')),
-    Param('payload_kg', 0.0, descriptor(
-        'Payload mass at the end effector [kg]; may be changed at run time and takes effect '
-        'on the next solve. Negative or larger values than the range are refused.', D,
-        lo=0.0, hi=contract.PAYLOAD_MAX_KG)),
-    Param('base_frame', 'base', descriptor(
-        'Frame of targets and outputs (robot base). Targets in any other frame are refused '
-        '(no tf2 transform).', S, constraints='a non-empty frame name')),
-    Param('pressure_unit', 'Pa', descriptor(
-        'Unit of pressure_command: Pa (default, REP-103) or kPa. Pressures are gauge '
-        '(relative to atmosphere); the layout label says the unit.', S,
-        constraints="one of: 'Pa', 'kPa'")),
-    Param('max_rate_hz', 100.0, descriptor(
-        'Maximum solve (and command) rate [Hz]; only the newest target is solved.', D,
-        lo=0.1, hi=1000.0)),
-    Param('command_rate_hz', 20.0, descriptor(
-        'Rate at which the current command is republished while active and no new one went '
-        'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
-        'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True)),
-    Param('regulator_play_kpa', 0.0, descriptor(
-        "The regulators' hysteresis (play) band [kPa], from their data sheet: each command "
-        'is sent at the edge of the band that puts the valve exactly at the pressure wanted '
-        '(a change of direction no longer vanishes in the play; a shaped step then leaves no '
-        'swing); 0 = off. Read on configure.', D, lo=0.0, hi=50.0)),
-    Param('allow_other_publishers', False, descriptor(
-        'Publish pressure_command even while another node publishes it (default false: '
-        'vent once, deactivate and wait for activate; see ownership in docs/ros.md).', B)),
-    Param('use_estimated_force', False, descriptor(
-        'Compensate the force of estimated_wrench (wrench_estimator_node) in the '
-        'feedforward, as external_force is; read at start-up.', B, read_only=True)),
-    Param('external_force_timeout_s', 1.0, descriptor(
-        'A force (external_force, estimated_wrench) older than this is no longer '
-        'compensated [s].', D, lo=0.01, hi=3600.0, read_only=True)),
-    Param('autostart', True, descriptor(
-        'Configure and activate at start-up (so that a plain ros2 run works).', B,
-        read_only=True)),
-)
-
-
-TOPICS = (
-    Topic('subscribes', 'target_pose', 'geometry_msgs/PoseStamped', 'in base_frame'),
-    Topic('subscribes', 'measured_pose', 'geometry_msgs/PoseStamped',
-          "with feedback 'integral' (best effort)"),
-    Topic('subscribes', 'external_force', 'geometry_msgs/WrenchStamped',
-          'a force at the end effector, compensated'),
-    Topic('subscribes', 'estimated_wrench', 'geometry_msgs/WrenchStamped',
-          'with use_estimated_force'),
-    Topic('publishes', 'pressure_command', 'std_msgs/Float64MultiArray',
-          'gauge pressures in pressure_unit, only while active; the vent on deactivate, '
-          'shutdown, or when it yields to another publisher'),
-    Topic('publishes', 'commanded_pose', 'geometry_msgs/PoseStamped',
-          "the model's pose for the command"),
-    Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
-          'per-solve status and 1 Hz heartbeat'),
-    Topic('services', '~/change_state, ~/get_state, ...', 'lifecycle_msgs',
-          'the standard lifecycle services (autostart: configure + activate at start-up)'),
-)
 
 
 class InverseKinetostaticNode(LifecycleNode):
@@ -280,7 +105,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._configure_error = ''
         self._model: RobotModel | None = None
         self._cfg = None
-        self._warm = None
+        self._warm = self._start_pose = None
         self._worker: worker.LatestWorker | None = None
         self._pub_cmd = self._pub_pose = None
         self._sub = None
@@ -440,6 +265,9 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._cfg, self._model = cfg, model
             self._warm = fw0 if fw0.success else None
+            # the first target after activate moves from here (the robot vented)
+            self._start_pose = None if not start.success else (
+                start.position, start.z_axis if cfg.n_segments >= 2 else None)
             play = 1e3 * float(self.get_parameter('regulator_play_kpa').value)
             self._play = (PlayCompensation(model.A, play, cfg.p_min, cfg.p_max) if play > 0
                           else None)
@@ -486,7 +314,7 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._active = True
         self._feedback.reset()
-        self._targets.reset()
+        self._targets.reset(self._start_pose)
         self.get_logger().info('active: pressure commands enabled')
         return super().on_activate(state)
 
@@ -791,15 +619,15 @@ class InverseKinetostaticNode(LifecycleNode):
         self._report(item, inv, dt, payload, unit, p, unsafe, usable)
 
     def _report(self, item, inv, dt, payload, unit, p, unsafe, usable) -> None:
-        """Counters, log lines and the status of one solve (after its command went out).
+        """Counters, log line and status of one solve (after its command went out).
 
         ``p``: the published pressures (None: nothing published, because the
         solve was not ``usable`` or the safety gate refused it, ``unsafe``).
         A budget-limited answer queues the same target again (its next
-        slice), at most ``MAX_CONTINUATIONS`` times.
+        slice, :meth:`_next_slice`).
         """
         values = inverse_values(inv, dt, payload, unit)
-        if usable:
+        if usable and unsafe is None:
             self._feedback.after_solve(inv)
             if self._modes is not None:
                 self._modes.offer(inv.forward)
@@ -807,53 +635,22 @@ class InverseKinetostaticNode(LifecycleNode):
             self._feedback.no_command()   # nothing goes out: the integrator freezes
         values.update(self._feedback.status())
         values.update(self._targets.status())
-        if not usable and inv.status in BUDGET_STATUSES:
-            # no usable answer yet: the next slice goes on from the progress it made, so that
-            # the solve ends with its cause (e.g. an unstable equilibrium) instead of a budget
-            more = self._next_slice(item)
-            if more:
-                self._resume = (item, inv)
-            msg = (f'no usable answer within the solve budget, last command kept'
-                   f'{", continuing" if more else ""}: {inv.message}')
-            self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
-            self._publish_diag(DiagnosticStatus.WARN if more else DiagnosticStatus.ERROR,
-                               msg, values)
-            if not more:
-                self.stats['failed'] += 1
-            return
-        if not usable:
-            self.stats['failed'] += 1
-            msg = f'solve failed ({inv.message}); last command kept'
-            self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
-            self._publish_diag(DiagnosticStatus.ERROR, msg, values)
-            return
-        if unsafe is not None:
-            self._feedback.no_command()
-            self.stats['failed'] += 1
-            msg = f'solver output refused by the safety gate ({unsafe}); last command kept'
-            self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
-            self._publish_diag(DiagnosticStatus.ERROR, msg, values)
-            return
-        values['pressures'] = ' '.join(f'{v:.6g}' for v in contract.to_unit(p, unit))
-        if inv.status in BUDGET_STATUSES:
-            self.stats['over_budget'] += 1
-            more = self._next_slice(item)
-            msg = (f'solve budget used up, best in-limit pressures so far sent'
-                   f'{", continuing" if more else ""}: {inv.message}')
-            self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
-            self._publish_diag(DiagnosticStatus.WARN, msg, values)
-        elif inv.reachable and self._feedback.fallback:
-            self._publish_diag(DiagnosticStatus.WARN, 'target reached without fresh measured '
-                               f'poses: feedback {values["feedback_state"]}', values)
-        elif inv.reachable:
-            self._publish_diag(DiagnosticStatus.OK, 'target reached', values)
-        else:
-            self.stats['unreachable'] += 1
-            self.get_logger().warning(f'target unreachable: {inv.message}',
-                                      throttle_duration_sec=WARN_THROTTLE_S)
-            self._publish_diag(DiagnosticStatus.WARN,
-                               f'target unreachable, best reachable pressures sent: {inv.message}',
-                               values)
+        budget = inv.status in BUDGET_STATUSES
+        more = budget and unsafe is None and self._next_slice(item)
+        if more and not usable:   # no usable answer yet: the next slice goes on from it
+            self._resume = (item, inv)
+        if p is not None:
+            values['pressures'] = ' '.join(f'{v:.6g}' for v in contract.to_unit(p, unit))
+        level, msg, counter, logged = diagnostics.solve_outcome(
+            inv, usable, budget, more, unsafe,
+            values.get('feedback_state', '') if self._feedback.fallback else None)
+        if counter is not None:
+            self.stats[counter] += 1
+        if logged:
+            log = self.get_logger()
+            (log.error if level == DiagnosticStatus.ERROR else log.warning)(
+                msg, throttle_duration_sec=WARN_THROTTLE_S)
+        self._publish_diag(level, msg, values)
 
     def _next_slice(self, item) -> bool:
         """Queue the next budget slice of ``item`` (at most ``MAX_CONTINUATIONS``); queued."""

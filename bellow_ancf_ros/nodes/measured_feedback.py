@@ -60,8 +60,7 @@ from .ros_util import (QOS_DEPTH, Param, StartupParameterError, declare_all, des
 
 __all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'measured_pose_qos']
 
-_D, _S, _B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-              ParameterType.PARAMETER_BOOL)
+_D, _S = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING
 _DEF = FeedbackSettings()
 #: The parameters FeedbackLink declares (what the inverse node's ``--help`` prints); all are
 #: read on configure.
@@ -70,7 +69,6 @@ FEEDBACK_PARAMETER_TABLE = (
         "Closed loop from measured_pose: 'none' (feedforward only, the paper's controller) "
         "or 'integral' (integral action on the task-space error). Read on configure.", _S,
         constraints="one of: 'none', 'integral'")),
-) + (
     Param('feedback_gain_per_s', AUTO_GAIN, descriptor(
         "Integral gain [1/s]: an error decays with time constant 1/gain. 'auto': the largest "
         'gain that keeps a gain margin of 3 and a phase margin of 45 deg with the robot\'s '
@@ -79,13 +77,6 @@ FEEDBACK_PARAMETER_TABLE = (
         'force or the pose moves that mode by more than 5 %. A fixed gain is warned about '
         'when its margins are thinner. Read on configure.', _S, dynamic=True,
         constraints="'auto' or a number from 0.01 to 50")),
-    Param('feedback_notch', _DEF.notch, descriptor(
-        "Pass the correction through a notch at the robot's first mode (its frequency and "
-        'damping ratio at the held equilibrium, followed as they move): a lightly damped '
-        'mode no longer limits the gain (two segments carrying 50 g: automatic gain 0.38 '
-        '-> 1.75 /s); the margins are then those of the worst robot mode within 10 % of '
-        "the model's. Off by default: measured, the higher gain passed more mocap noise and "
-        'tracked no better (docs/closed_loop.md). Read on configure.', _B)),
 ) + tuple(Param(name, float(default), descriptor(text + ' Read on configure.', _D, lo=lo, hi=hi))
           for name, default, text, lo, hi in (
     ('feedback_max_correction_mm', _DEF.max_correction_m * 1e3,
@@ -98,8 +89,6 @@ FEEDBACK_PARAMETER_TABLE = (
     ('measured_pose_outlier_mm', _DEF.outlier_gate_m * 1e3,
      'A measured pose this far from the median of the last five is an outlier, '
      'never integrated [mm].', 0.1, 1000.0),
-    ('feedback_reset_jump_mm', _DEF.reset_jump_m * 1e3,
-     'A target jump this large resets the correction [mm].', 0.1, 1000.0),
     ('feedback_rate_hz', 20.0,
      'Rate at which the newest target is re-solved with a fresh correction [Hz].',
      0.1, 1000.0),
@@ -182,8 +171,7 @@ class FeedbackLink:
         """The margin check of this loop's gain setting, lag and delay (``'auto'``: no loop)."""
         g = self.node.get_parameter
         gain = self._read_gain() if self.wanted else AUTO_GAIN
-        return ModeCheck(gain, g('feedback_loop_lag_s').value, g('feedback_loop_delay_s').value,
-                         notch=self.wanted and bool(g('feedback_notch').value))
+        return ModeCheck(gain, g('feedback_loop_lag_s').value, g('feedback_loop_delay_s').value)
 
     def configure(self, cfg, resubmit: Callable[[Any], None], modes=None) -> None:
         """Read the parameters; with feedback on, subscribe and start the re-solve timer.
@@ -204,9 +192,7 @@ class FeedbackLink:
             max_correction_rad=math.radians(g('feedback_max_correction_deg').value),
             measured_pose_timeout_s=g('measured_pose_timeout_s').value,
             outlier_gate_m=1e-3 * g('measured_pose_outlier_mm').value,
-            reset_jump_m=1e-3 * g('feedback_reset_jump_mm').value,
-            correction_frame=g('feedback_correction_frame').value,
-            notch=bool(g('feedback_notch').value))
+            correction_frame=g('feedback_correction_frame').value)
         self._use_orientation = cfg.n_segments >= 2
         self._frame = g('base_frame').value
         self._frames = PoseFrames(self.node, self._frame, cfg.mocap_frame)
@@ -378,7 +364,7 @@ class FeedbackLink:
         self._mode_result = res
         with self._lock:   # the watchdog watches the first mode where the robot is held
             if self._law is not None:
-                self._law.watch(res.frequency_hz, res.damping_ratio)
+                self._law.watch(res.frequency_hz)
                 if res.auto:
                     self._law.set_gain(res.gain_per_s)
 

@@ -184,12 +184,12 @@ class TargetLink:
             timer.start()
             self._levels.append(timer)
 
-    def reset(self) -> None:
-        """Forget the stream (on activate)."""
+    def reset(self, start=None) -> None:
+        """Forget the stream (on activate); ``start``: the pose the robot is at (vented)."""
         self._last_item = None
         with self._lock:
             if self._filter is not None:
-                self._filter.reset()
+                self._filter.reset(start)
             self._cancel_levels()
 
     def targets(self, item, wanted_at: float):

@@ -185,7 +185,8 @@ def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
     def publish():
         k = 0
         while not stop.is_set():
-            m = Float64MultiArray(data=[10e3 * (k // 20), 0.0, 0.0])
+            # (steps of 1 s; a slow start of the recorder on a busy machine: held at 90 kPa)
+            m = Float64MultiArray(data=[10e3 * min(k // 20, 9), 0.0, 0.0])
             m.layout.dim = [MultiArrayDimension(label='actuator_pressure_gauge_pa', size=3,
                                                 stride=3)]
             pub_p.publish(m)

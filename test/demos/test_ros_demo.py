@@ -32,7 +32,7 @@ def test_main_demo_short_run_one_segment(tmp_path):
                     and 'RMSE' in ln)
         assert 'held target' in line, line
     assert out.count('all finite and within the limits: yes') == 3
-    assert out.count('last (vent): [0.0, 0.0, 0.0]') == 3
+    assert out.count('last (vent): [0.000, 0.000, 0.000]') == 3
     assert 'closed-loop / feedforward position RMSE' in out
     assert 'dynamic / quasi-static feedforward position RMSE' in out
     assert 'realistic plant' in out and 'outliers (largest command step after one' in out

@@ -11,6 +11,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from bellow_ancf_ros.nodes.diagnostics import STATUS_PERIOD_S, ThrottledStatus  # noqa: E402
+from bellow_ancf_ros.nodes.diagnostics import solve_outcome  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import diagnostics_qos  # noqa: E402
 from bellow_ancf_ros.demos.pipeline import wait_until  # noqa: E402
 
@@ -74,3 +75,28 @@ def test_repeats_are_throttled_news_go_at_once_and_the_newest_arrives(spun):
         st.submit('robot', WARN, 'target unreachable', {'i': f's{i}'})
     assert wait_until(
         lambda: [_values(s)['i'] for s in statuses()][-3:] == ['s0', 's1', 's2'], 10.0)
+
+
+class _Inv:
+    def __init__(self, reachable=True, message='m'):
+        self.reachable, self.message = reachable, message
+
+
+@pytest.mark.parametrize('args, level, counter, logged, words', [
+    ((False, True, True), DiagnosticStatus.WARN, None, True, 'no usable answer'),
+    ((False, True, False), DiagnosticStatus.ERROR, 'failed', True, 'no usable answer'),
+    ((False, False, False), DiagnosticStatus.ERROR, 'failed', True, 'solve failed'),
+    ((True, False, False, 'limit'), DiagnosticStatus.ERROR, 'failed', True, 'safety gate (limit)'),
+    ((True, True, True), DiagnosticStatus.WARN, 'over_budget', True, 'so far sent, continuing'),
+    ((True, False, False, None, 'stale'), DiagnosticStatus.WARN, None, False, 'feedback stale'),
+    ((True, False, False), DiagnosticStatus.OK, None, False, 'target reached'),
+])
+def test_each_solve_outcome_has_its_level_counter_and_words(args, level, counter, logged, words):
+    got = solve_outcome(_Inv(), *args)
+    assert got[0] == level and got[2] == counter and got[3] == logged and words in got[1]
+
+
+def test_an_unreachable_target_is_a_counted_warning_naming_the_best_fit():
+    level, msg, counter, logged = solve_outcome(_Inv(False, 'best 3 mm'), True, False, False)
+    assert (level, counter, logged) == (DiagnosticStatus.WARN, 'unreachable', True)
+    assert msg.endswith('best 3 mm')

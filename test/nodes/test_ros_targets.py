@@ -25,7 +25,7 @@ def _step_after_held(h, one):
     """Hold a target until it is commanded, then publish one 10 mm away: ``(a, b, n0, t)``.
 
     ``n0``: the commanded poses before the step, ``t``: when it was published
-    (monotonic).  (The first target is taken as it is.)
+    (monotonic).  (The first target is moved to from the vented pose.)
     """
     a = solve_forward(one, [40e3, 20e3, 0.0]).position
     b = a + np.array([0.01, 0.0, 0.0])
@@ -95,6 +95,30 @@ def test_by_default_a_step_is_moved_through_smoothly(h, one):
     assert took >= 0.9 * dur, (took, dur)
 
 
+def test_the_first_target_after_activate_is_moved_to_from_the_vented_pose(h, one):
+    """The robot rests vented when the node activates: its first target is a smooth move too."""
+    h.record(PoseStamped, 'commanded_pose')
+    node = h.add(InverseKinetostaticNode, name='first')
+    vent = solve_forward(one, [0.0, 0.0, 0.0]).position
+    a = solve_forward(one, [80e3, 20e3, 0.0]).position
+    assert np.linalg.norm(a - vent) > 5e-3
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    t0 = time.monotonic()
+    pub.publish(target_msg(a))
+    wait_for(lambda: h.count('commanded_pose') > 0
+             and np.linalg.norm(pose_of(h.last('commanded_pose'))[0] - a) < 1e-6,
+             what='at the first target')
+    took = time.monotonic() - t0
+    with h.lock:
+        got = [pose_of(m)[0] for _, m in h.msgs['commanded_pose']]
+    frac = [float((p - vent) @ (a - vent) / ((a - vent) @ (a - vent))) for p in got]
+    inner = [x for x in frac if 1e-6 < x < 1 - 1e-6]
+    assert len(inner) >= 5, frac
+    assert all(-1e-9 <= x <= 1 + 1e-9 for x in frac) and inner == sorted(inner), frac
+    assert took >= 0.9 * node._targets._filter.jumps.duration_s
+
+
 def test_dynamic_feedforward_shifts_a_moving_stream_not_a_held_target(h, one):
     """A 2 s circle streamed at 50 Hz: commanded = target + the modal and lag shift."""
     h.record(PoseStamped, 'commanded_pose')
@@ -149,7 +173,7 @@ def test_regulator_play_is_compensated_in_every_command_not_the_vent(h, one):
     from bellow_ancf_ros.core import solve_inverse
     h.record(Float64MultiArray, 'pressure_command')
     node = h.add(InverseKinetostaticNode, regulator_play_kpa=1.0, command_rate_hz=0.0,
-                 name='play')
+                 target_shaping='none', name='play')   # (each target commanded at once)
     a = solve_forward(one, [40e3, 20e3, 5e3]).position
     b = solve_forward(one, [30e3, 25e3, 5e3]).position
     pub = h.publisher(PoseStamped, 'target_pose')

@@ -22,10 +22,8 @@
   loads of its motion through the first mode and the regulators' lag
   (dynamic feedforward of a planned path); :class:`TargetFilter`: both on a
   target stream, as the inverse node applies them;
-* :class:`ModeNotch`: the correction passes a notch at the first mode
-  (``FeedbackSettings.notch``; :func:`robust_margins` for a robot mode within
-  :data:`NOTCH_MISMATCH` of the model's); :class:`PlayCompensation`: commands
-  at the edge of the regulators' play band (the backlash inverse);
+* :class:`PlayCompensation`: commands at the edge of the regulators' play
+  band (the backlash inverse);
 * :class:`OscillationWatchdog`: a sustained or growing swing of the measured
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
   its gain and holds its correction);
@@ -43,7 +41,7 @@ The ROS nodes only feed these.
 
 from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
 from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, loop_delay_s,
-                            loop_margins, mode_variants, robust_margins, safe_gain)
+                            loop_margins, safe_gain)
 from ._dynamic_feedforward import DynamicFeedforward, StreamFeedforward, dynamic_path
 from ._force_estimator import ESTIMATOR_MODES, ForceEstimate, TipForceEstimator
 from ._loop_simulation import LoopRecord, LoopSimulation
@@ -52,7 +50,6 @@ from ._loop_cases import (LOOP_DELAY_S, LOOP_LAG_S, STEP_M, circle_case, default
 from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeCheck,
                           ModeCheckResult, gain_setting)
 from ._motion_capture import MocapSample, MotionCapture
-from ._notch import NOTCH_MISMATCH, NOTCH_POLE_DAMPING, ModeNotch
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._play import PlayCompensation
 from ._regulators import BellowCreep, PressureRegulators
@@ -73,8 +70,7 @@ __all__ = [
     "TargetShaper", "shaped", "shaper_impulses", "OscillationWatchdog", "WatchdogTrip",
     "TipForceEstimator", "loop_delay_s", "loop_margins", "safe_gain",
     "DynamicFeedforward", "StreamFeedforward", "dynamic_path", "TargetFilter",
-    "ModeNotch", "NOTCH_MISMATCH", "NOTCH_POLE_DAMPING", "PlayCompensation", "mode_variants",
-    "robust_margins", "STEP_M", "circle_case", "default_loop", "held_case", "step_case",
+    "PlayCompensation", "STEP_M", "circle_case", "default_loop", "held_case", "step_case",
     "LOOP_LAG_S", "LOOP_DELAY_S", "paper_circle",
     "FAMILY_RANGES", "RobotDraw", "draw_robot", "first_mode", "TARGET_SHAPINGS",
     "JumpTransition",

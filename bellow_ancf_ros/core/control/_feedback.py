@@ -56,13 +56,12 @@ Safeguards
   frozen (state ``HELD``) until a solve's answer goes out again
   (:meth:`IntegralFeedback.report`): the robot did not move because of the
   correction, so its error says nothing about the correction.
-* **Reset**: a target jump larger than ``reset_jump_m`` (or
-  ``reset_jump_rad``) clears the correction (the old one belongs elsewhere
-  in the workspace).
 * **A move of the controller's own**: a jump of the target stream made a
   smooth move (:class:`~._jumps.JumpTransition`) is not a mismatch: the
   caller passes ``hold_until`` and measurements captured before it are not
-  integrated (state ``MOVING``); the correction stays applied.
+  integrated (state ``MOVING``); the correction stays applied.  A jump does
+  not clear the correction either: in the azimuthal frame it is the robot's
+  mismatch, which holds across the workspace.
 * **Outliers** (a swapped or ghost marker): a measurement farther than
   ``outlier_gate_m`` (or ``outlier_gate_rad``) from the median of the last
   :data:`OUTLIER_WINDOW` received measurements is not integrated; the
@@ -80,10 +79,14 @@ Safeguards
   target stamped in the future, from a trajectory source that previews the
   regulators' lag, is wanted then), measurements the time they were
   captured (the mocap's latency is thereby taken out).
-* Each measurement is integrated once, over the time since the previous
-  integration, capped at ``max_dt_s`` (a late control step does not make a
-  large jump; control faster than the measurements does not integrate an
-  old error twice).
+* Each accepted measurement is integrated once: at a control step, every
+  one accepted since the previous integration is compared with the target
+  wanted at its capture time, and their mean is integrated over the time
+  since the previous integration, capped at ``max_dt_s`` (a late control
+  step does not make a large jump; control faster than the measurements
+  does not integrate an old error twice; a motion capture faster than the
+  control steps averages its noise instead of dropping all but the newest
+  sample).
 
 Times are plain floats in seconds from one monotonic clock, supplied by the
 caller (the ROS node uses ``time.monotonic()``; tests use simulated time).
@@ -111,8 +114,6 @@ import numpy as np
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ._history import bracket
 from ._median_gate import WINDOW, MedianGate
-from ._mode_check import RETUNE_FRACTION
-from ._notch import NOTCH_POLE_DAMPING, ModeNotch
 from ._watchdog import OscillationWatchdog
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
@@ -121,6 +122,8 @@ __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
 HISTORY_S = 2.0
 #: Received measurements whose median an accepted one must lie near (outlier gate).
 OUTLIER_WINDOW = WINDOW
+#: Accepted measurements kept for the next integration (a 1 kHz motion capture, 50 ms).
+MAX_PENDING = 50
 
 #: Values of the inverse node's ``feedback`` parameter.
 FEEDBACK_MODES = ('none', 'integral')
@@ -150,11 +153,8 @@ class FeedbackSettings:
     measured_pose_timeout_s: float = 0.25
     outlier_gate_m: float = 0.005
     outlier_gate_rad: float = math.radians(5.0)
-    reset_jump_m: float = 0.010
-    reset_jump_rad: float = math.radians(10.0)
     max_dt_s: float = 0.1
     correction_frame: str = 'azimuthal'
-    notch: bool = False    #: the applied correction passes a notch at the watched mode
 
     def __post_init__(self) -> None:
         """Refuse a non-positive or non-finite setting, naming it."""
@@ -164,10 +164,6 @@ class FeedbackSettings:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == 'correction_frame':
-                continue
-            if f.name == 'notch':
-                if not isinstance(v, bool):
-                    raise ValueError(f'feedback setting notch must be true or false, got {v!r}')
                 continue
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f'feedback setting {f.name} must be a positive finite number, '
@@ -198,16 +194,15 @@ class IntegralFeedback:
         """Start with no correction; ``use_orientation`` for two or more segments."""
         self.settings = settings or FeedbackSettings()
         self.use_orientation = bool(use_orientation)
-        self.notch: ModeNotch | None = None   # settings.notch: made by the first watch()
         self.reset()
         self._meas_t: float | None = None
         self._meas_p = self._meas_z = None
+        self._pending: list = []    # accepted (t, position, z-axis) not yet integrated
         s = self.settings
         self._gate_p = MedianGate(s.outlier_gate_m)
         self._gate_z = MedianGate(s.outlier_gate_rad, distance=_turn_from_median)
         self._outlier = False       # the newest received sample was an outlier
         self.rejected = 0
-        self.resets = 0
         self.watchdog: OscillationWatchdog | None = None
         self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
         self.gain_scale = 1.0       # cut by the watchdog on every trip
@@ -222,14 +217,12 @@ class IntegralFeedback:
         self._r = np.zeros(3)
         self._last_t: float | None = None
         self._used_meas_t: float | None = None
+        self._pending = []
         self._history: deque = deque()    # (wanted-at time, target position, target z-axis)
-        self._target_p = self._target_z = None
         self._command_p = self._command_z = None
         self._saturated = False
         self._held = False
         self.state = WAITING
-        if self.notch is not None:
-            self.notch.reset()
 
     @property
     def correction_m(self) -> np.ndarray:
@@ -273,11 +266,8 @@ class IntegralFeedback:
         return self.state in (STALE, OUTLIER, HELD, MOVING)
 
     # ------------------------------------------------------------ inputs
-    def watch(self, frequency_hz: float, damping_ratio: float | None = None) -> None:
+    def watch(self, frequency_hz: float) -> None:
         """Watch the measured error for an oscillation near this mode (the robot's first).
-
-        With ``settings.notch`` and a ``damping_ratio``, the applied
-        correction also passes a notch at this mode (:class:`~._notch.ModeNotch`).
 
         On a trip (:class:`~._watchdog.OscillationWatchdog`) the gain is
         halved (:attr:`gain_scale`) and the correction is held for one
@@ -285,12 +275,6 @@ class IntegralFeedback:
         what was seen.  A new frequency (a payload moved the mode) keeps the
         cut gain.
         """
-        if (self.settings.notch and damping_ratio is not None
-                and damping_ratio < NOTCH_POLE_DAMPING):   # (a mode that damped needs none)
-            if self.notch is None:
-                self.notch = ModeNotch(frequency_hz, damping_ratio)
-            elif abs(frequency_hz / self.notch.frequency_hz - 1.0) > RETUNE_FRACTION:
-                self.notch.set_mode(frequency_hz, damping_ratio)   # a new load, not a bend
         if self.watchdog is None:
             self.watchdog = OscillationWatchdog(frequency_hz)
         elif abs(self.watchdog.frequency_hz - frequency_hz) > 1e-9:
@@ -332,6 +316,9 @@ class IntegralFeedback:
             self.rejected += 1
             return False
         self._meas_t, self._meas_p, self._meas_z = float(t), p, z
+        self._pending.append((float(t), p, z))
+        if len(self._pending) > MAX_PENDING:   # (no control step for a while: the newest)
+            del self._pending[0]
         if self.watchdog is not None and self._history:
             # every accepted sample, at the measurements' rate: a control step is too slow
             # to see a swing near a stiff robot's mode
@@ -376,14 +363,7 @@ class IntegralFeedback:
             if self.use_orientation:
                 z_c = np.asarray(command[1], dtype=float).reshape(3)
                 z_c = z_c / np.linalg.norm(z_c)
-        if self._target_p is not None and (
-                np.linalg.norm(p_t - self._target_p) > s.reset_jump_m
-                or (z_t is not None and np.linalg.norm(rotation_between(self._target_z, z_t))
-                    > s.reset_jump_rad)):
-            self.reset()
-            self.resets += 1
         self._phi = self._azimuth(p_t)
-        self._target_p, self._target_z = p_t, z_t
         self._command_p, self._command_z = p_c, z_c
         self._history.append((float(t if wanted_at is None else wanted_at), p_t, z_t))
         while len(self._history) > 2 and self._history[1][0] < float(t) - HISTORY_S:
@@ -397,12 +377,15 @@ class IntegralFeedback:
         elif self._held:
             self.state = HELD
             self._last_t, self._used_meas_t = float(t), self._meas_t   # nothing to catch up
+            self._pending.clear()
         elif self._meas_t != self._used_meas_t and self._meas_t < self._hold_until:
             self.state = OSCILLATING   # the watchdog tripped: hold, then integrate slower
             self._last_t, self._used_meas_t = float(t), self._meas_t
+            self._pending.clear()
         elif self._meas_t != self._used_meas_t and self._meas_t < self._move_until:
             self.state = MOVING
             self._last_t, self._used_meas_t = float(t), self._meas_t
+            self._pending.clear()
         elif self._meas_t != self._used_meas_t:
             # each measurement is integrated once, over the time since the last integration
             dt = 0.0 if self._last_t is None else min(max(float(t) - self._last_t, 0.0),
@@ -413,7 +396,7 @@ class IntegralFeedback:
             self.state = OUTLIER
         if self.fallback:
             return p_c.copy(), None if z_c is None else z_c.copy()
-        return self._apply(p_c, z_c, float(t))
+        return self._apply(p_c, z_c)
 
     def _target_at(self, t: float):
         """The target wanted at time ``t``: interpolated between the targets around it.
@@ -434,23 +417,47 @@ class IntegralFeedback:
         z = before[2] + a * (after[2] - before[2])
         return p, z / np.linalg.norm(z)
 
+    def _sample_errors(self):
+        """Mean error of the pending samples, turned to the current target's azimuth.
+
+        ``(position error, z-axis error or None)``, or None when no pending
+        sample can be compared (captured before the current targets began, or
+        while the correction was held).  Every accepted sample counts once: a
+        motion capture faster than the control steps averages its noise.
+        """
+        hold = max(self._hold_until, self._move_until)
+        e_p, e_r = [], []
+        for t_m, p_m, z_m in self._pending:
+            then = None if t_m < hold else self._target_at(t_m)
+            if then is None:
+                continue
+            p_t, z_t = then
+            # the error measured at the target then, turned to the current target's azimuth
+            turn = rotation_z(self._phi - self._azimuth(p_t))
+            e_p.append(turn @ (p_t - p_m))
+            if self.use_orientation and z_m is not None:
+                e_r.append(turn @ rotation_between(z_m, z_t))
+        self._pending.clear()
+        if not e_p:
+            return None
+        return np.mean(e_p, axis=0), (np.mean(e_r, axis=0) if e_r else None)
+
     def _integrate(self, dt: float, p_now: np.ndarray, z_now: np.ndarray | None) -> None:
         s = self.settings
-        then = self._target_at(self._meas_t)
-        if then is None:          # measured before the current targets began: nothing to compare
-            self.state = TRACKING
-            return
-        p_t, z_t = then
         if self._meas_t < self._hold_until:   # the watchdog tripped on this sample
+            self._pending.clear()
             self.state = OSCILLATING
             return
+        errors = self._sample_errors()
+        if errors is None:        # measured before the current targets began: nothing to compare
+            self.state = TRACKING
+            return
+        e_p, e_r = errors
         k = self.gain_per_s * dt
-        # the error measured at the target then, turned to the current target's azimuth
-        turn = rotation_z(self._phi - self._azimuth(p_t))
-        c_new = _clamp(self.correction_m + k * (turn @ (p_t - self._meas_p)), s.max_correction_m)
+        c_new = _clamp(self.correction_m + k * e_p, s.max_correction_m)
         r_new = self.correction_rad
-        if self.use_orientation and self._meas_z is not None:
-            r = self.correction_rad + k * (turn @ rotation_between(self._meas_z, z_t))
+        if e_r is not None:
+            r = self.correction_rad + k * e_r
             r_new = _clamp(r - (r @ z_now) * z_now, s.max_correction_rad)
         if self._saturated:
             # anti-windup: only unwind while the inverse is at a limit
@@ -463,15 +470,11 @@ class IntegralFeedback:
             self.state = TRACKING
         self.correction_m, self.correction_rad = c_new, r_new
 
-    def _apply(self, p_t: np.ndarray, z_t: np.ndarray | None, t: float):
-        c, r = self.correction_m, self.correction_rad
-        if self.notch is not None:   # the correction as the robot is given it (notched)
-            out = self.notch.filter(t, np.concatenate([c, r]))
-            c, r = out[:3], out[3:]
-        p = p_t + c
+    def _apply(self, p_t: np.ndarray, z_t: np.ndarray | None):
+        p = p_t + self.correction_m
         if z_t is None:
             return p, None
-        return p, rotation_from_vector(r) @ z_t
+        return p, rotation_from_vector(self.correction_rad) @ z_t
 
     def report(self, reachable: bool, at_limit: bool, achieved_position: Any = None,
                achieved_z_axis: Any = None) -> None:
@@ -510,10 +513,7 @@ class IntegralFeedback:
             'feedback_correction_deg': f'{math.degrees(np.linalg.norm(self.correction_rad)):.3f}',
             'measured_pose_age_s': 'none' if age is None else f'{age:.3f}',
             'measured_poses_outliers': self.rejected,
-            'feedback_resets': self.resets,
             'feedback_gain_per_s': f'{self.gain_per_s:.4g}',
-            'feedback_notch_hz': ('off' if self.notch is None
-                                  else f'{self.notch.frequency_hz:.4g}'),
             'oscillation_trips': 0 if self.watchdog is None else self.watchdog.trips,
             'oscillation_seen': ('none' if self.watchdog is None or self.watchdog.last_trip is None
                                  else self.watchdog.last_trip.message),

@@ -1,7 +1,8 @@
 """A target jump becomes a move the robot can follow without ringing: the minimum-jerk transition.
 
 A step target (a planner's new goal, a teleoperator's click, the first
-target after start) asks the pressures to jump; the robot answers through
+target after start: :meth:`JumpTransition.reset` with the pose the robot is
+at) asks the pressures to jump; the robot answers through
 its first mode and rings, and a closed loop that measures the error meanwhile
 winds the transient into its correction (measured on the robot family: 3-9
 mm of overshoot on a 10 mm step).  :class:`JumpTransition` replaces each jump
@@ -79,9 +80,17 @@ class JumpTransition:
         self.frequency_hz = f
         self.duration_s = CYCLES / (MODE_SPREAD * f)
 
-    def reset(self) -> None:
-        """Forget the stream (the next target is taken as it is)."""
+    def reset(self, start=None) -> None:
+        """Forget the stream.
+
+        ``start``: ``(position, z_axis or None)``, where the robot is (the
+        pose of its current command, e.g. vented): the next target is a jump
+        from it when far enough; None: the next target is taken as it is.
+        """
         self._newest: tuple | None = None   # (t, position, z-axis)
+        if start is not None:
+            z0 = None if start[1] is None else np.asarray(start[1], dtype=float).reshape(3)
+            self._newest = (-math.inf, np.asarray(start[0], dtype=float).reshape(3), z0)
         self._step: tuple | None = None     # the stream's last step (position, z-axis)
         self._move: tuple | None = None     # (t0, duration, start position, start z-axis)
 

@@ -23,6 +23,7 @@ the safety gate (out of the limits or not finite; never sent).
 
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 import numpy as np
@@ -94,14 +95,49 @@ def _health(sim: LoopSimulation, rec) -> dict:
             'gain_per_s': None if sim.feedback is None else float(sim.feedback.gain_per_s)}
 
 
+def _step_figures(rec, ts: float, start, goal, before_pa) -> dict:
+    """A step from ``start`` to ``goal`` at ``ts``, the commands ``before_pa`` before it.
+
+    ``overshoot_mm`` (and ``overshoot_frac`` of the step): the largest
+    excursion past ``goal`` along the step; ``late_mm``: the largest distance
+    from it from 1.5 s after the step on (NaN if the run ends before);
+    ``command_excess``: the largest
+    command change beyond the settled one (mean over the last second), as a
+    fraction of that settled change (at least 1 kPa).
+    """
+    a = rec.arrays()
+    t = a['t']
+    after = t >= ts
+    size = float(np.linalg.norm(goal - start))
+    u = (goal - start) / size
+    over = max(float(np.max((a['true_p'][after] - goal) @ u)), 0.0)
+    tail = a['true_p'][t >= ts + 1.5]   # (none in a run shorter than that: NaN)
+    late = float(np.linalg.norm(tail - goal, axis=1).max()) if len(tail) else math.nan
+    cmd = a['command_pa']
+    change = cmd[t > t[-1] - _SETTLED_S].mean(axis=0) - before_pa
+    beyond = (cmd[after] - before_pa) * np.sign(change) - np.abs(change)
+    excess = float(np.max(beyond.max(axis=0) / np.maximum(np.abs(change), _MIN_CHANGE_PA)))
+    return {'overshoot_mm': over * 1e3, 'overshoot_frac': over / size, 'late_mm': late * 1e3,
+            'command_excess': max(excess, 0.0)}
+
+
 def held_case(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
               duration_s: float = 8.0, loop: Loop = default_loop) -> dict:
-    """A held target: RMSE and largest error over the last half of ``duration_s``."""
+    """A held target, the first after start: RMSE and largest error over the last half.
+
+    The robot starts where its regulators are (vented); ``first_*``: the
+    figures of :func:`step_case` for the move from there to the target
+    (``first_overshoot_frac``, ``first_command_excess``, ...).
+    """
     sim = loop(model, robot, payload_kg)
     p, z = _rest_pose(model, payload_kg)
     t0 = robot.time_s
+    before = robot.regulators.command_pa.copy()
+    start, _ = robot.true_pose()
     rec = sim.run(duration_s, lambda t: (p, z))
-    return {**rec.summary(t0 + duration_s / 2), **_health(sim, rec)}
+    first = _step_figures(rec, t0, start, p, before)
+    return {**rec.summary(t0 + duration_s / 2), **{f'first_{k}': v for k, v in first.items()},
+            **_health(sim, rec)}
 
 
 def circle_case(model: RobotModel, robot: SimulatedRobot, speed: float,
@@ -120,31 +156,13 @@ def circle_case(model: RobotModel, robot: SimulatedRobot, speed: float,
 
 def step_case(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
               loop: Loop = default_loop, hold_s: float = 5.0, after_s: float = 4.0) -> dict:
-    """A 10 mm step target after ``hold_s`` of the held one.
-
-    ``overshoot_mm``: the largest excursion past the new target along the
-    step; ``late_mm``: the largest distance from it from 1.5 s after the step
-    on; ``command_excess``: the largest command change beyond the settled
-    one (mean over the last second), as a fraction of that settled change
-    (at least 1 kPa).
-    """
+    """A 10 mm step target in ``y`` after ``hold_s`` of the held one (:func:`_step_figures`)."""
     sim = loop(model, robot, payload_kg)
     p, z = _rest_pose(model, payload_kg)
-    u = np.array([0.0, 1.0, 0.0])
-    goal = p + STEP_M * u
+    goal = p + STEP_M * np.array([0.0, 1.0, 0.0])
     rec = sim.run(hold_s, lambda t: (p, z))
     ts = robot.time_s
     rec = sim.run(after_s, lambda t: (p if t < ts else goal, z), record=rec)
     a = rec.arrays()
-    t = a['t']
-    after = t >= ts
-    over = float(np.max((a['true_p'][after] - goal) @ u))
-    late = float(np.linalg.norm(a['true_p'][t >= ts + 1.5] - goal, axis=1).max())
-    cmd = a['command_pa']
-    c0 = cmd[t < ts][-1]
-    change = cmd[t > t[-1] - _SETTLED_S].mean(axis=0) - c0
-    beyond = (cmd[after] - c0) * np.sign(change) - np.abs(change)
-    excess = float(np.max(beyond.max(axis=0) / np.maximum(np.abs(change), _MIN_CHANGE_PA)))
-    return {'overshoot_mm': max(over, 0.0) * 1e3, 'overshoot_frac': max(over, 0.0) / STEP_M,
-            'late_mm': late * 1e3, 'command_excess': max(excess, 0.0),
-            **_health(sim, rec)}
+    before = a['command_pa'][a['t'] < ts][-1]
+    return {**_step_figures(rec, ts, p, goal, before), **_health(sim, rec)}

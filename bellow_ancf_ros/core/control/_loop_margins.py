@@ -36,10 +36,8 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from scipy.optimize import brentq
 
-from ._notch import NOTCH_POLE_DAMPING
-
 __all__ = ['LoopMargins', 'MIN_GAIN_MARGIN', 'MIN_PHASE_MARGIN_DEG', 'loop_delay_s',
-           'loop_margins', 'mode_variants', 'robust_margins', 'safe_gain']
+           'loop_margins', 'safe_gain']
 
 #: The smallest gain margin the package accepts for the integral loop.
 MIN_GAIN_MARGIN = 3.0
@@ -86,73 +84,29 @@ def _checked(k, tau, T, modes):
     return out
 
 
-def _phase(w, tau, T, modes, notch=None):
+def _phase(w, tau, T, modes):
     ph = -math.pi / 2 - np.arctan(w * tau) - w * T
     for wn, z in modes:
         ph = ph - np.arctan2(2 * z * wn * w, wn * wn - w * w)
-    if notch is not None:   # zeros minus poles (module _notch)
-        wn, zz, zp = notch
-        ph = ph + np.arctan2(2 * zz * wn * w, wn * wn - w * w) - np.arctan2(
-            2 * zp * wn * w, wn * wn - w * w)
     return ph
 
 
-def _log_gain(w, tau, T, modes, notch=None):
+def _log_gain(w, tau, T, modes):
     """``log |L_1(jw)|`` (unit gain)."""
     g = -np.log(w) - 0.5 * np.log1p((w * tau) ** 2)
     for wn, z in modes:
         g = g + 2 * np.log(wn) - 0.5 * np.log((wn * wn - w * w) ** 2 + (2 * z * wn * w) ** 2)
-    if notch is not None:
-        wn, zz, zp = notch
-        d = (wn * wn - w * w) ** 2
-        g = g + 0.5 * (np.log(d + (2 * zz * wn * w) ** 2) - np.log(d + (2 * zp * wn * w) ** 2))
     return g
 
 
-def _notch_rad(notch):
-    """``(w [rad/s], zeta_zeros, zeta_poles)`` of a notch ``(frequency_hz, damping_ratio)``."""
-    if notch is None:
-        return None
-    f, z = float(notch[0]), float(notch[1])
-    zp = float(notch[2]) if len(notch) > 2 else NOTCH_POLE_DAMPING
-    if not (math.isfinite(f) and f > 0 and math.isfinite(z) and 0 <= z <= zp):
-        raise ValueError(f'a notch needs a frequency > 0 and a damping ratio in [0, {zp:g}], '
-                         f'got ({f}, {z})')
-    return 2 * math.pi * f, z, zp
-
-
-def _w_top(tau, T, ms, nt) -> float:
+def _w_top(tau, T, ms) -> float:
     """The top of the frequency range searched [rad/s]: far above the modes, lag and delay."""
-    w = max(max([wn for wn, _ in ms] + ([nt[0]] if nt else [])) * 50.0,
-            50.0 / max(tau, 1e-3), 1e3)
+    w = max(max(wn for wn, _ in ms) * 50.0, 50.0 / max(tau, 1e-3), 1e3)
     return max(w, 20 * math.pi / T) if T > 0 else w
 
 
-def _limit_by_grid(tau, T, ms, notch, w_top):
-    """``(k_max, w_lim)``: every crossing of an odd multiple of -180 deg, found on a grid.
-
-    A notch's phase is not monotonic (it lags below its frequency and leads
-    above), so a level may be crossed several times; each is refined.
-    """
-    grid = np.geomspace(1e-6, w_top, 40000)
-    ph = _phase(grid, tau, T, ms, notch)
-    k_max, w_lim = math.inf, math.inf
-    n = 0
-    while -math.pi * (2 * n + 1) >= ph.min() and n <= 50:
-        level = -math.pi * (2 * n + 1)
-        d = ph - level
-        for i in np.flatnonzero(np.sign(d[:-1]) != np.sign(d[1:])):
-            w_n = brentq(lambda w: _phase(w, tau, T, ms, notch) - level, grid[i], grid[i + 1],
-                         xtol=1e-12, rtol=1e-12)
-            g = math.exp(-_log_gain(w_n, tau, T, ms, notch))
-            if g < k_max:
-                k_max, w_lim = g, w_n
-        n += 1
-    return k_max, w_lim
-
-
 def loop_margins(gain_per_s: float, lag_s: float, delay_s: float,
-                 modes: Sequence[tuple[float, float]] = (), notch=None) -> LoopMargins:
+                 modes: Sequence[tuple[float, float]] = ()) -> LoopMargins:
     """Margins of the integral loop (module docstring).
 
     Parameters
@@ -163,13 +117,10 @@ def loop_margins(gain_per_s: float, lag_s: float, delay_s: float,
     modes : ``(frequency_hz, damping_ratio)`` of the robot's modes that the
         correction excites (its first lateral modes at the held equilibrium);
         empty: the quasi-static robot.
-    notch : ``(frequency_hz, damping_ratio[, pole_damping])`` of a notch the
-        correction passes (:class:`~._notch.ModeNotch`), or None.
     """
     k, tau, T = float(gain_per_s), float(lag_s), float(delay_s)
     ms = _checked(k, tau, T, modes)
-    nt = _notch_rad(notch)
-    if not ms and nt is None:
+    if not ms:
         w_c = brentq(lambda w: w * math.hypot(1.0, w * tau) - k, 0.0, k) if tau > 0 else k
         pm = math.pi / 2 - math.atan(w_c * tau) - w_c * T
         if T > 0:
@@ -180,10 +131,7 @@ def loop_margins(gain_per_s: float, lag_s: float, delay_s: float,
             w_180, gm = math.inf, math.inf
         return LoopMargins(math.degrees(pm), gm, w_c, k * gm, pm / w_c if pm > 0 else 0.0,
                            w_180)
-    w_top = _w_top(tau, T, ms, nt)
-    if nt is not None:
-        k_max, w_lim = _limit_by_grid(tau, T, ms, nt, w_top)
-        return _with_crossovers(k, tau, T, ms, nt, w_top, k_max, w_lim)
+    w_top = _w_top(tau, T, ms)
     # phase crossings of -180, -540, ... deg: each exactly once (the phase falls monotonically)
     k_max, w_lim = math.inf, math.inf
     n = 0
@@ -199,16 +147,16 @@ def loop_margins(gain_per_s: float, lag_s: float, delay_s: float,
         n += 1
         if n > 50:
             break
-    return _with_crossovers(k, tau, T, ms, None, w_top, k_max, w_lim)
+    return _with_crossovers(k, tau, T, ms, w_top, k_max, w_lim)
 
 
-def _with_crossovers(k, tau, T, ms, nt, w_top, k_max, w_lim) -> LoopMargins:
+def _with_crossovers(k, tau, T, ms, w_top, k_max, w_lim) -> LoopMargins:
     """The margins at gain ``k`` given the stability limit ``(k_max, w_lim)``."""
     # gain crossovers (|L| = 1): |L| need not fall monotonically near a mode
     grid = np.geomspace(1e-6, w_top, 20000)
-    lg = _log_gain(grid, tau, T, ms, nt) + math.log(k)
+    lg = _log_gain(grid, tau, T, ms) + math.log(k)
     idx = np.flatnonzero(np.sign(lg[:-1]) != np.sign(lg[1:]))
-    crossings = [brentq(lambda w: _log_gain(w, tau, T, ms, nt) + math.log(k), grid[i],
+    crossings = [brentq(lambda w: _log_gain(w, tau, T, ms) + math.log(k), grid[i],
                         grid[i + 1], xtol=1e-12, rtol=1e-12) for i in idx]
     # phase margin of each crossover: the extra phase lag that would put it on -1, i.e. down
     # to the next odd multiple of -180 deg (a crossover past -180 near a mode's peak, at
@@ -216,7 +164,7 @@ def _with_crossovers(k, tau, T, ms, nt, w_top, k_max, w_lim) -> LoopMargins:
     stable = k < k_max
     pms = []
     for wc in crossings:
-        ph = float(_phase(wc, tau, T, ms, nt)) + math.pi
+        ph = float(_phase(wc, tau, T, ms)) + math.pi
         pm = ph % (2 * math.pi) if stable else (ph + math.pi) % (2 * math.pi) - math.pi
         pms.append((pm, wc))
     pm, w_c = min(pms) if pms else (math.pi, math.nan)
@@ -225,56 +173,16 @@ def _with_crossovers(k, tau, T, ms, nt, w_top, k_max, w_lim) -> LoopMargins:
                        k_max, dm, w_lim)
 
 
-def mode_variants(modes: Sequence[tuple[float, float]], mismatch: float,
-                  count: int = 5) -> list:
-    """The modes with every frequency scaled by ``1 + u mismatch``, ``u`` in [-1, 1] (``count``).
-
-    The robots a notched loop must also be safe with: the robot's mode is
-    the model's only to within the mismatch (``_notch.NOTCH_MISMATCH``).
-    """
-    if mismatch <= 0:
-        return [list(modes)]
-    return [[(f * (1.0 + u * mismatch), z) for f, z in modes]
-            for u in np.linspace(-1.0, 1.0, count)]
-
-
-def robust_margins(gain_per_s: float, lag_s: float, delay_s: float,
-                   modes: Sequence[tuple[float, float]] = (), notch=None,
-                   mismatch: float = 0.0) -> LoopMargins:
-    """The thinnest margins (smallest gain margin) over :func:`mode_variants`."""
-    ms = [loop_margins(gain_per_s, lag_s, delay_s, v, notch)
-          for v in mode_variants(modes, mismatch)]
-    return min(ms, key=lambda m: (m.gain_margin, m.phase_margin_deg))
-
-
-def _phase_margin_on_grid(k, grid, ph, lg, stable):
-    """The phase margin [deg] at gain ``k`` from the loop sampled on ``grid`` (no refinement)."""
-    d = lg + math.log(k)
-    idx = np.flatnonzero(np.sign(d[:-1]) != np.sign(d[1:]))
-    if idx.size == 0:
-        return 180.0
-    p = ph[idx] + math.pi
-    pm = np.mod(p, 2 * math.pi) if stable else np.mod(p + math.pi, 2 * math.pi) - math.pi
-    return math.degrees(float(pm.min()))
-
-
 def safe_gain(lag_s: float, delay_s: float, modes: Sequence[tuple[float, float]] = (),
               min_gain_margin: float = MIN_GAIN_MARGIN,
-              min_phase_margin_deg: float = MIN_PHASE_MARGIN_DEG, notch=None,
-              mismatch: float = 0.0) -> float:
+              min_phase_margin_deg: float = MIN_PHASE_MARGIN_DEG) -> float:
     """The largest integral gain [1/s] with both margins at least the given ones.
 
     The gain-margin bound is exact (``k_max / min_gain_margin``); below it
     the gains are scanned from the top (the phase margin need not fall
     monotonically with the gain when a mode's peak is near the crossover)
     and the largest that keeps the phase margin is refined by bisection.
-    With a ``notch`` (and a ``mismatch``), the gain that keeps both margins
-    for every robot of :func:`mode_variants` (the smallest of their gains).
     """
-    if notch is not None or mismatch > 0:
-        return min(_safe_gain_sampled(lag_s, delay_s, v, min_gain_margin,
-                                      min_phase_margin_deg, notch)
-                   for v in mode_variants(modes, mismatch))
     k_gm = loop_margins(1.0, lag_s, delay_s, modes).max_gain_per_s / float(min_gain_margin)
     if not math.isfinite(k_gm):
         k_gm = 100.0
@@ -284,11 +192,6 @@ def safe_gain(lag_s: float, delay_s: float, modes: Sequence[tuple[float, float]]
         m = loop_margins(k, lag_s, delay_s, modes)
         return m.phase_margin_deg >= min_phase_margin_deg and m.gain_margin >= min_gain_margin
 
-    return _largest(ks, ok)
-
-
-def _largest(ks, ok) -> float:
-    """The largest gain of the descending ``ks`` that is ``ok``, refined by bisection."""
     for i, k in enumerate(ks):
         if ok(k):
             if i == 0:
@@ -299,21 +202,3 @@ def _largest(ks, ok) -> float:
                 lo, hi = (mid, hi) if ok(mid) else (lo, mid)
             return lo
     return float(ks[-1])
-
-
-def _safe_gain_sampled(lag_s, delay_s, modes, min_gain_margin, min_phase_margin_deg, notch):
-    """:func:`safe_gain` of one robot, the phase margins read off one sampling of the loop."""
-    k1 = loop_margins(1.0, lag_s, delay_s, modes, notch)
-    k_max = k1.max_gain_per_s
-    k_gm = k_max / float(min_gain_margin) if math.isfinite(k_max) else 100.0
-    tau, T = float(lag_s), float(delay_s)
-    ms = _checked(1.0, tau, T, modes)
-    nt = _notch_rad(notch)
-    grid = np.geomspace(1e-6, _w_top(tau, T, ms, nt), 20000)
-    ph, lg = _phase(grid, tau, T, ms, nt), _log_gain(grid, tau, T, ms, nt)
-
-    def ok(k):
-        return (k_max / k >= min_gain_margin
-                and _phase_margin_on_grid(k, grid, ph, lg, k < k_max) >= min_phase_margin_deg)
-
-    return _largest(np.geomspace(k_gm, k_gm * 1e-4, 120), ok)

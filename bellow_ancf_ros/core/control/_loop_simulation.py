@@ -31,7 +31,7 @@ import numpy as np
 
 from ..geometry import angle_between
 from ..model import RobotModel
-from ..solve import solve_inverse
+from ..solve import solve_forward, solve_inverse
 from ._feedback import FeedbackSettings, IntegralFeedback
 from ._play import PlayCompensation
 from ._simulated_robot import SimulatedRobot
@@ -164,6 +164,14 @@ class LoopSimulation:
                                       cfg.p_max) if play_compensation_pa > 0 else None)
         t = robot.time_s
         self._next = {'physics': t + self.physics_dt, 'mocap': t, 'control': t}
+        if jumps is not None or mode_check is not None:   # as the node at configure: the
+            start = solve_forward(model, np.clip(robot.regulators.command_pa, cfg.p_min,
+                                                 cfg.p_max), payload_kg=self.payload_kg)
+            if start.success:   # first mode where the robot rests, the first target from there
+                self._check_modes(t, start)
+                if jumps is not None:
+                    jumps.reset((start.position,
+                                 start.z_axis if self.use_orientation else None))
 
     def _control(self, t: float, target: Target, rec: LoopRecord) -> None:
         ref_p, ref_z = target(t)
@@ -235,7 +243,7 @@ class LoopSimulation:
             self.jumps.set_mode(res.frequency_hz)
         if fb is None:
             return
-        fb.watch(res.frequency_hz, res.damping_ratio)
+        fb.watch(res.frequency_hz)
         if res.auto and (not self.gains or res.gain_per_s != self.gains[-1][1]):
             fb.set_gain(res.gain_per_s)
             self.gains.append((t, res.gain_per_s))

@@ -34,8 +34,7 @@ from dataclasses import dataclass
 
 from ..dynamics import ModalError, natural_modes
 from ._loop_margins import (MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG, LoopMargins, loop_margins,
-                            robust_margins, safe_gain)
-from ._notch import NOTCH_MISMATCH
+                            safe_gain)
 
 __all__ = ['AUTO_GAIN', 'GAIN_RANGE_PER_S', 'ModeCheck', 'ModeCheckResult', 'RETUNE_FRACTION',
            'gain_setting']
@@ -76,8 +75,6 @@ class ModeCheckResult:
     moved: bool            #: the mode moved by more than the retune fraction since the last
     computed_s: float      #: how long the modal analysis and the margins took [s]
     auto: bool = False     #: the gain is the safe gain (``gain_per_s='auto'``)
-    notch: bool = False    #: the correction passes a notch at the mode (margins: the worst
-    #: over a robot mode within NOTCH_MISMATCH of the model's)
 
     @property
     def ok(self) -> bool:
@@ -106,11 +103,9 @@ class ModeCheckResult:
         """One line: the gain, its margins with the mode, the safe gain."""
         m = self.margins
         auto = ' (auto)' if self.auto else ''
-        notch = (f', notched; margins for a robot mode within {NOTCH_MISMATCH:.0%} of it'
-                 if self.notch else '')
         head = (f'feedback gain {self.gain_per_s:.3g} /s{auto} with the robot\'s first mode '
                 f'({self.frequency_hz:.3g} Hz, damping ratio {self.damping_ratio:.3f}, payload '
-                f'{self.payload_kg:g} kg{notch}): gain margin {m.gain_margin:.2f}, phase margin '
+                f'{self.payload_kg:g} kg): gain margin {m.gain_margin:.2f}, phase margin '
                 f'{m.phase_margin_deg:.0f} deg')
         if self.ok:
             return head
@@ -146,21 +141,16 @@ class ModeCheck:
     period_s : recompute at most this often while the equilibrium moves.
     retune_fraction : a move of the first mode by more than this is reported
         as ``moved``.
-    notch : the correction passes a notch at the mode
-        (:class:`~._notch.ModeNotch`, ``FeedbackSettings.notch``): the margins
-        and the safe gain include it, for the worst robot mode within
-        :data:`~._notch.NOTCH_MISMATCH` of the model's.
     """
 
     def __init__(self, gain_per_s: float, lag_s: float, delay_s: float, period_s: float = 2.0,
-                 retune_fraction: float = RETUNE_FRACTION, notch: bool = False) -> None:
+                 retune_fraction: float = RETUNE_FRACTION) -> None:
         self.auto = gain_setting(gain_per_s) == AUTO_GAIN
         self.gain_per_s = GAIN_RANGE_PER_S[0] if self.auto else float(gain_per_s)
         loop_margins(self.gain_per_s, lag_s, delay_s)   # checks the numbers (ValueError)
         self.lag_s, self.delay_s = float(lag_s), float(delay_s)
         self.period_s = float(period_s)
         self.retune_fraction = float(retune_fraction)
-        self.notch = bool(notch)
         self.last: ModeCheckResult | None = None
         self._last_t = -math.inf
         self._last_load = None
@@ -184,9 +174,7 @@ class ModeCheck:
         except ModalError:
             return None
         modes = [(mode.frequency_hz, mode.damping_ratio)]
-        notch = modes[0] if self.notch else None
-        mismatch = NOTCH_MISMATCH if self.notch else 0.0
-        safe = safe_gain(self.lag_s, self.delay_s, modes, notch=notch, mismatch=mismatch)
+        safe = safe_gain(self.lag_s, self.delay_s, modes)
         prev = self.last
         moved = prev is None or abs(mode.frequency_hz - prev.frequency_hz) > (
             self.retune_fraction * prev.frequency_hz)
@@ -196,9 +184,8 @@ class ModeCheck:
             gain = min(max(safe, lo), hi)
             if not moved and prev is not None:
                 gain = prev.gain_per_s
-        margins = (robust_margins(gain, self.lag_s, self.delay_s, modes, notch, mismatch)
-                   if self.notch else loop_margins(gain, self.lag_s, self.delay_s, modes))
+        margins = loop_margins(gain, self.lag_s, self.delay_s, modes)
         self.last = ModeCheckResult(mode.frequency_hz, mode.damping_ratio, gain, margins, safe,
                                     float(fw.load.payload_kg), moved,
-                                    time.perf_counter() - t0, self.auto, self.notch)
+                                    time.perf_counter() - t0, self.auto)
         return self.last

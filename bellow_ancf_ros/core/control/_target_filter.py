@@ -82,12 +82,16 @@ class TargetFilter:
         """Until when a closed loop holds its correction (a jump's move) [s]; None: never."""
         return None if self.jumps is None else self.jumps.hold_until
 
-    def reset(self) -> None:
-        """Forget the stream (the next target is taken as it is)."""
+    def reset(self, start=None) -> None:
+        """Forget the stream (the next target is taken as it is).
+
+        ``start``: ``(position, z_axis or None)``, the pose the robot is at
+        (``smooth``: the next target is a jump from it when far enough).
+        """
         if self.shaper is not None:
             self.shaper.reset()
         if self.jumps is not None:
-            self.jumps.reset()
+            self.jumps.reset(start)
         if self.feedforward is not None:
             self.feedforward.reset()
         self._newest = None

@@ -48,6 +48,25 @@ def test_a_step_becomes_a_minimum_jerk_move_of_two_slowest_periods():
     assert jt.busy(1.0 + 0.9 * dur) and not jt.busy(1.0 + dur)
 
 
+def test_the_first_target_after_start_is_a_move_from_where_the_robot_is():
+    """reset(start): a first target far from the start pose is a jump; a near one passes."""
+    jt = JumpTransition(F)
+    start, far = np.array([0.0, 0.0, 0.2]), np.array([0.015, 0.0, 0.19])
+    jt.reset((start, None))
+    jt.push(3.0, far)
+    assert jt.moves == 1 and jt.busy(3.0)
+    np.testing.assert_allclose(jt.at(3.0)[0], start, atol=1e-15)
+    np.testing.assert_allclose(jt.at(3.0 + jt.duration_s)[0], far, atol=1e-15)
+    near = start + np.array([0.001, 0.0, 0.0])
+    jt.reset((start, None))
+    jt.push(3.0, near)
+    assert jt.moves == 1 and not jt.busy(3.0)
+    np.testing.assert_array_equal(jt.at(3.0)[0], near)
+    jt.reset()   # no start: the first target is taken as it is
+    jt.push(5.0, far)
+    assert jt.moves == 1 and not jt.busy(5.0)
+
+
 def test_the_move_leaves_every_mode_of_the_family_nearly_at_rest():
     """An undamped mode at 0.7-1.4x the model's, driven by the move: residual at most 4.1 %."""
     jt = JumpTransition(F)

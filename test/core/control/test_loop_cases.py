@@ -65,3 +65,18 @@ def test_step_overshoot_is_measured_along_the_step(model):
     assert STEP_M == 0.010
     assert 0.0 <= r['overshoot_frac'] * 10.0 == pytest.approx(r['overshoot_mm'])
     assert r['late_mm'] >= 0.0 and r['command_excess'] >= 0.0
+
+
+def test_the_first_target_after_start_moves_without_overshoot(model):
+    """From the vented start to the held target: a smooth move (3.5 mm), no swing past it.
+
+    What is left past the target is the mismatch the loop has not learned yet
+    (the robot is 6-10 % off the model): measured 0.30 mm, against 1.69 mm
+    when the first target is commanded at once.
+    """
+    robot = SimulatedRobot('one_segment_mismatched', seed=1)
+    r = held_case(model, robot, duration_s=4.0)
+    assert r['first_overshoot_mm'] < 0.5
+    plain = held_case(model, SimulatedRobot('one_segment_mismatched', seed=1), duration_s=4.0,
+                      loop=lambda m, rb, pl: default_loop(m, rb, pl, smooth_jumps=False))
+    assert plain['first_overshoot_mm'] > 3 * r['first_overshoot_mm']
