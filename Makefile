@@ -24,7 +24,8 @@ $(STAMP): requirements.txt setup.py
 	touch $@
 
 # main job: model vs a mismatched simulated robot, feedforward then closed loop, then the loads
-# phase (an unannounced payload and a push, sensed and compensated; ROS processes, ~7 min)
+# phase (an unannounced payload and a push, sensed and compensated; ROS processes; about 15 min
+# on a quiet 2-core machine, longer on a busy one)
 demo: $(STAMP)
 	$(VENV)/bin/python -m bellow_ancf_ros.demos.closed_loop
 	$(VENV)/bin/python -m bellow_ancf_ros.demos.forces
@@ -40,6 +41,7 @@ demo-offline: $(STAMP)
 
 # the tests without ROS on two workers (pytest-xdist: CPU-bound, independent), then the ROS
 # tests one at a time (nodes, processes and their timing need the cores); fails if either fails
+# (about 11 min on a fresh 2-core machine: about 3 without ROS, about 7.5 for the ROS tests)
 test: $(STAMP)
 	@$(VENV)/bin/python -m pytest -m "not ros" -n 2; a=$$?; \
 	$(VENV)/bin/python -m pytest -m ros; b=$$?; \
@@ -65,6 +67,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/stream_latency.py two_segment
 	$(VENV)/bin/python bench/dynamics_bench.py
 	$(VENV)/bin/python bench/remedies_bench.py
+	$(VENV)/bin/python bench/busy_bench.py
 	# the closed loop on 100 robots of the family per segment count (about 25 min on 2 cores)
 	$(VENV)/bin/python bench/family_bench.py --doc
 

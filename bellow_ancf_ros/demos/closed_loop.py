@@ -12,10 +12,12 @@ pipeline as separate processes on an isolated random ``ROS_DOMAIN_ID``
         --measured_pose--> (back to the inverse node when feedback is on)
         --measured_pressure--> forward_kinetostatic_node --predicted_pose-->
 
-with ``feedback: none`` (the paper's quasi-static feedforward controller),
-``dynamic_feedforward: true`` (the motion's inertial and damping loads
-through the first mode) and ``feedback: integral`` (the closed loop, on the
-automatic gain; the 50 g case runs it alone, and holds 16 s) one after the
+with ``feedback: none`` and ``dynamic_feedforward: false`` (the paper's
+quasi-static feedforward controller), ``dynamic_feedforward: true`` (the
+motion's inertial and damping loads through the first mode, and the
+regulators' lag) and ``feedback: integral`` (the closed loop at the node's
+defaults: the automatic gain, dynamic feedforward; the 50 g case runs it
+alone, and holds 16 s) one after the
 other (each on its own domain and with the cores to itself;
 ``--side-by-side``: at once); the inverse node compensates the regulators'
 documented play (``regulator_play_kpa``). The simulated robot is realistic
@@ -25,8 +27,8 @@ by default (``--ideal``: the clean robot): it has mass and rings
 bellows creeping 15 % of their elongation over 2 s, a motion capture at 120 Hz
 with 8 ms latency, 0.15 mm noise, 0.5 % outliers of 10-30 mm and 0.5 s
 dropouts every 15 s. The trajectory publisher streams at 50 Hz and previews
-the regulators' lag
-(``preview_s`` = dead time + time constant + half a target period).
+the regulators' dead time and half a target period, and for the quasi-static
+feedforward their time constant too (``preview_s`` 0.025 and 0.085 s).
 
 Each run: the nodes come up; this process holds the path's first point
 (lead-in) until the trajectory publisher, started with ``start_delay_s`` =
@@ -203,7 +205,7 @@ class Run:
             log_dir, tag=self.tag)
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
             'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
-            'dynamic_feedforward': mode == 'dynamic', 'payload_kg': case.payload_kg,
+            'dynamic_feedforward': mode != 'none', 'payload_kg': case.payload_kg,
             'regulator_play_kpa': play_kpa(args.plant)},
             self.env, log_dir, tag=self.tag)
         self.procs['forward'] = NodeProcess('forward_kinetostatic_node', {
@@ -260,7 +262,7 @@ class Run:
                 'rate_hz': TARGET_RATE_HZ, 'period_s': self.col.period_s,
                 'start_delay_s': self.args.lead_in, 'spin_up_s': self.spin_up_s,
                 'ramp_in_s': 0.0,   # this process holds the path's first point (lead-in)
-                'preview_s': preview_s(self.args.plant, self.mode == 'dynamic')}
+                'preview_s': preview_s(self.args.plant, self.mode != 'none')}
         if case.bending_angle_deg is not None:
             traj['bending_angle_deg'] = case.bending_angle_deg
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', traj, self.env,
@@ -334,7 +336,7 @@ class Run:
         with self.rec.lock:
             stamped = [m for _, m in self.rec.msgs['target_pose'] if _stamp(m) > 0]
         first, last = _stamp(stamped[0]), _stamp(stamped[-1])
-        d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode == 'dynamic')
+        d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode != 'none')
         tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
         case, kw = self.case, self.col.path_kw
         clock = self.rec.node.get_clock()
@@ -635,7 +637,8 @@ def main(argv=None) -> int:
     domains = random.sample(range(102), sum(len(c.case.modes) for c in cols) + 2)
     print(f'bellow_ancf_ros main job: the default model controls a simulated robot that is not '
           f'the model (config/*_mismatched.yaml), {args.plant} plant, targets at '
-          f'{TARGET_RATE_HZ:g} Hz previewed by {preview_s(args.plant):g} s; node logs in '
+          f'{TARGET_RATE_HZ:g} Hz previewed by {preview_s(args.plant):g} s (with dynamic '
+          f'feedforward {preview_s(args.plant, True):g} s); node logs in '
           f'{log_dir} (kept if it fails)')
     t_all = time.monotonic()
     results, ok = {}, True

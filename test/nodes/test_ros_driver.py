@@ -46,7 +46,7 @@ class Written:
 
 def test_a_held_target_is_republished_at_command_rate_hz(h, one):
     h.record(Float64MultiArray, 'pressure_command')
-    node = h.add(InverseKinetostaticNode, command_rate_hz=20.0)
+    node = h.add(InverseKinetostaticNode, command_rate_hz=20.0, target_shaping='none')
     pub = h.publisher(PoseStamped, 'target_pose')
     pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
     wait_for(lambda: node.stats['published'] >= 1, what='the first command')
@@ -144,7 +144,7 @@ def test_two_publishers_on_pressure_command_never_alternate(h, one):
     from bellow_ancf_ros.nodes.ros_util import command_qos
     h.record(Float64MultiArray, 'pressure_command')
     h.record(DiagnosticArray, '/diagnostics', command_qos())
-    inv = h.add(InverseKinetostaticNode, command_rate_hz=20.0)
+    inv = h.add(InverseKinetostaticNode, command_rate_hz=20.0, target_shaping='none')
     pub = h.publisher(PoseStamped, 'target_pose')
     pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
     wait_for(lambda: inv.stats['published'] >= 1, what='the controller commands')

@@ -204,8 +204,10 @@ def stack(tmp_path_factory):
     os.environ['ROS_DOMAIN_ID'] = str(domain)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     logs = tmp_path_factory.mktemp('node_logs')
+    # the static pipeline: each prediction is a target (not shifted, not moved to smoothly)
     inverse = NodeProcess('inverse_kinetostatic_node', env, logs,
-                          {'robot_config': 'one_segment', 'max_rate_hz': 200.0}).start()
+                          {'robot_config': 'one_segment', 'max_rate_hz': 200.0,
+                           'dynamic_feedforward': False, 'target_shaping': 'none'}).start()
     forward = NodeProcess('forward_kinetostatic_node', env, logs,
                           {'robot_config': 'one_segment'}).start()
     client = Client(domain)

@@ -176,6 +176,15 @@ def assert_safe(values_pa, cfg):
 
 
 def setup_inverse(h, **params):
+    """An inverse node, its recorders and a target publisher: ``(node, publisher, commands)``.
+
+    The static pipeline unless ``params`` say otherwise: each target is
+    commanded as it is (``target_shaping: none``, no dynamic feedforward;
+    the defaults, which move to a target smoothly, are tested in
+    test_ros_targets.py).
+    """
+    params.setdefault('target_shaping', 'none')
+    params.setdefault('dynamic_feedforward', False)
     cmd = h.record(Float64MultiArray, 'pressure_command')
     h.record(PoseStamped, 'commanded_pose')
     h.record(DiagnosticArray, '/diagnostics', command_qos())

@@ -19,10 +19,13 @@ ZV/ZVD shaper, it does not need the mode within +-20 %.
 
 A jump: a target more than :data:`JUMP_M` (or :data:`JUMP_RAD` of its
 z-axis) from where the stream was heading (the previous target plus the
-previous step; the previous target itself after a jump): a stream that moves
-smoothly passes unchanged and undelayed at any rate (a circle at 10x: 0.02
-mm from the extrapolation between 50 Hz targets, 0.5 mm between 10 Hz
-ones); a stream that starts moving at full speed gets a smooth start.  While a move runs, new
+previous step scaled to the time since it, by the targets' times; the
+previous target itself after a jump): a stream that moves smoothly passes
+unchanged and undelayed at any rate, and with any jitter of its times (a
+circle at 10x: 0.02 mm from the extrapolation between 50 Hz targets, 0.5 mm
+between 10 Hz ones; a target 25 ms later than the one before, on the
+two-segment circle at 10x, is 2.1 mm from an extrapolation by one step); a
+stream that starts moving at full speed gets a smooth start.  While a move runs, new
 targets move its end (the move converges on the newest).  The closed loop
 holds its correction until :meth:`JumpTransition.hold_until` (the move's end
 plus :data:`SETTLE_S` for the regulators' lag and the motion capture's
@@ -91,7 +94,7 @@ class JumpTransition:
         if start is not None:
             z0 = None if start[1] is None else np.asarray(start[1], dtype=float).reshape(3)
             self._newest = (-math.inf, np.asarray(start[0], dtype=float).reshape(3), z0)
-        self._step: tuple | None = None     # the stream's last step (position, z-axis)
+        self._step: tuple | None = None     # the stream's last step (position, z-axis, time)
         self._move: tuple | None = None     # (t0, duration, start position, start z-axis)
 
     def push(self, t: float, position, z_axis=None) -> None:
@@ -100,18 +103,22 @@ class JumpTransition:
         z = None if z_axis is None else np.asarray(z_axis, dtype=float).reshape(3)
         old, step = self._newest, self._step
         if old is not None:
-            head_p = old[1] if step is None else old[1] + step[0]
+            # the last step, scaled to the time since the last target: a late target of a
+            # smooth stream (a busy computer, a dropped one) is where the stream was heading
+            dt = float(t) - old[0]
+            k = dt / step[2] if step is not None and 0.0 < step[2] < math.inf else 1.0
+            head_p = old[1] if step is None else old[1] + k * step[0]
             jump = float(np.linalg.norm(p - head_p)) > JUMP_M
             if z is not None and old[2] is not None:
-                head_z = old[2] if step is None or step[1] is None else old[2] + step[1]
+                head_z = old[2] if step is None or step[1] is None else old[2] + k * step[1]
                 jump |= float(np.linalg.norm(z - head_z)) > JUMP_RAD
             if jump and self.duration_s > 0:
                 start_p, start_z = self.at(float(t))
                 self._move = (float(t), self.duration_s, start_p, start_z)
                 self.moves += 1
-            # the step the stream takes (none after a jump: the jump is not its speed)
-            self._step = None if jump else (
-                p - old[1], None if z is None or old[2] is None else z - old[2])
+            # the step the stream takes and its time (none after a jump: not its speed)
+            self._step = None if jump or not math.isfinite(dt) else (   # (none from the start)
+                p - old[1], None if z is None or old[2] is None else z - old[2], dt)
         self._newest = (float(t), p, z)
 
     def busy(self, t: float) -> bool:

@@ -3,8 +3,9 @@
 Each case runs a fresh :class:`~._loop_simulation.LoopSimulation` of the
 inverse node's closed loop at its defaults (``feedback: integral``,
 ``feedback_gain_per_s: auto`` with the node's loop lag and delay, a jump of
-the targets moved through smoothly: ``target_shaping: smooth``, no dynamic
-feedforward) around a robot, with targets stamped when
+the targets moved through smoothly: ``target_shaping: smooth``, a moving
+target shifted for the mode and the regulators' lag: ``dynamic_feedforward``)
+around a robot, with targets stamped when
 they are wanted (nobody previewed them: ``preview_s`` 0), and measures what
 the goals name, on the robot's true pose:
 
@@ -55,10 +56,11 @@ Loop = Callable[[RobotModel, SimulatedRobot, float], LoopSimulation]
 
 
 def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
-                 dynamic_feedforward: bool = False, smooth_jumps: bool = True) -> LoopSimulation:
+                 dynamic_feedforward: bool = True, smooth_jumps: bool = True) -> LoopSimulation:
     """The inverse node's closed loop at its defaults around ``robot`` (targets not previewed).
 
-    ``dynamic_feedforward``: as the node's ``dynamic_feedforward: true``;
+    ``dynamic_feedforward``: as the node's ``dynamic_feedforward`` (default
+    true; False: off);
     ``smooth_jumps``: as its ``target_shaping: smooth`` (the default; False:
     ``none``).
     """

@@ -55,8 +55,10 @@ monotone, so that is a box ``lam_min <= lam <= lam_max`` on the stretches).
   result carries the solve's progress: ``resume`` (the last accepted iterate,
   an exact equilibrium with its sensitivities), ``resume_stage`` (exact
   iteration, its retry from the cold start, or the search for the best
-  answer in the limits) and ``resume_cut`` (a forward solve the budget cut
-  short, continued where it stopped).  Passed back as ``warm_start`` for the
+  answer in the limits), ``resume_search`` (that search's least-squares runs
+  still to do: the one it was in, from its best iterate, and the starts not
+  begun) and ``resume_cut`` (a forward solve the budget cut short, continued
+  where it stopped).  Passed back as ``warm_start`` for the
   same target, the next call continues there instead of starting over, so
   repeated budgeted calls ("slices") end at the answer of one unbudgeted
   solve.  The deadline is checked before every Newton iteration (forward
@@ -139,6 +141,9 @@ class InverseResult:
     resume_stage: int = dataclasses.field(default=0, repr=False)  # where it continues (_EXACT..)
     # (stretches, ForwardResult) of a forward solve cut short, continued if evaluated again
     resume_cut: tuple | None = dataclasses.field(default=None, repr=False)
+    # the search for the best answer in the limits (resume_stage _BEST): its least-squares runs
+    # still to do, as (stretches, ForwardResult) starts (None: it had not chosen its starts)
+    resume_search: list | None = dataclasses.field(default=None, repr=False)
 
     @property
     def converged(self):
@@ -300,13 +305,13 @@ def solve_inverse(
         pe, ae = pose_errors(fw, position, z_axis)
         return pe <= ptol and (ae is None or ae <= atol)
 
-    warm_fw, prev_best, stage = warm_start, None, _EXACT
+    warm_fw, prev_best, stage, search = warm_start, None, _EXACT, None
     if isinstance(warm_start, InverseResult):
         warm_fw = warm_start.forward
         if warm_start.resume is not None:  # continue an interrupted solve
             warm_fw, prev_best = warm_start.resume, warm_start.forward
             if _same_target(warm_start, position, z_axis, load):
-                stage = warm_start.resume_stage
+                stage, search = warm_start.resume_stage, warm_start.resume_search
     if warm_fw is not None and not warm_fw.converged:
         warm_fw, stage = None, _EXACT
     obj = Objective(model, position, z_axis, load, None, tol, budget)
@@ -345,8 +350,8 @@ def solve_inverse(
             )
         if stage != _EXACT:
             # an interrupted solve continues in the stage it was in
-            lam, fw, reached, iters = _continue(obj, prev_best, warm_fw, lo, hi, lam_ref, multi,
-                                                done, max_iter)
+            lam, fw, reached, iters = _continue(obj, prev_best, warm_fw, search, lo, hi, lam_ref,
+                                                multi, done, max_iter)
         elif fw is not None:
             lam, reached, iters = fw.stretch, True, fw.iterations
         elif norm(position) > _SURELY_OUT * _reach(model):
@@ -383,6 +388,8 @@ def solve_inverse(
         res.resume = _resume_point(model, obj, warm_fw)
         res.resume_stage = obj.stage
         res.resume_cut = obj.cut
+        if obj.stage == _BEST:
+            res.resume_search = obj.search
         if obj.stage == _RETRY and obj.resume is None:
             res.resume_stage = _RETRY_COLD  # the cold retry has not got anywhere yet
         return res
@@ -406,16 +413,22 @@ def _reach(model):
                 for seg in cfg.segments) + cfg.tool_length)
 
 
-def _continue(obj, prev_best, resume, lo, hi, lam_ref, multi, done, max_iter):
+def _continue(obj, prev_best, resume, search, lo, hi, lam_ref, multi, done, max_iter):
     """Continue an interrupted solve in its stage ``obj.stage``: ``(lam, fw, reached, its)``.
 
     ``resume`` is its last accepted iterate (or its warm start), ``prev_best``
-    its best answer so far.  Work done already is not repeated: the retry from
-    the cold start goes on from its iterate, the search for the best answer in
-    the limits from its best answer (without the seeds it had).
+    its best answer so far, ``search`` the least-squares runs its search for
+    the best answer in the limits had still to do (None: it had not chosen
+    its starts).  Work done already is not repeated: the retry from the cold
+    start goes on from its iterate, the search from where each of its runs
+    stands (the interrupted one from its best iterate, then the starts it had
+    not begun).  The search ends, and its best answer is the answer, only
+    when every one of its runs has ended, as in one unbudgeted call: a run at
+    a first-order point of the least squares (:func:`stationary`) has ended
+    when that point is a clear miss; a nearly exact one is polished first.
     """
     model = obj.model
-    local, seeds, iters = [], False, 0
+    local, iters = [], 0
     if obj.stage in (_RETRY, _RETRY_COLD):
         start = np.clip(resume.stretch, lo, hi)
         if obj.stage == _RETRY_COLD:
@@ -426,17 +439,34 @@ def _continue(obj, prev_best, resume, lo, hi, lam_ref, multi, done, max_iter):
             obj, start, np.ones(model.A, bool), lo, hi, lam_ref, multi, done, max_iter)
         if reached:
             return lam, fw, True, iters
-        obj.stage, seeds = _BEST, True
+        obj.stage, search = _BEST, None   # a new search, from its seeds
         if O is not None:
             local.append((lam, fw))
-    if prev_best is not None and prev_best.converged and prev_best.load == obj.load:
-        if not seeds and stationary(obj, prev_best.stretch, lo, hi, lam_ref, multi):
-            # the search had arrived: its best answer is the answer (a least-squares run
-            # from it would only confirm it)
-            return prev_best.stretch, prev_best, done(prev_best), 0
-        local.append((prev_best.stretch, prev_best))
-    lam, fw, reached, it2 = _best_answer(obj, local, resume, lo, hi, lam_ref, multi, done,
-                                         max_iter, seeds=seeds)
+    usable = prev_best is not None and prev_best.converged and prev_best.load == obj.load
+    if search is None:
+        # the search had not chosen its starts (or is new): all of it, its best answer so far
+        # among the candidates
+        if usable:
+            local.append((prev_best.stretch, prev_best))
+        lam, fw, reached, it2 = _best_answer(obj, local, resume, lo, hi, lam_ref, multi, done,
+                                             max_iter)
+        return lam, fw, reached, iters + it2
+    runs = obj.search = [(lam, fw) for lam, fw in search if fw.converged and fw.load == obj.load]
+    if runs and stationary(obj, runs[0][0], lo, hi, lam_ref, multi):
+        # the interrupted run had arrived: ended, unless nearly exact (then its least squares
+        # ends at once and the polish follows)
+        O = obj.evaluate(runs[0][0])[2]  # noqa: E741
+        if cost(O) > POLISH_BELOW:
+            runs = obj.search = runs[1:]
+    if not runs:
+        # every run has ended: the best answer seen is the answer
+        _, lam, fw = obj.best
+        return lam, fw, done(fw), iters
+    options = {}
+    if 2**model.A > MAX_CORNERS:  # as _best_answer runs them
+        options.update(max_nfev=_MANY_NFEV, polish_below=POLISH_BELOW)
+    lam, fw, reached, it2 = best_in_limits(obj, runs, lo, hi, lam_ref, multi, done, max_iter,
+                                           n_starts=len(runs), **options)
     return lam, fw, reached, iters + it2
 
 
@@ -449,17 +479,16 @@ def _same_target(prev, position, z_axis, load):
             and np.array_equal(position, prev.target_position))
 
 
-def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter, seeds=True):
+def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter):
     """Best answer inside the limits from the local answer, the warm start, seeds and corners.
 
-    ``seeds`` false: not the vent and mid-range seeds (a continued solve had them already).
     Returns ``(lam, fw, reached, iterations)``; ``fw`` None when no forward solve converged.
     """
     model = obj.model
     candidates = list(local)
     if warm_fw is not None:
         candidates.append((warm_fw.stretch, warm_fw))
-    for seed in (np.ones(model.A), lam_ref) if seeds else ():  # vent and mid-range pressures
+    for seed in (np.ones(model.A), lam_ref):  # vent and mid-range pressures
         seed = np.clip(seed, lo, hi)
         _, fw_s, O_s, _ = obj.evaluate(seed)
         if O_s is not None:
@@ -467,7 +496,7 @@ def _best_answer(obj, local, warm_fw, lo, hi, lam_ref, multi, done, max_iter, se
     candidates += corner_solutions(model, obj.load, obj.budget)
     if not candidates:
         return None, None, False, 0
-    options = {} if seeds else {"n_starts": 1}  # a continued search: from its best answer only
+    options = {}
     if 2**model.A > MAX_CORNERS:  # no corners: the least squares searches for exact answers too
         options.update(max_nfev=_MANY_NFEV, polish_below=POLISH_BELOW)
     return best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, **options)

@@ -83,6 +83,13 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_st
     active limits.  With ``polish_below``, a run stops at the first iterate
     whose ``|O|^2/2`` is below it and that iterate is polished (inside the
     limits).  Returns ``(lam, fw, reached, iterations)`` of the best answer seen.
+
+    ``obj.search`` holds the runs still to do while it works: the running one
+    as its best iterate so far, then the starts not begun.  A budget that
+    runs out leaves it there, and a continued solve does exactly those runs
+    (passing them as ``candidates`` with ``n_starts=len(candidates)``), so
+    that no start of the search is skipped: its best answer is a target's
+    best in the limits only once every run has ended.
     """
     A = obj.model.A
     eps = 1e-4 if multi else 0.0
@@ -97,13 +104,19 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_st
         if len(starts) == n_starts:
             break
 
+    run_best = [np.inf]  # the running least-squares run's best cost
+
     def fun(v):
         _, fw_v, Ov, _ = obj.evaluate(v)
         if Ov is None:
             raise ForwardFailure()
         if obj.best[2] is fw_v:
             obj.advance(v)  # a new best answer: progress, and the point to continue from
-        if polish_below is not None and cost(Ov) <= polish_below:
+        c = cost(Ov)
+        if c < run_best[0]:  # the run goes on from here if the budget runs out
+            run_best[0] = c
+            obj.search[0] = (np.array(v, dtype=float), fw_v)
+        if polish_below is not None and c <= polish_below:
             raise _NearEnough(np.array(v, dtype=float))
         return np.concatenate([Ov, eps * (v - lam_ref)]) if multi else Ov
 
@@ -111,8 +124,10 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_st
         Jv = obj.evaluate(v)[3]
         return np.vstack([Jv, eps * np.eye(A)]) if multi else Jv
 
-    for lam0, fw0 in starts:
+    for k, (lam0, fw0) in enumerate(starts):
         obj.warm = fw0
+        obj.search = list(starts[k:])  # this run, then the starts not begun
+        run_best[0] = np.inf
         try:
             ls = least_squares(
                 fun,
@@ -146,7 +161,9 @@ def best_in_limits(obj, candidates, lo, hi, lam_ref, multi, done, max_iter, n_st
         )
         iters += it2
         if reached:
+            obj.search = []
             return lam, fw, True, iters
+    obj.search = []  # every run has ended
     c, lam, fw = obj.best
     return lam, fw, done(fw), iters
 

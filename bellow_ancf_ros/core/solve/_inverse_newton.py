@@ -154,8 +154,10 @@ class Objective:
     """Objective (eq. 28) as a function of the stretches, with warm-started forward solves.
 
     Remembers the best converged evaluation (lowest ``|O|``) for a solve
-    that runs out of budget, and the point an interrupted solve continues
-    from (``resume``: the last accepted iterate, with its sensitivities).
+    that runs out of budget, the point an interrupted solve continues
+    from (``resume``: the last accepted iterate, with its sensitivities),
+    and the least-squares runs its search for the best answer has still to
+    do (``search``).
     """
 
     def __init__(self, model, position, z_axis, load, warm, tol, budget):
@@ -172,6 +174,10 @@ class Objective:
         self._last_dx = None
         self.cut = None  # (lam, ForwardResult) of a forward solve the budget cut short
         self.pending = {}  # stretches -> cut ForwardResult of an earlier call, to continue
+        # the least-squares runs of the search for the best answer still to do, as
+        # (lam, ForwardResult) starts: the running one (from its best iterate) first
+        # (None: the search has not chosen its starts; _inverse_limits.best_in_limits)
+        self.search = None
 
     def offer(self, lam, fw):
         """Record a converged forward result as a candidate answer; return its objective."""

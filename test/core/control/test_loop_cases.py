@@ -53,9 +53,9 @@ def test_circle_under_feedforward_lags_by_one_control_period(model):
 
 def test_default_loop_is_the_nodes_closed_loop(model):
     sim = default_loop(model, _exact_robot())
-    assert sim.feedback is not None and sim.preview_s == 0.0 and sim.feedforward is None
-    assert sim.mode_check is not None
-    assert default_loop(model, _exact_robot(), dynamic_feedforward=True).feedforward is not None
+    assert sim.feedback is not None and sim.preview_s == 0.0 and sim.feedforward is not None
+    assert sim.mode_check is not None and sim.jumps is not None
+    assert default_loop(model, _exact_robot(), dynamic_feedforward=False).feedforward is None
 
 
 def test_step_overshoot_is_measured_along_the_step(model):
