@@ -22,7 +22,7 @@ from .ros_util import WARN_THROTTLE_S
 __all__ = [
     'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
     'ThrottledStatus', 'diagnostic_status', 'inverse_values', 'publish_diagnostic',
-    'solve_outcome', 'solve_values',
+    'lifecycle_level', 'solve_outcome', 'solve_values',
 ]
 
 #: Minimum interval between two WARN diagnostics of the same refusal reason [s].
@@ -147,6 +147,29 @@ def inverse_values(inv, dt: float, payload: float, unit: str) -> dict:
         'payload_kg': payload,
         'pressure_unit': unit,
     }
+
+
+def lifecycle_level(state: str, yielded_to: str = '', last_solve_ok=None,
+                    configure_error: str = '', recovery: str = '') -> tuple:
+    """A controller's heartbeat level and message for its lifecycle ``state``.
+
+    ``yielded_to``: why it went inactive for another publisher of its
+    commands ('' when it did not); ``last_solve_ok``: False when the last
+    solve failed; ``configure_error``: why the last configure failed, and
+    ``recovery`` the way out.
+    """
+    if state == 'inactive' and yielded_to:
+        return DiagnosticStatus.ERROR, f'inactive: {yielded_to}'
+    if state == 'active':
+        if last_solve_ok is False:
+            return DiagnosticStatus.WARN, 'active; the last solve failed'
+        return DiagnosticStatus.OK, 'active: pressure commands enabled'
+    if state == 'inactive':
+        return DiagnosticStatus.OK, 'inactive: pressure commands disabled'
+    if configure_error:
+        return (DiagnosticStatus.ERROR,
+                f'unconfigured: configure failed ({configure_error}); {recovery}'.rstrip('; '))
+    return DiagnosticStatus.WARN, f'{state}: no pressure commands'
 
 
 def solve_outcome(inv, usable: bool, budget: bool, more: bool, unsafe=None,

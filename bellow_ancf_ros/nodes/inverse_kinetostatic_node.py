@@ -44,7 +44,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_problem,
                     precompute_corners, solve_forward, solve_inverse, warm_up)
 from ..core import geometry
-from ..core.control import TARGET_SHAPINGS, PlayCompensation, gain_setting
+from ..core.control import PlayCompensation
 from . import contract, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FeedbackLink
@@ -104,14 +104,12 @@ class InverseKinetostaticNode(LifecycleNode):
         self._configured = False
         self._configure_error = ''
         self._model: RobotModel | None = None
-        self._cfg = None
-        self._warm = self._start_pose = None
+        self._cfg = self._warm = self._start_pose = None
+        # made on configure: the solver thread, topics, external_force input (ExternalForce),
+        # one owner of pressure_command (TopicOwner), timers
         self._worker: worker.LatestWorker | None = None
-        self._pub_cmd = self._pub_pose = None
-        self._sub = None
-        self._force: ExternalForce | None = None   # external_force input (configured)
-        self._owner: TopicOwner | None = None   # one owner of pressure_command (configured)
-        self._owner_timer = None
+        self._pub_cmd = self._pub_pose = self._sub = self._force = self._owner = None
+        self._owner_timer = self._republish_timer = None
         self._yield_requested = False
         self._said_orientation_ignored = False
         self._refusals = Refusals(self, 'targets', self._publish_diag)
@@ -123,7 +121,6 @@ class InverseKinetostaticNode(LifecycleNode):
                       'over_budget': 0, 'republished': 0}
         self._last_publish_t = -float('inf')
         self._last_pose = None   # the commanded_pose of the current command
-        self._republish_timer = None
         self.solve_stats = worker.SolveStats()
         self._last_item, self._continuations = None, 0   # budget slices of one target
         self._resume = None   # (item, unusable budget-limited answer): its next slice goes on
@@ -134,7 +131,8 @@ class InverseKinetostaticNode(LifecycleNode):
                                        f'{self.get_name()}: inverse kinetostatics')
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self._cfg.name if self._cfg is not None else '')
-        self.heartbeat.add_source(self._feedback_heartbeat)
+        self.heartbeat.add_source(lambda: self._feedback.heartbeat(self._active,
+                                                                   self._targets.status()))
         self.heartbeat.add_source(lambda: {} if self._force is None else self._force.status())
 
         if self.get_parameter('autostart').value:
@@ -176,14 +174,9 @@ class InverseKinetostaticNode(LifecycleNode):
         robot cannot carry at the current target (or the current command),
         where the model can tell (core :func:`~bellow_ancf_ros.core.payload_problem`).
         """
-        if param.name == 'feedback_gain_per_s':   # dynamic typing: rclpy checks no type
-            try:
-                gain_setting(param.value)
-            except ValueError as exc:
-                return f'feedback_gain_per_s: {exc}'
-        if param.name == 'target_shaping' and param.value not in TARGET_SHAPINGS:
-            return (f'target_shaping = {param.value!r} is not allowed; allowed: '
-                    f'{", ".join(map(repr, TARGET_SHAPINGS))}')
+        refused = FeedbackLink.refusal(param) or TargetLink.refusal(param)
+        if refused:
+            return refused
         if not getattr(self, '_configured', False):   # (declaring parameters in __init__)
             return ''
         if param.name == 'payload_kg':
@@ -224,21 +217,6 @@ class InverseKinetostaticNode(LifecycleNode):
                                        time_budget_s=PAYLOAD_CHECK_BUDGET_S)
             return payload_problem(model, payload, pressures=command,
                                    time_budget_s=PAYLOAD_CHECK_BUDGET_S)
-
-    def _feedback_heartbeat(self):
-        """Feedback state for the heartbeat; WARN while no fresh measured pose arrives."""
-        values = dict(self._feedback.status(), **self._targets.status())
-        margin = self._feedback.margin_warning
-        ringing = self._feedback.oscillation_error
-        if ringing is not None and self._active:
-            return DiagnosticStatus.ERROR, f'feedback: {ringing}', values
-        if margin is not None and self._active:
-            return DiagnosticStatus.WARN, f'loop margins: {margin}', values
-        if self._feedback.fallback and self._active:
-            return (DiagnosticStatus.WARN,
-                    f'feedback without measured poses: {values.get("feedback_state", "")}',
-                    values)
-        return values
 
     # ---------------------------------------------------------- lifecycle
     def on_configure(self, state: State) -> TransitionCallbackReturn:
@@ -371,29 +349,19 @@ class InverseKinetostaticNode(LifecycleNode):
         with self._lock:
             self._active = False
             self._configured = False
-        if self._modes is not None:
-            self._modes.stop()
-            self._modes = None
-        self._feedback.release()
-        self._targets.release()
-        for attr in ('_republish_timer', '_owner_timer'):
-            if getattr(self, attr, None) is not None:
-                self.destroy_timer(getattr(self, attr))
-                setattr(self, attr, None)
         self._owner = None
-        if self._worker is not None:
-            self._worker.stop()
-            self._worker = None
-        if self._force is not None:
-            self._force.destroy()
-            self._force = None
-        for attr, destroy in (('_sub', self.destroy_subscription),
-                              ('_pub_cmd', self.destroy_publisher),
-                              ('_pub_pose', self.destroy_publisher)):
-            ent = getattr(self, attr)
+        for attr, end in (('_modes', 'stop'), ('_worker', 'stop'), ('_force', 'destroy'),
+                          ('_republish_timer', self.destroy_timer),
+                          ('_owner_timer', self.destroy_timer),
+                          ('_sub', self.destroy_subscription),
+                          ('_pub_cmd', self.destroy_publisher),
+                          ('_pub_pose', self.destroy_publisher)):
+            ent = getattr(self, attr, None)
             if ent is not None:
-                destroy(ent)
+                getattr(ent, end)() if isinstance(end, str) else end(ent)
                 setattr(self, attr, None)
+        self._feedback.release()   # (no solve runs any more: the worker has stopped)
+        self._targets.release()
         with self._lock:
             self._model = self._cfg = self._warm = self._last_pose = None
             self._last_target = self._held_item = None
@@ -428,21 +396,10 @@ class InverseKinetostaticNode(LifecycleNode):
         if self.last_vent_acked is not None:
             values['last_vent_acked'] = str(self.last_vent_acked).lower()
         owner = getattr(self, '_owner', None)
-        if state == 'inactive' and owner is not None and owner.yielded:
-            level, message = DiagnosticStatus.ERROR, f'inactive: {owner.status()}'
-        elif state == 'active':
-            level, message = DiagnosticStatus.OK, 'active: pressure commands enabled'
-            last_ok = self.solve_stats.summary()['last_ok']
-            if last_ok is False:
-                level, message = DiagnosticStatus.WARN, 'active; the last solve failed'
-        elif state == 'inactive':
-            level, message = DiagnosticStatus.OK, 'inactive: pressure commands disabled'
-        elif self._configure_error:
-            level = DiagnosticStatus.ERROR
-            message = (f'unconfigured: configure failed ({self._configure_error}); '
-                       + contract.configure_failed_hint(self._node_path()))
-        else:
-            level, message = DiagnosticStatus.WARN, f'{state}: no pressure commands'
+        level, message = diagnostics.lifecycle_level(
+            state, owner.status() if owner is not None and owner.yielded else '',
+            self.solve_stats.summary()['last_ok'], self._configure_error,
+            contract.configure_failed_hint(self._node_path()))
         return level, message, values
 
     @property
@@ -543,12 +500,12 @@ class InverseKinetostaticNode(LifecycleNode):
         self._refusals.report(reason, self.stats['refused'])
 
     # ---------------------------------------------------------- solving
-    def _on_worker_error(self, exc: BaseException) -> None:
+    def _on_worker_error(self, exc: BaseException, values: dict | None = None) -> None:
+        """A solve raised: ERROR (log and status), the last command stands."""
         self.stats['failed'] += 1
-        self.get_logger().error(f'inverse solve raised {type(exc).__name__}: {exc}',
-                                throttle_duration_sec=WARN_THROTTLE_S)
-        self._publish_diag(DiagnosticStatus.ERROR,
-                           f'solver exception: {type(exc).__name__}: {exc}', {})
+        msg = f'solver exception ({type(exc).__name__}: {exc}); last command kept'
+        self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
+        self._publish_diag(DiagnosticStatus.ERROR, msg, values or {})
 
     def _solve(self, item) -> None:
         pos, z, stamp, _t_recv = item
@@ -574,12 +531,7 @@ class InverseKinetostaticNode(LifecycleNode):
         except Exception as exc:  # noqa: BLE001 - keep serving (RecursionError too)
             dt = time.perf_counter() - t0
             self.solve_stats.record(dt, ok=False)
-            self.stats['failed'] += 1
-            self.get_logger().error(f'inverse solve raised {type(exc).__name__}: {exc}',
-                                    throttle_duration_sec=WARN_THROTTLE_S)
-            self._publish_diag(DiagnosticStatus.ERROR,
-                               f'solver exception ({type(exc).__name__}); last command kept',
-                               {'solve_time_ms': f'{dt * 1e3:.3f}', 'payload_kg': payload})
+            self._on_worker_error(exc, {'solve_time_ms': f'{dt * 1e3:.3f}', 'payload_kg': payload})
             return
         dt = time.perf_counter() - t0
         self.stats['solved'] += 1

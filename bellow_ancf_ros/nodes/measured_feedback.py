@@ -46,6 +46,7 @@ import time
 from typing import Any, Callable
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -400,6 +401,36 @@ class FeedbackLink:
         """True while feedback is on but not integrating: no measurement yet, or a dropout."""
         with self._lock:
             return self._law is not None and self._law.blind
+
+    def heartbeat(self, active: bool, extra: dict):
+        """The loop's part of the node's heartbeat: its values and ``extra``.
+
+        While ``active``: ERROR for :data:`TRIP_REPORT_S` after a watchdog
+        trip, WARN while the gain leaves less than the margins or no fresh
+        measured pose arrives: ``(level, message, values)``; else the values.
+        """
+        values = dict(self.status(), **extra)
+        ringing, margin = self.oscillation_error, self.margin_warning
+        if ringing is not None and active:
+            return DiagnosticStatus.ERROR, f'feedback: {ringing}', values
+        if margin is not None and active:
+            return DiagnosticStatus.WARN, f'loop margins: {margin}', values
+        if self.fallback and active:
+            return (DiagnosticStatus.WARN,
+                    f'feedback without measured poses: {values.get("feedback_state", "")}',
+                    values)
+        return values
+
+    @staticmethod
+    def refusal(param) -> str:
+        """Why a new value of ``feedback_gain_per_s`` is not allowed, or ''."""
+        if param.name != 'feedback_gain_per_s':   # dynamic typing: rclpy checks no type
+            return ''
+        try:
+            gain_setting(param.value)
+        except ValueError as exc:
+            return f'feedback_gain_per_s: {exc}'
+        return ''
 
     def status(self) -> dict:
         """Diagnostics values of the loop (``feedback: none`` when off)."""

@@ -194,6 +194,14 @@ class TargetLink:
             timer.start()
             self._levels.append(timer)
 
+    @staticmethod
+    def refusal(param) -> str:
+        """Why a new value of ``target_shaping`` is not allowed, or ''."""
+        if param.name != 'target_shaping' or param.value in TARGET_SHAPINGS:
+            return ''
+        return (f'target_shaping = {param.value!r} is not allowed; allowed: '
+                f'{", ".join(map(repr, TARGET_SHAPINGS))}')
+
     def reset(self, start=None) -> None:
         """Forget the stream (on activate); ``start``: the pose the robot is at (vented)."""
         self._last_item = None

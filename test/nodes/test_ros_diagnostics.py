@@ -11,7 +11,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from bellow_ancf_ros.nodes.diagnostics import STATUS_PERIOD_S, ThrottledStatus  # noqa: E402
-from bellow_ancf_ros.nodes.diagnostics import solve_outcome  # noqa: E402
+from bellow_ancf_ros.nodes.diagnostics import lifecycle_level, solve_outcome  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import diagnostics_qos  # noqa: E402
 from bellow_ancf_ros.demos.pipeline import wait_until  # noqa: E402
 
@@ -100,3 +100,17 @@ def test_an_unreachable_target_is_a_counted_warning_naming_the_best_fit():
     level, msg, counter, logged = solve_outcome(_Inv(False, 'best 3 mm'), True, False, False)
     assert (level, counter, logged) == (DiagnosticStatus.WARN, 'unreachable', True)
     assert msg.endswith('best 3 mm')
+
+
+@pytest.mark.parametrize('args, level, words', [
+    (('inactive', 'yielded to /exc'), DiagnosticStatus.ERROR, 'inactive: yielded to /exc'),
+    (('active', '', True), DiagnosticStatus.OK, 'pressure commands enabled'),
+    (('active', '', False), DiagnosticStatus.WARN, 'the last solve failed'),
+    (('inactive',), DiagnosticStatus.OK, 'pressure commands disabled'),
+    (('unconfigured', '', None, 'no robot', 'configure again'), DiagnosticStatus.ERROR,
+     'configure failed (no robot); configure again'),
+    (('unconfigured',), DiagnosticStatus.WARN, 'unconfigured: no pressure commands'),
+])
+def test_the_heartbeat_says_the_lifecycle_state_and_why(args, level, words):
+    got = lifecycle_level(*args)
+    assert got[0] == level and words in got[1]
