@@ -35,6 +35,7 @@ from ..solve import solve_forward, solve_inverse
 from ._feedback import FeedbackSettings, IntegralFeedback
 from ._play import PlayCompensation
 from ._simulated_robot import SimulatedRobot
+from ._target_filter import TargetFilter
 
 __all__ = ['LoopRecord', 'LoopSimulation']
 
@@ -158,6 +159,10 @@ class LoopSimulation:
         self.mode_check = mode_check
         self.feedforward = feedforward
         self.jumps = jumps
+        # the node's composition of the two (its TargetLink): the move of a jump, shifted by
+        # the feedforward of the target stream itself (a move is the controller's, not a path)
+        self.targets = (None if jumps is None and feedforward is None
+                        else TargetFilter.of(jumps, feedforward))
         self.gains: list = []                 # (time, gain) whenever the automatic gain changed
         cfg = model.cfg
         self.play = (PlayCompensation(cfg.n_actuators_total, play_compensation_pa, cfg.p_min,
@@ -169,9 +174,9 @@ class LoopSimulation:
                                                  cfg.p_max), payload_kg=self.payload_kg)
             if start.success:   # first mode where the robot rests, the first target from there
                 self._check_modes(t, start)
-                if jumps is not None:
-                    jumps.reset((start.position,
-                                 start.z_axis if self.use_orientation else None))
+                if self.targets is not None:
+                    self.targets.reset((start.position,
+                                        start.z_axis if self.use_orientation else None))
 
     def _control(self, t: float, target: Target, rec: LoopRecord) -> None:
         ref_p, ref_z = target(t)
@@ -179,13 +184,11 @@ class LoopSimulation:
         p = np.asarray(p, dtype=float)
         z = None if (z is None or not self.use_orientation) else np.asarray(z, dtype=float)
         command, hold = None, None
-        if self.jumps is not None:   # a jump becomes a move: commanded and compared with
-            self.jumps.push(t + self.preview_s, p, z)
-            p, z = self.jumps.at(t + self.preview_s)
-            hold = self.jumps.hold_until
-        if self.feedforward is not None:   # the command shifted; the loop compares the wanted
-            self.feedforward.push(t + self.preview_s, p, z)
-            command = self.feedforward.target()
+        if self.targets is not None:   # a jump becomes a move, a stream is shifted: the
+            self.targets.push(t + self.preview_s, p, z)   # loop compares the move (wanted)
+            shifted, (p, z) = self.targets.targets(t)
+            command = shifted if self.feedforward is not None else None
+            hold = self.targets.hold_until
         fb = self.feedback
         if fb is not None:
             p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s, command=command,
@@ -237,10 +240,8 @@ class LoopSimulation:
         res = chk.update(fw, t)
         if res is None:
             return
-        if self.feedforward is not None:
-            self.feedforward.set_mode(res.frequency_hz, res.damping_ratio)
-        if self.jumps is not None:
-            self.jumps.set_mode(res.frequency_hz)
+        if self.targets is not None:
+            self.targets.set_mode(res.frequency_hz, res.damping_ratio)
         if fb is None:
             return
         fb.watch(res.frequency_hz)

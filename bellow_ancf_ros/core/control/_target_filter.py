@@ -56,6 +56,22 @@ class TargetFilter:
         self._newest: tuple | None = None
         self._arrived = True   # the shaped target reached the newest target (was solved for)
 
+    @classmethod
+    def of(cls, jumps: JumpTransition | None = None,
+           feedforward: StreamFeedforward | None = None) -> 'TargetFilter':
+        """A filter made of these parts (``smooth`` when given ``jumps``, else ``none``).
+
+        Its mode is theirs (the feedforward's, else the jumps' if they have
+        one) until :meth:`set_mode`.
+        """
+        filt = cls('smooth' if jumps is not None else 'none')
+        filt.jumps, filt.feedforward = jumps, feedforward
+        if feedforward is not None:
+            filt.mode = (feedforward.ff.frequency_hz, feedforward.ff.damping_ratio)
+        elif jumps is not None and jumps.frequency_hz is not None:
+            filt.mode = (jumps.frequency_hz, 0.0)
+        return filt
+
     @property
     def enabled(self) -> bool:
         """True when shaping (smooth jumps included) or dynamic feedforward is on."""

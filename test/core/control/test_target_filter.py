@@ -97,3 +97,26 @@ def test_smooth_stays_busy_until_the_moves_end_was_given_out():
     np.testing.assert_array_equal(tf.target(1.0 + dur)[0], b)
     assert not tf.busy(1.0 + dur)           # ... the target at the end given out does
     assert tf.hold_until == pytest.approx(1.0 + dur + 0.5)
+
+
+def test_a_jumps_move_is_not_shifted_by_the_feedforward():
+    """The move is the controller's own: the feedforward shifts the stream, not the move.
+
+    (As the node composes them; LoopSimulation builds the same with TargetFilter.of. Shifting
+    the move inverted the model's mode on it: one-segment steps overshot 1.2-1.7 mm instead of
+    0.26-0.58 mm on three robots of the family.)
+    """
+    from bellow_ancf_ros.core.control import JumpTransition, StreamFeedforward
+    tf = TargetFilter.of(JumpTransition(2.4), StreamFeedforward(2.4, 0.05, lag_s=0.06))
+    assert tf.mode == (2.4, 0.05)
+    a, b = np.array([0.0, 0.0, 0.2]), np.array([0.0, 0.01, 0.2])
+    for k in range(10):
+        tf.push(0.02 * k, a)
+        tf.targets(0.02 * k)
+    t = 0.2
+    tf.push(t, b)
+    for k in range(1, 40):
+        cmd, ref = tf.targets(t + 0.02 * k)
+        tf.push(t + 0.02 * k, b)
+        np.testing.assert_allclose(cmd[0], ref[0], atol=1e-12)
+    assert tf.jumps.moves == 1
