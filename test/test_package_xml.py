@@ -55,7 +55,8 @@ MODULE_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'pyth
 STDLIB_OR_OWN = {'bellow_ancf_ros'}
 #: the test suite's own helper modules (test/, test/data/, bench/)
 LOCAL_TEST_HELPERS = {'conftest', 'reference_beams', 'calibration_data', 'make_solver_baseline',
-                      'update_readme', 'remedies_bench', 'family_bench', 'busy_bench'}
+                      'update_readme', 'remedies_bench', 'family_bench', 'busy_bench',
+                      'demo_table', 'demo_results'}
 
 
 def dependencies():

@@ -51,8 +51,19 @@ held target (mean true pose over the last half of the hold); the model's own
 error (forward node's prediction from the measured pressures vs the true
 pose); the outliers and dropouts the motion capture produced, the largest
 command step after an outlier against the normal steps, and the error 2 s
-after each dropout; the pressure safety check.  Writes a PNG (``--plot``,
-default ``demo_tracking.png``): 3-D paths and the errors over time.
+after each dropout; the pressure safety check; for each case, the goals the
+closed loop missed and by how much (``MISSED: held 0.612 > 0.500 mm``).
+
+Writes the results file (``--results``, default ``demo_results.json``): every
+printed figure, each goal with its limit and whether it was met, the missed
+ones as printed, the machine's CPU count and load average at the start and
+the end (and at each case's start), the date, the options, and the time
+series of the pictures (at most :data:`MAX_SAMPLES` samples per run);
+``bench/demo_table.py`` renders such files as the table of
+docs/closed_loop.md.  Then the pictures
+(:mod:`.closed_loop_plot`, drawn from that file: ``--plot``, default
+``demo_tracking.png``, the summary, and ``demo_tracking_<n>seg.png``, the
+detail page of each segment count).
 
 Exit status 0 when every run flowed, every pressure command was finite and
 within the limits, and the closed loop met the goals (:data:`GOALS`: RMSE at
@@ -67,23 +78,27 @@ swing at most :data:`~.step_target.STEP_GOAL_M`); 1 otherwise.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
+from datetime import datetime, timezone
+import json
 import math
+import os
+from pathlib import Path
+import platform
 import random
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..cli.output import count, numbers
+from ..cli.output import count, number, numbers
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
 from .pipeline import (NodeProcess, Recorder, child_env, plant_effects, play_kpa, tidy,
                        wait_until, wait_up)
-from .step_target import step_phase
+from .step_target import STEP_GOAL_M, step_phase
 
 PAPER_PERIOD_S = 20.0
 SPEEDS = (1.0, 4.0, 10.0)      # times the paper's speed
@@ -97,6 +112,8 @@ SPIN_UP_S = 5.0                # the path's speed rises over min(period, this) [
 OUTLIER_EXCESS_GOAL_KPA = 2.0  # a command step after an outlier, beyond the normal steps
 OUTLIER_MIN_M = 5e-3           # a measured pose this far from the true one is an outlier
 DROPOUT_GAP_S = 0.25           # measured poses this far apart: a dropout
+RESULTS_FORMAT = 1             # the results file's layout (``--results``)
+MAX_SAMPLES = 200              # time-series samples per run in the results file (decimated)
 
 
 @dataclass(frozen=True)
@@ -563,7 +580,12 @@ def _parse(argv):
     ap = argparse.ArgumentParser(prog='python -m bellow_ancf_ros.demos.closed_loop',
                                  description=__doc__.split('\n\n')[0])
     ap.add_argument('--plot', default='demo_tracking.png',
-                    help='PNG output (default: %(default)s)')
+                    help='the summary picture (PNG; default: %(default)s); the detail pages go '
+                         'next to it as <name>_<n>seg.png')
+    ap.add_argument('--results', default='demo_results.json',
+                    help='the results file (JSON; default: %(default)s): every printed figure, '
+                         'the goals and which were missed, the machine, the time series of the '
+                         'pictures')
     ap.add_argument('--ideal', dest='plant', action='store_const', const='ideal',
                     default='realistic',
                     help='the clean simulated robot (no dead time, hysteresis, creep, latency, '
@@ -596,40 +618,208 @@ def _parse(argv):
     return ap.parse_args(argv)
 
 
+# ---------------------------------------------------------------- results
+def _decimated(n: int, limit: int = MAX_SAMPLES) -> np.ndarray:
+    """At most ``limit`` indices spread evenly over ``range(n)``, the first and last kept."""
+    if n <= limit:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0, n - 1, limit)).astype(int))
+
+
+def _rounded(a, digits: int) -> list:
+    """``a`` as nested lists of floats rounded to ``digits`` (compact JSON)."""
+    return np.round(np.asarray(a, dtype=float), digits).tolist()
+
+
+def run_record(r: dict, two: bool) -> dict:
+    """One run's figures (what the demo prints) and time series, as JSON-ready values.
+
+    ``r``: :func:`analyse`'s result.  Position figures in mm, angles in deg,
+    command steps in kPa; ``series``: the evaluated period, decimated to at
+    most :data:`MAX_SAMPLES` samples (time [s], target and true position [mm],
+    position error [mm], for two segments the angle error [deg]).
+    """
+    out = {'samples': int(r['n_measured']), 'targets': int(r['n_targets'])}
+    if 'pos_err' in r:
+        out['rmse_mm'] = _rms(r['pos_err']) * 1e3
+        out['max_mm'] = float(np.max(r['pos_err'])) * 1e3
+        if two:
+            out['rmse_deg'] = math.degrees(_rms(r['ang_err']))
+            out['max_deg'] = math.degrees(float(np.max(r['ang_err'])))
+    if 'steady_mm' in r:
+        out['held_mm'] = r['steady_mm']
+        if two:
+            out['held_deg'] = r['steady_deg']
+    out.update(model_rms_mm=r['model_rms_mm'], outliers=int(r['outliers']),
+               step_after_outlier_kpa=r['step_after_outlier_kpa'],
+               step_normal_p99_kpa=r['step_normal_p99_kpa'], dropouts=int(r['dropouts']),
+               error_2s_after_dropouts_mm=list(r['error_2s_after_dropouts_mm']),
+               commands=int(r['n_commands']), safe=bool(r['safe']), vent=r['vent'],
+               diagnostics=dict(zip(('ok', 'warn', 'error'), (int(v) for v in r['levels']))))
+    if 'pos_err' in r:
+        k = _decimated(len(r['t']))
+        series = {'t_s': _rounded(r['t'][k], 3), 'target_mm': _rounded(r['target'][k] * 1e3, 3),
+                  'measured_mm': _rounded(r['measured'][k] * 1e3, 3),
+                  'pos_err_mm': _rounded(r['pos_err'][k] * 1e3, 4)}
+        if two:
+            series['ang_err_deg'] = _rounded(np.degrees(r['ang_err'][k]), 4)
+        out['series'] = series
+    return out
+
+
+def goal(name: str, figure: str, value, limit: float, unit: str) -> dict:
+    """One goal: its name, the figure it judges, the value, the limit, the unit, met or not.
+
+    A missing value (no data) is not met.
+    """
+    return {'goal': name, 'figure': figure, 'value': value, 'limit': limit, 'unit': unit,
+            'met': value is not None and value <= limit}
+
+
+def miss_text(g: dict) -> str:
+    """What a missed goal missed and by how much: ``'held 0.612 > 0.500 mm'``."""
+    if g['value'] is None:
+        return f'{g["goal"]}: no data'
+    return f'{g["goal"]} {number(g["value"])} > {number(g["limit"])} {g["unit"]}'
+
+
+def closed_loop_goals(col: Column, cl: dict | None) -> list:
+    """The closed loop's goals of a column (:data:`GOALS`, :data:`STEADY_GOALS`, outliers).
+
+    ``cl``: the closed loop's :func:`run_record` (None: the run failed).  The
+    outlier goal is judged only when an outlier came during the run (its
+    limit: the normal steps' 99th percentile plus
+    :data:`OUTLIER_EXCESS_GOAL_KPA`).
+    """
+    two = col.bending_angle_deg is not None
+    cl = cl or {}
+    goal_mm, goal_deg = GOALS.get((2 if two else 1, col.speed, col.case.payload_kg),
+                                  (None, None))
+    s_mm, s_deg = STEADY_GOALS[2 if two else 1]
+    out = []
+    for name, fig, limit, unit in (('RMSE', 'rmse_mm', goal_mm, 'mm'),
+                                   ('RMSE', 'rmse_deg', goal_deg, 'deg'),
+                                   ('held', 'held_mm', s_mm, 'mm'),
+                                   ('held', 'held_deg', s_deg, 'deg')):
+        if limit is not None:
+            out.append(goal(name, fig, cl.get(fig), limit, unit))
+    after, normal = cl.get('step_after_outlier_kpa'), cl.get('step_normal_p99_kpa')
+    if after is not None and normal is not None:
+        out.append(goal('outlier step', 'step_after_outlier_kpa', after,
+                        normal + OUTLIER_EXCESS_GOAL_KPA, 'kPa'))
+    return out
+
+
+def _ratios(runs: dict, two: bool) -> dict:
+    """Dynamic FF and closed loop RMSE as % of the quasi-static feedforward's."""
+    ff, out = runs.get('none') or {}, {}
+    for mode, what in (('dynamic', 'dynamic / quasi-static feedforward'),
+                       ('integral', 'closed-loop / feedforward')):
+        other = runs.get(mode) or {}
+        if 'rmse_mm' in ff and 'rmse_mm' in other:
+            out[what] = {'position_pct': 100.0 * other['rmse_mm'] / ff['rmse_mm']}
+            if two:
+                out[what]['angle_pct'] = 100.0 * other['rmse_deg'] / ff['rmse_deg']
+    return out
+
+
+def column_record(col: Column, res: dict) -> dict:
+    """One case at one speed: its runs (:func:`run_record`, None: failed), ratios and goals."""
+    two = col.bending_angle_deg is not None
+    runs = {m: None if res.get(m) is None else run_record(res[m], two) for m in col.case.modes}
+    goals = closed_loop_goals(col, runs.get('integral'))
+    return {'key': col.key, 'label': col.label, 'case': col.case.label,
+            'robot': col.robot, 'plant_robot': col.case.plant, 'segments': 2 if two else 1,
+            'speed': col.speed, 'period_s': col.period_s, 'payload_kg': col.case.payload_kg,
+            'modes': list(col.case.modes), 'runs': runs, 'ratios': _ratios(runs, two),
+            'goals': goals, 'met': all(g['met'] for g in goals),
+            'missed': [miss_text(g) for g in goals if not g['met']]}
+
+
+def step_record(step: dict | None) -> dict | None:
+    """The step phase (:func:`~.step_target.step_phase`) with its goal (None: not run)."""
+    if step is None:
+        return None
+    zvd = step['runs'].get('zvd') or {}
+    g = goal('shaped swing', 'swing_mm', zvd.get('swing_mm'), STEP_GOAL_M * 1e3, 'mm')
+    return dict(step, goals=[g], met=g['met'], missed=[] if g['met'] else [miss_text(g)])
+
+
+def machine_state() -> dict:
+    """The time (UTC, ISO 8601) and the machine's load average (1, 5, 15 min)."""
+    try:
+        load = [round(v, 2) for v in os.getloadavg()]
+    except OSError:       # not on every platform
+        load = None
+    return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'), 'load': load}
+
+
+def _load(load) -> str:
+    return 'n/a' if load is None else numbers(load, '.2f')
+
+
 def _fmt(r: dict, two: bool) -> str:
-    if 'pos_err' not in r:
+    if 'rmse_mm' not in r:
         return 'no data'
-    s = f'{_rms(r["pos_err"]) * 1e3:6.3f} mm (max {r["pos_err"].max() * 1e3:5.2f})'
+    s = f'{r["rmse_mm"]:6.3f} mm (max {r["max_mm"]:5.2f})'
     if two:
-        s += (f', {math.degrees(_rms(r["ang_err"])):5.3f} deg '
-              f'(max {math.degrees(r["ang_err"].max()):4.2f})')
+        s += f', {r["rmse_deg"]:5.3f} deg (max {r["max_deg"]:4.2f})'
     return s
 
 
-def _goals(col: Column, cl: dict, two: bool) -> tuple[bool, str]:
-    """Whether the closed loop met the column's goals, and the line that says so."""
-    goal_mm, goal_deg = GOALS.get((2 if two else 1, col.speed, col.case.payload_kg),
-                                  (math.inf, None))
-    s_mm, s_deg = STEADY_GOALS[2 if two else 1]
-    ok = _rms(cl['pos_err']) * 1e3 <= goal_mm and (
-        goal_deg is None or math.degrees(_rms(cl['ang_err'])) <= goal_deg)
-    ok &= cl.get('steady_mm', math.inf) <= s_mm and (
-        s_deg is None or cl.get('steady_deg', math.inf) <= s_deg)
-    after, normal = cl['step_after_outlier_kpa'], cl['step_normal_p99_kpa']
-    ok &= after is None or normal is None or after <= normal + OUTLIER_EXCESS_GOAL_KPA
-    text = (f'    goals: RMSE <= {goal_mm} mm' + (f' / {goal_deg} deg' if goal_deg else '')
-            + f', held target <= {s_mm} mm' + (f' / {s_deg} deg' if s_deg else '')
-            + f', outlier step <= normal + {OUTLIER_EXCESS_GOAL_KPA:g} kPa: '
-            + ('met' if ok else 'NOT met'))
-    return ok, text
+def _goals_line(col: Column, c: dict) -> str:
+    """The column's goals, met or not, and each missed one with its figure."""
+    text = '    goals: ' + ', '.join(
+        f'{g["goal"]} <= ' + (f'normal + {OUTLIER_EXCESS_GOAL_KPA:g} kPa'
+                              if g['figure'] == 'step_after_outlier_kpa'
+                              else f'{g["limit"]:g} {g["unit"]}')
+        for g in c['goals'])
+    return text + (': met' if c['met'] else ': NOT met; MISSED: ' + ', '.join(c['missed']))
+
+
+def _print_column(col: Column, c: dict) -> None:
+    """The printed lines of one column (from its :func:`column_record`)."""
+    two = c['segments'] == 2
+    print(f'  {col.label} (controller: default model, robot: {col.case.plant}):')
+    for mode in col.case.modes:
+        r = c['runs'][mode]
+        if r is None:
+            print(f'    {MODE_NAMES[mode]:12s} FAILED')
+            continue
+        steady = ('n/a' if 'held_mm' not in r else f'{r["held_mm"]:.3f} mm'
+                  + (f' / {r["held_deg"]:.3f} deg' if two else ''))
+        model = 'n/a' if r['model_rms_mm'] is None else f'{r["model_rms_mm"]:.2f} mm'
+        print(f'    {MODE_NAMES[mode]:12s} RMSE {_fmt(r, two)}; held target: {steady}; '
+              f'{r["samples"]} samples; model vs robot {model}')
+        after = r['step_after_outlier_kpa']
+        print(f'    {"":12s} mocap: {count(r["outliers"], "outlier")} (largest command '
+              'step after one: ' + ('none' if after is None else f'{after:.2f} kPa')
+              + f', normal steps p99 {r["step_normal_p99_kpa"] or 0.0:.2f} kPa), '
+              f'{count(r["dropouts"], "dropout")} (error 2 s after: '
+              + (', '.join(f'{e:.3f}' for e in r['error_2s_after_dropouts_mm']) or 'n/a')
+              + ' mm)')
+        d = r['diagnostics']
+        print(f'    {"":12s} {r["commands"]} pressure commands, all finite and within '
+              f'the limits: {"yes" if r["safe"] else "NO"}; last (vent): '
+              + (numbers(r['vent']) if r['vent'] else 'None') + '; inverse '
+              f'diagnostics {d["ok"]} OK / {d["warn"]} WARN / {d["error"]} ERROR')
+    for what, ratio in c['ratios'].items():
+        print(f'    {what} position RMSE: {ratio["position_pct"]:.1f} %'
+              + (f', angle RMSE: {ratio["angle_pct"]:.1f} %' if two else ''))
+    if c['runs'].get('integral') is not None and 'rmse_mm' in c['runs']['integral']:
+        print(_goals_line(col, c))
 
 
 def main(argv=None) -> int:
-    """Run the cases, print the summary, write the plot; exit status 0 when the goals hold."""
+    """Run the cases, print the summary, write the results and the pictures.
+
+    Exit status 0 when the goals hold.
+    """
     args = _parse(argv)
     from ..core import load_robot
     from ..core import limit_blas_threads
     limit_blas_threads()
+    start = machine_state()
     log_dir = Path(tempfile.mkdtemp(prefix='bellow_ancf_ros_demo_'))
     speeds = [float(v) for v in args.speeds.split(',')]
     cols = columns([c for c in CASES if c.robot in args.cases.split(',')], speeds,
@@ -638,72 +828,60 @@ def main(argv=None) -> int:
     print(f'bellow_ancf_ros main job: the default model controls a simulated robot that is not '
           f'the model (config/*_mismatched.yaml), {args.plant} plant, targets at '
           f'{TARGET_RATE_HZ:g} Hz previewed by {preview_s(args.plant):g} s (with dynamic '
-          f'feedforward {preview_s(args.plant, True):g} s); node logs in '
+          f'feedforward {preview_s(args.plant, True):g} s); {count(os.cpu_count(), "CPU")}, '
+          f'load average {_load(start["load"])} at the start; node logs in '
           f'{log_dir} (kept if it fails)')
     t_all = time.monotonic()
-    results, ok = {}, True
+    results, ok, loads = {}, True, {}
     for col in cols:
         cfg = load_robot(col.robot)
         results[col.key] = {}
+        loads[col.key] = machine_state()['load']   # where the machine got busy, if it did
         for mode, run in run_column(col, args, domains, log_dir).items():
             if not run['ok']:
                 ok = False
                 continue
             run['period'] = col.period_s
             results[col.key][mode] = analyse(run, cfg)
-            results[col.key][mode]['raw'] = run
     print(f'\ntrue pose vs target over the second trajectory period ({PAPER}):')
     passed = ok and bool(cols)
+    records = []
     for col in cols:
-        two = col.bending_angle_deg is not None
-        res = results.get(col.key, {})
-        print(f'  {col.label} (controller: default model, robot: {col.case.plant}):')
-        for mode in col.case.modes:
-            r = res.get(mode)
-            if r is None:
-                print(f'    {MODE_NAMES[mode]:12s} FAILED')
-                passed = False
-                continue
-            steady = ('n/a' if 'steady_mm' not in r else f'{r["steady_mm"]:.3f} mm'
-                      + (f' / {r["steady_deg"]:.3f} deg' if two else ''))
-            model = 'n/a' if r['model_rms_mm'] is None else f'{r["model_rms_mm"]:.2f} mm'
-            print(f'    {MODE_NAMES[mode]:12s} RMSE {_fmt(r, two)}; held target: {steady}; '
-                  f'{r["n_measured"]} samples; model vs robot {model}')
-            after = r['step_after_outlier_kpa']
-            print(f'    {"":12s} mocap: {count(r["outliers"], "outlier")} (largest command '
-                  'step after one: ' + ('none' if after is None else f'{after:.2f} kPa')
-                  + f', normal steps p99 {r["step_normal_p99_kpa"] or 0.0:.2f} kPa), '
-                  f'{count(r["dropouts"], "dropout")} (error 2 s after: '
-                  + (', '.join(f'{e:.3f}' for e in r['error_2s_after_dropouts_mm']) or 'n/a')
-                  + ' mm)')
-            print(f'    {"":12s} {r["n_commands"]} pressure commands, all finite and within '
-                  f'the limits: {"yes" if r["safe"] else "NO"}; last (vent): '
-                  + (numbers(r['vent']) if r['vent'] else 'None') + '; inverse '
-                  f'diagnostics {r["levels"][0]} OK / {r["levels"][1]} WARN / '
-                  f'{r["levels"][2]} ERROR')
-            passed &= r['safe']
-        ff, dyn, cl = res.get('none'), res.get('dynamic'), res.get('integral')
-        for other, what in ((dyn, 'dynamic / quasi-static feedforward'),
-                            (cl, 'closed-loop / feedforward')):
-            if ff and other and 'pos_err' in ff and 'pos_err' in other:
-                ratio = _rms(other['pos_err']) / _rms(ff['pos_err'])
-                line = f'    {what} position RMSE: {ratio * 100:.1f} %'
-                if two:
-                    line += (f', angle RMSE: '
-                             f'{_rms(other["ang_err"]) / _rms(ff["ang_err"]) * 100:.1f} %')
-                print(line)
-        if cl and 'pos_err' in cl:
-            met, text = _goals(col, cl, two)
-            print(text)
-            if not args.no_goals:
-                passed &= met
-        elif not args.no_goals:
-            passed = False
+        c = column_record(col, results.get(col.key, {}))
+        c['load_at_start'] = loads.get(col.key)
+        records.append(c)
+        _print_column(col, c)
+        runs = [r for r in c['runs'].values()]
+        passed &= all(r is not None and r['safe'] for r in runs)
+        cl = c['runs'].get('integral')
+        if not args.no_goals:
+            passed &= cl is not None and 'rmse_mm' in cl and c['met']
+    step = None
     if not args.no_step:
-        passed &= step_phase(args, domains, log_dir)
-    path = Path(args.plot)
-    plot(results, cols, path)
-    print(f'  plot written to {path}; total {time.monotonic() - t_all:.0f} s')
+        step = step_record(step_phase(args, domains, log_dir))
+        g = step['goals'][0]
+        print(f'    goal: shaped residual swing <= {g["limit"]:g} mm: '
+              + ('met' if g['met'] else 'NOT met; MISSED: ' + ', '.join(step['missed'])))
+        passed &= step['ran'] and (step['met'] or args.no_goals)
+    end = machine_state()
+    data = {'format': RESULTS_FORMAT, 'what': 'make demo (python -m bellow_ancf_ros.demos.'
+            'closed_loop): the closed loop against the mismatched simulated robot',
+            'date': start['date'], 'date_end': end['date'], 'wall_s': time.monotonic() - t_all,
+            'machine': {'cpus': os.cpu_count(), 'load_start': start['load'],
+                        'load_end': end['load'], 'platform': platform.platform(),
+                        'python': platform.python_version()},
+            'options': {'plant': args.plant, 'speeds': speeds, 'cases': args.cases.split(','),
+                        'period_scale': args.period_scale, 'lead_in_s': args.lead_in,
+                        'hold_s': args.hold, 'spin_up_s': args.spin_up, 'seed': args.seed,
+                        'sequential': args.sequential, 'goals_checked': not args.no_goals,
+                        'step': not args.no_step},
+            'paper': PAPER, 'passed': bool(passed), 'cases': records, 'step': step}
+    out = Path(args.results)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(data, separators=(',', ':')) + '\n')
+    written = plot(data, Path(args.plot))
+    print(f'  results written to {out} (load average {_load(end["load"])} at the end); pictures '
+          + ', '.join(str(p) for p in written) + f'; total {data["wall_s"]:.0f} s')
     print('PASS' if passed else 'FAIL')
     tidy(log_dir, passed)
     return 0 if passed else 1

@@ -1,5 +1,6 @@
 """The main job (`make demo`, demos.closed_loop), shortened: it runs, reports, plots."""
 
+import json
 import os
 import subprocess
 import sys
@@ -36,37 +37,24 @@ def test_main_demo_short_run_one_segment(tmp_path):
     assert 'closed-loop / feedforward position RMSE' in out
     assert 'dynamic / quasi-static feedforward position RMSE' in out
     assert 'realistic plant' in out and 'outliers (largest command step after one' in out
-    assert plot.is_file() and plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
-
-
-def test_plot_has_plain_z_ticks_and_draws_only_the_evaluated_path():
-    """Issue 10 item 11: no offset label on the 3-D axes, no line back to the start."""
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from bellow_ancf_ros.demos import closed_loop as ros_demo, closed_loop_plot as ros_demo_plot
-
-    t = np.linspace(0.0, 20.0, 400, endpoint=False)
-    circle = np.column_stack([0.02 * np.cos(t / 20 * 2 * np.pi),
-                              0.02 * np.sin(t / 20 * 2 * np.pi), np.full_like(t, 0.20912)])
-    res = {'t': t, 'target': circle, 'measured': circle + 1e-3, 'pos_err': np.full_like(t, 1e-3),
-           'ang_err': np.full_like(t, 0.01)}
-    cols = ros_demo.columns()
-    fig = ros_demo_plot.figure({c.key: {'none': res, 'integral': res} for c in cols}, cols)
-    fig.canvas.draw()
-    axes3d = [a for a in fig.axes if a.name == '3d']
-    assert len(axes3d) == len(cols) == 8   # 1x, 4x, 10x per robot; 50 g at 1x and 10x
-    for ax in axes3d:
-        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
-            assert axis.get_major_formatter().get_offset() == ''
-        labels = [tl.get_text() for tl in ax.zaxis.get_ticklabels() if tl.get_text()]
-        assert labels and all(len(lab) <= 6 for lab in labels), labels   # e.g. '209', '211'
-        for line in ax.get_lines():
-            xs, ys, zs = line.get_data_3d()
-            assert len(xs) == len(t)          # exactly the evaluated samples, nothing appended
-            shift = 0.0 if line.get_label() == 'target' else 1.0   # measured = target + 1 mm
-            np.testing.assert_allclose(xs[-1], circle[-1, 0] * 1e3 + shift)
-    plt.close(fig)
+    for png in (plot, tmp_path / 'demo_1seg.png'):   # the summary and the detail page
+        assert png.is_file() and png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # the results file: in the working directory by default, every printed figure, the goals
+    data = json.loads((tmp_path / 'demo_results.json').read_text())
+    assert data['machine']['cpus'] >= 1 and len(data['machine']['load_start']) == 3
+    assert data['options']['speeds'] == [4.0] and not data['options']['goals_checked']
+    (col,) = data['cases']
+    assert col['key'] == 'one_segment@4x' and set(col['runs']) == {'none', 'dynamic', 'integral'}
+    assert [(g['goal'], g['unit'], g['limit']) for g in col['goals']][:2] == [
+        ('RMSE', 'mm', 1.0), ('held', 'mm', 0.3)]
+    assert col['missed'] == [g for g in col['missed'] if ' > ' in g]
+    cl = col['runs']['integral']
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith('closed loop ')
+                and 'RMSE' in ln)
+    assert f'RMSE {cl["rmse_mm"]:6.3f} mm' in line and f'{cl["held_mm"]:.3f} mm' in line
+    assert len(cl['series']['t_s']) <= 200 and cl['safe'] and cl['vent'] == [0.0] * 3
+    goals = next(ln for ln in out.splitlines() if ln.strip().startswith('goals: RMSE <= 1 mm'))
+    assert goals.endswith(': met') or 'NOT met; MISSED: ' in goals, goals
 
 
 @pytest.mark.slow
