@@ -14,8 +14,6 @@ starts it, with a 5 ms solve budget (``max_rate_hz`` 1000), one target
 published as soon as it is active (unshaped: the first solve is the target's).
 """
 
-import os
-import signal
 import subprocess
 import sys
 
@@ -31,7 +29,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from bellow_ancf_ros.core import InverseStatus, solve_forward, solve_inverse  # noqa: E402
 from bellow_ancf_ros.nodes import inverse_kinetostatic_node as inv_mod  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
-from ros_processes import node_process_env, SpunClient  # noqa: E402
+from ros_processes import interrupt, node_process_env, SpunClient  # noqa: E402
 import test_ros_nodes as _rn  # noqa: E402
 from test_ros_nodes import diag_statuses, kv, setup_inverse, target_msg, wait_for  # noqa: E402
 
@@ -153,13 +151,7 @@ def test_node_process_first_target_after_activate_is_reached(one, tmp_path):
         assert {s.message for s in verdicts} == {'target reached'}, (
             [s.message for s in verdicts], log_path.read_text())
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGINT)
-            try:
-                proc.wait(15.0)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(5.0)
+        interrupt(proc, 15.0)
         client.close()
     assert 'target unreachable' not in log_path.read_text()
     assert all(s.level != DiagnosticStatus.ERROR for s in client.statuses(solves))

@@ -6,6 +6,8 @@ Imports rclpy: only for tests that already skipped without it.
 import os
 from pathlib import Path
 import random
+import signal
+import subprocess
 import threading
 
 import rclpy
@@ -23,6 +25,18 @@ def node_process_env() -> dict:
     e['PYTHONPATH'] = str(REPO) + os.pathsep + e.get('PYTHONPATH', '')
     e['PYTHONUNBUFFERED'] = '1'
     return e
+
+
+def interrupt(proc, wait_s: float) -> None:
+    """Ctrl-C to a node process's group (started with ``start_new_session``); SIGKILL late."""
+    if proc.poll() is not None:
+        return
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        proc.wait(wait_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(5.0)
 
 
 class SpunClient:
