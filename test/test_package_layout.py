@@ -17,7 +17,6 @@ and an installed executable must start.
 import os
 import py_compile
 import random
-import signal
 import stat
 import subprocess
 import sys
@@ -176,6 +175,8 @@ print('ROBOT', load_robot('two_segment').source)
 
 
 def test_installed_executable_starts_and_stops_cleanly(colcon_install, tmp_path):
+    from ros_processes import interrupt   # (imports rclpy: only where a node runs)
+
     colcon_install = colcon_install.prefix
     exe = colcon_install / 'lib' / PKG / 'trajectory_publisher'
     if not exe.is_file():
@@ -196,11 +197,5 @@ def test_installed_executable_starts_and_stops_cleanly(colcon_install, tmp_path)
         assert "publishing 'planar_circle'" in log_path.read_text()
         assert '20 Hz' in log_path.read_text()      # node-specific -p overrides the file
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGINT)
-            try:
-                proc.wait(10.0)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(5.0)
+        interrupt(proc, 10.0)
     assert proc.returncode == 0, log_path.read_text()

@@ -61,6 +61,7 @@ from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # no
 from bellow_ancf_ros.nodes.mocap_relay import MocapRelay  # noqa: E402
 from bellow_ancf_ros.nodes.regulator_driver import RegulatorDriver  # noqa: E402
 from bellow_ancf_ros.nodes.wrench_estimator_node import WrenchEstimatorNode  # noqa: E402
+from ros_processes import interrupt_all  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / 'README.md'
@@ -278,16 +279,8 @@ def test_venv_node_commands_start_and_stop(tmp_path):
                 time.sleep(0.05)
             assert f"'{robot}'" in log.read_text(), (robot, log.read_text())
     finally:
-        for *_, proc in procs:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGINT)
-        codes = []
-        for _, _, log, proc in procs:
-            try:
-                codes.append(proc.wait(20.0))
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                codes.append(proc.wait(5.0))
+        interrupt_all([proc for *_, proc in procs], 20.0)
+    codes = [proc.returncode for *_, proc in procs]
     assert codes == [0] * len(procs), [log.read_text() for _, _, log, _ in procs]
 
 
@@ -413,16 +406,8 @@ def test_documented_ros2_run_node_lines_start_on_a_colcon_install(colcon_install
             # the installed node ran, not the checkout's module
             assert str(REPO) not in log.read_text(), log.read_text()
     finally:
-        for *_, proc in procs:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGINT)
-        codes = []
-        for _, _, proc in procs:
-            try:
-                codes.append(proc.wait(20.0))
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                codes.append(proc.wait(5.0))
+        interrupt_all([proc for *_, proc in procs], 20.0)
+    codes = [proc.returncode for *_, proc in procs]
     failed = [(line, log.read_text()[-1500:])
               for (line, log, _), code in zip(procs, codes) if code]
     assert codes == [0] * len(procs), failed

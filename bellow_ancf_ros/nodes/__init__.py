@@ -6,7 +6,8 @@
   ``predicted_shape`` (RViz markers).
 * :mod:`.trajectory_publisher` -- the paper's trajectories on ``target_pose``.
 * :mod:`.contract` -- the message contract and the pressure safety gate (no rclpy import);
-* :mod:`.worker` -- the latest-only solve worker and solve statistics (no rclpy import).
+* :mod:`.worker` -- the latest-only solve worker, budget slices, solve statistics and
+  the model ready for a control loop (no rclpy import).
 * :mod:`.ros_util` -- rclpy helpers: QoS, checked parameter declaration,
   one-line start-up errors, the acknowledged vent, the executor and the
   main / spin / signal idiom.

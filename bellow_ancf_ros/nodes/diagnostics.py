@@ -22,7 +22,7 @@ from .ros_util import WARN_THROTTLE_S
 __all__ = [
     'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
     'ThrottledStatus', 'diagnostic_status', 'inverse_values', 'publish_diagnostic',
-    'lifecycle_level', 'solve_outcome', 'solve_values',
+    'lifecycle_level', 'lifecycle_state', 'solve_outcome', 'solve_values',
 ]
 
 #: Minimum interval between two WARN diagnostics of the same refusal reason [s].
@@ -147,6 +147,22 @@ def inverse_values(inv, dt: float, payload: float, unit: str) -> dict:
         'payload_kg': payload,
         'pressure_unit': unit,
     }
+
+
+def lifecycle_state(node, active: bool, configured: bool) -> str:
+    """Label of a lifecycle node's current state (``unconfigured``, ``inactive``, ``active``...).
+
+    What rclpy's state machine says; without one, or when it cannot say,
+    the node's own flags: ``active``, else ``configured`` (inactive), else
+    unconfigured.
+    """
+    sm = getattr(node, '_state_machine', None)
+    if sm is not None:
+        try:
+            return str(sm.current_state[1])
+        except Exception:  # noqa: BLE001 - fall back on the node's own flags
+            pass
+    return 'active' if active else 'inactive' if configured else 'unconfigured'
 
 
 def lifecycle_level(state: str, yielded_to: str = '', last_solve_ok=None,

@@ -41,8 +41,7 @@ from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import State, TransitionCallbackReturn
 from std_msgs.msg import Float64MultiArray
 
-from ..core import (ConfigError, InverseStatus, RobotModel, load_robot, payload_problem,
-                    precompute_corners, solve_forward, solve_inverse, warm_up)
+from ..core import ConfigError, InverseStatus, RobotModel, payload_problem, solve_inverse
 from ..core import geometry
 from ..core.control import PlayCompensation
 from . import contract, worker
@@ -122,8 +121,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._last_publish_t = -float('inf')
         self._last_pose = None   # the commanded_pose of the current command
         self.solve_stats = worker.SolveStats()
-        self._last_item, self._continuations = None, 0   # budget slices of one target
-        self._resume = None   # (item, unusable budget-limited answer): its next slice goes on
+        self._slices = worker.BudgetSlices(MAX_CONTINUATIONS)   # budget slices of one target
         # diagnostics in every lifecycle state: per-solve statuses and the 1 Hz heartbeat
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         # per-solve statuses: a new level or message at once, an unchanged one at most at 10 Hz
@@ -154,16 +152,6 @@ class InverseKinetostaticNode(LifecycleNode):
 
     def _node_path(self) -> str:
         return self.get_fully_qualified_name()
-
-    def lifecycle_state(self) -> str:
-        """Label of the current lifecycle state (``unconfigured``, ``inactive``, ``active``...)."""
-        sm = getattr(self, '_state_machine', None)
-        if sm is not None:
-            try:
-                return str(sm.current_state[1])
-            except Exception:  # noqa: BLE001 - fall back on the node's own flags
-                pass
-        return 'active' if self._active else 'inactive' if self._configured else 'unconfigured'
 
     def _configure_time_check(self, param) -> str:
         """Refuse a change of a parameter read on configure unless unconfigured.
@@ -221,18 +209,9 @@ class InverseKinetostaticNode(LifecycleNode):
     # ---------------------------------------------------------- lifecycle
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         name = self.get_parameter('robot_config').value
-        try:
-            cfg = load_robot(name)
-            model = RobotModel(cfg)
-            # straight robot at vent pressure: first warm start (also warms caches)
-            vent = contract.vent_pressures(model.A, cfg.p_min, cfg.p_max)
-            fw0 = solve_forward(model, vent)
-            payload = float(self.get_parameter('payload_kg').value)
-            # where the loop starts (its automatic gain): vented, carrying the payload
-            start = fw0 if payload == 0.0 else solve_forward(model, vent, payload_kg=payload)
-            # the corners of the pressure box, needed by the first unreachable target
-            precompute_corners(model, payload)
-            warm_up(model)  # the warm-started path's kernels compiled (or loaded) now
+        try:   # fw0: the straight robot at vent pressure (first warm start); start: with payload
+            cfg, model, fw0, start = worker.ready_model(
+                name, float(self.get_parameter('payload_kg').value))
         except (ConfigError, ValueError, OSError) as exc:
             self._configure_error = f'robot_config {name!r}: {exc}'
             self.get_logger().error(f'configure failed: {self._configure_error}')
@@ -382,7 +361,7 @@ class InverseKinetostaticNode(LifecycleNode):
     # ---------------------------------------------------------- heartbeat
     def _heartbeat_status(self) -> tuple:
         """Base heartbeat: lifecycle state, robot, solve statistics, counters."""
-        state = self.lifecycle_state()
+        state = diagnostics.lifecycle_state(self, self._active, self._configured)
         cfg = self._cfg
         values = {
             'lifecycle_state': state,
@@ -513,9 +492,7 @@ class InverseKinetostaticNode(LifecycleNode):
             model, cfg, warm, active = self._model, self._cfg, self._warm, self._active
         if model is None or not active:
             return
-        resume, self._resume = self._resume, None
-        if resume is not None and resume[0] is item:
-            warm = resume[1]   # the next slice of a solve with no usable answer yet
+        warm = self._slices.warm_start(item, warm)   # (a solve with no usable answer yet)
         payload = float(self.get_parameter('payload_kg').value)
         force = None if self._force is None else self._force.current()
         t0 = time.perf_counter()
@@ -576,7 +553,7 @@ class InverseKinetostaticNode(LifecycleNode):
         ``p``: the published pressures (None: nothing published, because the
         solve was not ``usable`` or the safety gate refused it, ``unsafe``).
         A budget-limited answer queues the same target again (its next
-        slice, :meth:`_next_slice`).
+        slice, :class:`~.worker.BudgetSlices`, :meth:`_queue_slice`).
         """
         values = inverse_values(inv, dt, payload, unit)
         if usable and unsafe is None:
@@ -588,9 +565,8 @@ class InverseKinetostaticNode(LifecycleNode):
         values.update(self._feedback.status())
         values.update(self._targets.status())
         budget = inv.status in BUDGET_STATUSES
-        more = budget and unsafe is None and self._next_slice(item)
-        if more and not usable:   # no usable answer yet: the next slice goes on from it
-            self._resume = (item, inv)
+        more = budget and unsafe is None and self._slices.next(
+            item, self._queue_slice, None if usable else inv)   # (unusable: goes on from it)
         if p is not None:
             values['pressures'] = ' '.join(f'{v:.6g}' for v in contract.to_unit(p, unit))
         level, msg, counter, logged = diagnostics.solve_outcome(
@@ -604,15 +580,12 @@ class InverseKinetostaticNode(LifecycleNode):
                 msg, throttle_duration_sec=WARN_THROTTLE_S)
         self._publish_diag(level, msg, values)
 
-    def _next_slice(self, item) -> bool:
-        """Queue the next budget slice of ``item`` (at most ``MAX_CONTINUATIONS``); queued."""
-        self._continuations = self._continuations + 1 if item is self._last_item else 1
-        self._last_item = item
+    def _queue_slice(self, item) -> bool:
+        """Queue ``item`` again for its next budget slice (unless a newer one waits); queued."""
         with self._lock:   # deactivated meanwhile: no slice (the vent stands; an old target
             if not self._active:   # must not be solved after a later activate)
                 return False
-            return (self._continuations < MAX_CONTINUATIONS and self._worker is not None
-                    and self._worker.resubmit(item))
+            return self._worker is not None and self._worker.resubmit(item)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
         cfg = self._cfg

@@ -1,8 +1,12 @@
-"""The nodes' solve loop helpers (no rclpy import): the latest-only worker and solve statistics.
+"""The nodes' solve loop helpers (no rclpy import): model, latest-only worker, slices, statistics.
 
+* :func:`ready_model`: a robot's model ready for a control loop (loaded, its
+  vent equilibrium, nothing left to compile or search at the first target);
 * :class:`LatestWorker`: a worker thread that always processes the newest
   item only (older ones are overwritten, so memory stays bounded) at a
   bounded rate;
+* :class:`BudgetSlices`: the budget slices of one item (a solve its
+  wall-clock budget stopped goes on in the next);
 * :class:`SolveStats`: solve-time statistics and the age of the last solve
   for the status heartbeat.
 """
@@ -18,10 +22,37 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['BURST', 'LatestWorker', 'SolveStats']
+from ..core import RobotModel, load_robot, precompute_corners, solve_forward, warm_up
+from . import contract
+
+__all__ = ['BURST', 'BudgetSlices', 'LatestWorker', 'SolveStats', 'ready_model']
 
 #: Starts the latest-only worker may make back to back after an idle period (token bucket).
 BURST = 2
+
+
+# ------------------------------------------------------------ the model
+def ready_model(robot_config: str, payload_kg: float = 0.0) -> tuple:
+    """A robot's model ready for a control loop: ``(cfg, model, vented, start)``.
+
+    ``robot_config``: a shipped robot name or a robot YAML path
+    (:func:`~bellow_ancf_ros.core.load_robot`; ConfigError, ValueError or
+    OSError when it cannot be used).  ``vented``: the straight robot at vent
+    pressure, no payload (the forward result that is the first warm start);
+    ``start``: the vented robot carrying ``payload_kg`` (``vented`` itself
+    without payload), where the loop starts (its automatic gain).  The
+    corners of the pressure box, needed by the first unreachable target, are
+    precomputed and the warm-started path's kernels compiled (or loaded)
+    now, not at the first target.
+    """
+    cfg = load_robot(robot_config)
+    model = RobotModel(cfg)
+    vent = contract.vent_pressures(model.A, cfg.p_min, cfg.p_max)
+    vented = solve_forward(model, vent)   # (also warms caches)
+    start = vented if payload_kg == 0.0 else solve_forward(model, vent, payload_kg=payload_kg)
+    precompute_corners(model, payload_kg)
+    warm_up(model)
+    return cfg, model, vented, start
 
 
 # ------------------------------------------------------------ latest-only
@@ -172,6 +203,48 @@ class LatestWorker:
             self._cond.notify_all()
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout)
+
+
+# ------------------------------------------------------------ budget slices
+class BudgetSlices:
+    """The budget slices of one item: a solve its wall-clock budget stopped goes on in the next.
+
+    After a budget-limited solve, :meth:`next` queues the same item again
+    (``queue(item)``, which may refuse), as long as fewer than
+    ``max_slices`` slices of it ran in a row.  A slice with no usable answer
+    hands that answer on: the next slice of the same item starts from it
+    (:meth:`warm_start`), not from the last good solve.  Used by one solve
+    thread (not thread-safe).
+    """
+
+    def __init__(self, max_slices: int) -> None:
+        self.max_slices = int(max_slices)
+        self._item: Any = None
+        self._count = 0          # slices of ``_item`` in a row
+        self._resume: tuple | None = None   # (item, its unusable budget-limited answer)
+
+    def warm_start(self, item: Any, warm: Any) -> Any:
+        """The warm start of a solve of ``item``: ``warm``, or its previous slice's answer.
+
+        The previous slice's answer only when it was not usable and ``item``
+        is its item; taken once either way.
+        """
+        resume, self._resume = self._resume, None
+        return resume[1] if resume is not None and resume[0] is item else warm
+
+    def next(self, item: Any, queue: Callable[[Any], bool], unusable: Any = None) -> bool:
+        """Queue the next slice of ``item`` after a budget-limited solve; whether queued.
+
+        ``queue(item)``: queues it, or refuses (False); not called once
+        ``max_slices`` slices of ``item`` ran in a row.  ``unusable``: the
+        solve's answer when it was not usable (the next slice goes on from it).
+        """
+        self._count = self._count + 1 if item is self._item else 1
+        self._item = item
+        more = self._count < self.max_slices and bool(queue(item))
+        if more and unusable is not None:
+            self._resume = (item, unusable)
+        return more
 
 
 # ------------------------------------------------------------ statistics

@@ -9,9 +9,11 @@ rclpy = pytest.importorskip('rclpy')
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.lifecycle import Node as LifecycleNode  # noqa: E402
 
 from bellow_ancf_ros.nodes.diagnostics import STATUS_PERIOD_S, ThrottledStatus  # noqa: E402
-from bellow_ancf_ros.nodes.diagnostics import lifecycle_level, solve_outcome  # noqa: E402
+from bellow_ancf_ros.nodes.diagnostics import (  # noqa: E402
+    lifecycle_level, lifecycle_state, solve_outcome)
 from bellow_ancf_ros.nodes.ros_util import diagnostics_qos  # noqa: E402
 from bellow_ancf_ros.demos.pipeline import wait_until  # noqa: E402
 
@@ -114,3 +116,20 @@ def test_an_unreachable_target_is_a_counted_warning_naming_the_best_fit():
 def test_the_heartbeat_says_the_lifecycle_state_and_why(args, level, words):
     got = lifecycle_level(*args)
     assert got[0] == level and words in got[1]
+
+
+def test_the_lifecycle_state_is_rclpys_and_the_flags_without_it(ros_context):
+    node = LifecycleNode('lifecycle_label', context=ros_context)
+    try:
+        # the state machine's word, whatever the flags say
+        assert lifecycle_state(node, active=True, configured=True) == 'unconfigured'
+        node.trigger_configure()
+        assert lifecycle_state(node, active=False, configured=False) == 'inactive'
+        node.trigger_activate()
+        assert lifecycle_state(node, active=False, configured=False) == 'active'
+    finally:
+        node.destroy_node()
+    no_machine = object()
+    assert lifecycle_state(no_machine, active=True, configured=True) == 'active'
+    assert lifecycle_state(no_machine, active=False, configured=True) == 'inactive'
+    assert lifecycle_state(no_machine, active=False, configured=False) == 'unconfigured'

@@ -26,6 +26,7 @@ from bellow_ancf_ros.nodes.regulator_driver import RegulatorDriver  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 import test_ros_nodes as _rn  # noqa: E402
 from test_ros_nodes import pressure_msg, target_msg, wait_for  # noqa: E402
+from ros_processes import interrupt  # noqa: E402
 
 h = _rn.h
 
@@ -208,12 +209,8 @@ def test_driver_process_vents_on_ctrl_c(h):
         for _ in range(10):   # a controller republishes; one message may precede matching
             pub.publish(pressure_msg([70e3, 10e3, -30e3]))
             time.sleep(0.1)
-        os.killpg(proc.pid, signal.SIGINT)
-        out, _ = proc.communicate(timeout=20)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(10)
+        out = interrupt(proc, 20.0)
     assert proc.returncode == 0, out[-2000:]
     assert 'regulators <- 70.00 10.00 -30.00 kPa gauge' in out
     assert 'regulators <- 0.00 0.00 0.00 kPa gauge' in out and 'vented: driver shutdown' in out

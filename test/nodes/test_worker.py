@@ -1,4 +1,4 @@
-"""nodes.worker: the latest-only worker and the solve statistics (no ROS needed)."""
+"""nodes.worker: the model, the latest-only worker, budget slices, solve statistics (no ROS)."""
 
 import threading
 import time
@@ -6,7 +6,25 @@ import time
 import numpy as np
 import pytest
 
+from bellow_ancf_ros.core import ConfigError
 from bellow_ancf_ros.nodes import worker
+
+
+# ------------------------------------------------------------------ the model
+def test_ready_model_starts_vented_and_carries_the_payload():
+    cfg, model, vented, start = worker.ready_model('one_segment')
+    assert cfg.name == 'one_segment' and model.A == cfg.n_actuators_total
+    assert vented.success and start is vented          # no payload: one equilibrium
+    assert vented.position[2] > 0.0                    # the straight robot, pointing up
+    _, _, vented2, loaded = worker.ready_model('one_segment', payload_kg=0.05)
+    assert loaded.success and loaded is not vented2
+    assert loaded.position[2] < vented2.position[2]    # the payload shortens the robot
+    assert np.allclose(vented2.position, vented.position)   # the warm start: no payload
+
+
+def test_ready_model_refuses_an_unknown_robot():
+    with pytest.raises(ConfigError):
+        worker.ready_model('no_such_robot')
 
 
 # ------------------------------------------------------------------ latest-only worker
@@ -142,3 +160,39 @@ def test_solve_stats_summary_window_and_age():
     assert s['p95_s'] == pytest.approx(np.percentile([0.002, 0.003, 0.004, 0.010], 95))
     assert s['last_solve_age_s'] == pytest.approx(0.25)
     assert stats.times() == [0.002, 0.003, 0.004, 0.010]
+
+
+# ------------------------------------------------------------ budget slices
+def test_budget_slices_stop_after_max_slices_of_one_item_in_a_row():
+    slices, queued = worker.BudgetSlices(3), []
+
+    def queue(item):
+        queued.append(item)
+        return True
+    a, b = object(), object()
+    assert slices.next(a, queue) and slices.next(a, queue)   # slices 1 and 2 of a: queued
+    assert not slices.next(a, queue)                         # the third: no more
+    assert queued == [a, a]
+    assert slices.next(b, queue)                             # a new item counts from 1
+    assert queued == [a, a, b]
+
+
+def test_budget_slices_say_when_the_queue_refuses():
+    slices = worker.BudgetSlices(40)
+    assert not slices.next('item', lambda item: False)
+
+
+def test_an_unusable_answer_is_the_next_slice_warm_start_once_and_for_its_item_only():
+    slices = worker.BudgetSlices(40)
+    a, b = object(), object()
+    assert slices.warm_start(a, 'warm') == 'warm'            # nothing handed on yet
+    assert slices.next(a, lambda item: True, unusable='a, slice 1')
+    assert slices.warm_start(a, 'warm') == 'a, slice 1'      # goes on from it
+    assert slices.warm_start(a, 'warm') == 'warm'            # taken once
+    assert slices.next(a, lambda item: True, unusable='a, slice 2')
+    assert slices.warm_start(b, 'warm') == 'warm'            # a newer item: the last good one
+    assert slices.warm_start(a, 'warm') == 'warm'            # (and the old answer is gone)
+    assert slices.next(a, lambda item: True)                 # usable: nothing handed on
+    assert slices.warm_start(a, 'warm') == 'warm'
+    assert not slices.next(a, lambda item: False, unusable='not queued')
+    assert slices.warm_start(a, 'warm') == 'warm'            # no next slice: nothing kept

@@ -27,16 +27,32 @@ def node_process_env() -> dict:
     return e
 
 
-def interrupt(proc, wait_s: float) -> None:
-    """Ctrl-C to a node process's group (started with ``start_new_session``); SIGKILL late."""
-    if proc.poll() is not None:
-        return
-    os.killpg(proc.pid, signal.SIGINT)
-    try:
-        proc.wait(wait_s)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(5.0)
+def interrupt(proc, wait_s: float):
+    """Ctrl-C to a node process's group (started with ``start_new_session``); SIGKILL late.
+
+    Waits up to ``wait_s`` for it to exit, then SIGKILLs its group.  Returns
+    what it wrote to a ``stdout=PIPE`` (None without one); its exit status
+    is then ``proc.returncode``.
+    """
+    return interrupt_all([proc], wait_s)[0]
+
+
+def interrupt_all(procs, wait_s: float) -> list:
+    """:func:`interrupt` for several node processes: Ctrl-C to all first, then each waited for.
+
+    Returns their outputs, in order (see :func:`interrupt`).
+    """
+    for proc in procs:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+    outputs = []
+    for proc in procs:
+        try:   # (communicate: a full pipe would block the process on its way out)
+            outputs.append(proc.communicate(timeout=wait_s)[0])
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            outputs.append(proc.communicate(timeout=5.0)[0])
+    return outputs
 
 
 class SpunClient:
