@@ -62,7 +62,9 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/fuzz_bench.py
 	$(VENV)/bin/python bench/budget_bench.py
 	$(VENV)/bin/python bench/redundant_bench.py
-	$(VENV)/bin/python bench/effects_bench.py
+	# what each hardware effect costs the closed loop (10 min on 2 busy cores): writes
+	# bench/effects.json and its tables in docs/closed_loop.md
+	$(VENV)/bin/python bench/effects_bench.py --doc
 	$(VENV)/bin/python bench/stream_latency.py one_segment
 	$(VENV)/bin/python bench/stream_latency.py two_segment
 	$(VENV)/bin/python bench/dynamics_bench.py
