@@ -89,8 +89,9 @@ def test_figures_of_a_recording(cfg):
     diag = [_diag(T0 + t, f'{inv}: inverse kinetostatics',
                   {'measured_pose_age_s': 0.4 if 1.0 < t < 1.6 else 0.02,
                    'solve_time_ms': 1.5, 'oscillation_trips': 0,
-                   'feedback_state': ('holding the correction: a target jump is being moved '
-                                      'through' if 4.0 <= t < 5.5 else 'integrating')})
+                   'feedback_state': ('holding the correction: a move of its own (a target '
+                                      'jump, a stopped stream braking)' if 4.0 <= t < 5.5
+                                      else 'integrating')})
             for t in np.arange(0.05, s.end_s, 0.1)]
     diag.append(_diag(T0 - 0.5, f'{inv}: status', {'targets_published': 10,
                                                    'oscillation_trips': 0}))

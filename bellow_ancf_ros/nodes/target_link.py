@@ -123,7 +123,7 @@ class TargetLink:
         modes.listen(self._on_mode)
         if modes.result is not None:
             self._on_mode(None, modes.result)
-        if filt.shaper is not None or filt.jumps is not None:
+        if filt.enabled:   # (re-solves while shaping, moving through a jump or braking)
             def tick():
                 item = self._last_item
                 with self._lock:

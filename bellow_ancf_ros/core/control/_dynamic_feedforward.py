@@ -45,6 +45,8 @@ __all__ = ['DynamicFeedforward', 'StreamFeedforward', 'dynamic_path']
 #: Largest shift of the target [m] and of its z-axis [rad] the feedforward applies.
 MAX_SHIFT_M = 0.01
 MAX_SHIFT_RAD = math.radians(10.0)
+#: A stopped stream slower than this over its brake time is not braked [m], [rad].
+_STILL_M, _STILL_RAD = 1.0e-5, 1.0e-4
 
 
 class DynamicFeedforward:
@@ -128,6 +130,38 @@ def dynamic_path(path: Callable[[float], tuple], frequency_hz: float, damping_ra
     return f
 
 
+def _brake_bases() -> np.ndarray:
+    """Quintic bases of a stop: ``g_k^(m)(0) = delta_km`` (k, m = 1, 2), all else zero at 0 and 1.
+
+    Rows: coefficients (lowest power first) of ``g_1, g_2``: the path
+    ``v T g_1 + a T^2 g_2`` leaves with the stream's velocity and
+    acceleration and is back at rest at its start after ``T``.  (Matching
+    the jerk too, a septic, rang more on the robot family.)
+    """
+    rows = []
+    for k in (1, 2):
+        A, b = np.zeros((6, 6)), np.zeros(6)
+        for m in range(3):
+            for n in range(6):      # d^m/dtau^m of tau^n at 0 and at 1
+                A[m, n] = math.factorial(n) if n == m else 0.0
+                A[3 + m, n] = (math.factorial(n) / math.factorial(n - m)) if n >= m else 0.0
+        b[k] = 1.0
+        rows.append(np.linalg.solve(A, b))
+    return np.array(rows)
+
+
+_BRAKE = [np.array([np.polynomial.polynomial.polyder(c, m) if m else c for c in _brake_bases()])
+          for m in range(4)]
+
+
+def _brake(tau: float) -> np.ndarray:
+    """``(2 bases, value and 3 derivatives in tau)`` of the stop at ``tau`` (zero from 1 on)."""
+    t = max(float(tau), 0.0)
+    if t >= 1.0:
+        return np.zeros((2, 4))
+    return np.array([[np.polynomial.polynomial.polyval(t, c) for c in d] for d in _BRAKE]).T
+
+
 class StreamFeedforward:
     """:class:`DynamicFeedforward` on a stream of stamped targets.
 
@@ -136,13 +170,28 @@ class StreamFeedforward:
     the targets of the last ``window_s`` (at least three).  A target farther
     than ``jump_m`` from the one before (a step), a gap longer than
     ``window_s``, or too few samples: the newest target unshifted.
+
+    **A stream that stops** (no target for ``stale_periods`` of its own
+    intervals, at least ``window_s`` / 2) while it was moving: the robot,
+    led by the shift, is moving at the stream's speed.  Holding the shifted
+    target would drive it on by the shift and leave its mode ringing; dropping
+    the shift, a velocity step, rings it too.  Instead the wanted pose (the
+    *reference*, :meth:`reference`) continues from the newest target along a
+    quintic that starts with the stream's velocity and acceleration and
+    comes back to rest at that target after one brake time (``brake_periods``
+    of the mode, at least ``4 lag_s``), shifted as any path: the robot
+    follows it and comes to rest at the last target without ringing
+    (:meth:`busy` while braking; the closed loop holds its integral then).
     """
 
     def __init__(self, frequency_hz: float, damping_ratio: float, window_s: float = 0.08,
-                 jump_m: float = 0.005, **kw) -> None:
+                 jump_m: float = 0.005, stale_periods: float = 3.0, brake_periods: float = 1.0,
+                 **kw) -> None:
         self.ff = DynamicFeedforward(frequency_hz, damping_ratio, **kw)
         self.window_s, self.jump_m = float(window_s), float(jump_m)
+        self.stale_periods, self.brake_periods = float(stale_periods), float(brake_periods)
         self._hist: deque = deque()
+        self._brake = None   # the stop of the stream, once seen: (t1, T, p1, dp, z1, dz)
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shift for this mode from now on."""
@@ -151,6 +200,7 @@ class StreamFeedforward:
     def reset(self) -> None:
         """Forget the stream (the next target starts unshifted)."""
         self._hist.clear()
+        self._brake = None
 
     def push(self, t: float, position, z_axis=None) -> None:
         """A target wanted at time ``t`` (a time that goes back starts the stream again)."""
@@ -163,22 +213,107 @@ class StreamFeedforward:
         h.append((float(t), p, z))
         while len(h) > 3 and h[0][0] < t - self.window_s:
             h.popleft()
+        self._brake = None
 
-    def target(self):
-        """The newest target shifted for the mode: ``(position, z_axis or None)``."""
+    @property
+    def brake_s(self) -> float:
+        """How long a stopped stream's brake takes [s]."""
+        return max(self.brake_periods / self.ff.frequency_hz, 4.0 * self.ff.lag_s)
+
+    def stale_s(self) -> float:
+        """How long after its newest target the stream counts as stopped [s]."""
+        t = [s[0] for s in self._hist]
+        step = float(np.median(np.diff(t))) if len(t) >= 2 else self.window_s
+        return max(self.stale_periods * step, 0.5 * self.window_s)
+
+    def _fit(self):
+        """The derivatives at the newest target, ``(dp, dz or None)``: rows v, a[, j]."""
         h = self._hist
-        if not h:
-            raise ValueError('no target pushed yet')
-        t1, p1, z1 = h[-1]
         if len(h) < 3:
-            return p1, z1
-        t = np.array([s[0] for s in h]) - t1
+            return None
+        t = np.array([s[0] for s in h]) - h[-1][0]
         cols = [np.ones_like(t), t, 0.5 * t * t]   # value, slope, curvature (and jerk)
         if len(h) >= 5 and self.ff.c3 > 0:
             cols.append(t ** 3 / 6)
         V = np.column_stack(cols)
-        coef = np.linalg.lstsq(V, np.array([s[1] for s in h]), rcond=None)[0]
+        dp = np.linalg.lstsq(V, np.array([s[1] for s in h]), rcond=None)[0][1:]
+        if h[-1][2] is None:
+            return dp, None
+        return dp, np.linalg.lstsq(V, np.array([s[2] for s in h]), rcond=None)[0][1:]
+
+    def _braking(self, now: float | None):
+        """The brake of a stream stopped by ``now`` (None: not stopped, or not moving)."""
+        h = self._hist
+        if now is None or not h or now <= h[-1][0] + self.stale_s():
+            return None
+        if self._brake is None:
+            fit = self._fit()
+            if fit is None:
+                return None
+            t1, p1, z1 = h[-1]
+            dp, dz = fit
+            T = self.brake_s
+
+            def reach(d):
+                return 0.0 if d is None else float(np.linalg.norm(d[0]) * T
+                                                   + np.linalg.norm(d[1]) * T * T)
+            if reach(dp) < _STILL_M and reach(dz) < _STILL_RAD:
+                return None   # a held target repeated, then not: nothing to brake
+            self._brake = (t1, T, p1, dp, z1, dz)
+        return self._brake
+
+    def _along(self, brake, now: float):
+        """Pose and derivative rows ``(v, a, j)`` on the brake at ``now``."""
+        t1, T, p1, dp, z1, dz = brake
+        k, m = np.arange(1, 3)[:, None], np.arange(4)[None, :]
+        W = _brake((now - t1) / T) * T ** (k - m)   # d^m/dt^m of T^k g_k(tau) [k rows]
+
+        def on(x, d):   # d: rows v, a[, j] at the stream's end
+            moved = W.T @ d[:2]                      # rows: offset, v, a, j
+            return x + moved[0], moved[1:]
+        p, vp = on(p1, dp)
         if z1 is None:
-            return self.ff.shifted(p1, coef[1:])
-        cz = np.linalg.lstsq(V, np.array([s[2] for s in h]), rcond=None)[0]
-        return self.ff.shifted(p1, coef[1:], z1, cz[1:])
+            return p, vp, None, None
+        z, vz = on(z1, dz)
+        return p, vp, z / np.linalg.norm(z), vz
+
+    def reference(self, now: float | None = None):
+        """The pose wanted at ``now``: the newest target, or the brake of a stopped stream."""
+        h = self._hist
+        if not h:
+            raise ValueError('no target pushed yet')
+        brake = self._braking(now)
+        if brake is None:
+            return h[-1][1], h[-1][2]
+        p, _, z, _ = self._along(brake, now)
+        return p, z
+
+    def busy(self, now: float) -> bool:
+        """True while a stopped stream brakes (until one target after its end was given out)."""
+        brake = self._braking(now)
+        return brake is not None and now <= brake[0] + 1.5 * brake[1]
+
+    def hold_until(self):
+        """The end of a brake under way (the closed loop holds its integral until then)."""
+        return None if self._brake is None else self._brake[0] + self._brake[1]
+
+    def target(self, now: float | None = None):
+        """The wanted pose shifted for the mode: ``(position, z_axis or None)``.
+
+        ``now``: the time it is commanded at (None: the stream has not stopped).
+        """
+        h = self._hist
+        if not h:
+            raise ValueError('no target pushed yet')
+        brake = self._braking(now)
+        if brake is not None:
+            p, vp, z, vz = self._along(brake, now)
+            return self.ff.shifted(p, vp, z, vz)
+        t1, p1, z1 = h[-1]
+        fit = self._fit()
+        if fit is None:
+            return p1, z1
+        dp, dz = fit
+        if z1 is None:
+            return self.ff.shifted(p1, dp)
+        return self.ff.shifted(p1, dp, z1, dz)

@@ -140,7 +140,7 @@ STALE = 'holding the correction: measured_pose too old (dropout)'
 OUTLIER = 'holding the correction: newest measured_pose is an outlier'
 HELD = 'frozen: no command went out for the corrected target'
 OSCILLATING = 'holding the correction: oscillation seen, gain cut'
-MOVING = 'holding the correction: a target jump is being moved through'
+MOVING = 'holding the correction: a move of its own (a target jump, a stopped stream braking)'
 
 
 @dataclass(frozen=True)

@@ -39,8 +39,9 @@ from ._target_filter import TargetFilter
 
 __all__ = ['LoopRecord', 'LoopSimulation']
 
-#: ``target(t) -> (position (3,), z_axis (3,) or None)``: the pose wanted at time ``t``.
-Target = Callable[[float], tuple]
+#: ``target(t) -> (position (3,), z_axis (3,) or None)``: the pose wanted at time ``t``;
+#: ``None``: no target then (the stream has stopped: the last one stands, re-solved).
+Target = Callable[[float], tuple | None]
 
 
 @dataclass
@@ -156,6 +157,7 @@ class LoopSimulation:
         self.command = None
         self.corrupt: Callable | None = None  # corrupt(sample) -> sample, for tests
         self._outlier_since = False
+        self._last = None                     # the newest target (position, z_axis)
         self.mode_check = mode_check
         self.feedforward = feedforward
         self.jumps = jumps
@@ -179,13 +181,22 @@ class LoopSimulation:
                                         start.z_axis if self.use_orientation else None))
 
     def _control(self, t: float, target: Target, rec: LoopRecord) -> None:
-        ref_p, ref_z = target(t)
-        p, z = target(t + self.preview_s)
-        p = np.asarray(p, dtype=float)
-        z = None if (z is None or not self.use_orientation) else np.asarray(z, dtype=float)
+        new = target(t + self.preview_s)
+        if new is None:   # the stream stopped: the node re-solves its last target
+            if self._last is None:
+                raise ValueError(f'no target at t = {t:g} s, and none before')
+            (p, z), ref = self._last, self._last
+        else:
+            p = np.asarray(new[0], dtype=float)
+            z = (None if (new[1] is None or not self.use_orientation)
+                 else np.asarray(new[1], dtype=float))
+            ref = target(t) or (p, z)
+            self._last = (p, z)
+        ref_p, ref_z = ref
         command, hold = None, None
         if self.targets is not None:   # a jump becomes a move, a stream is shifted: the
-            self.targets.push(t + self.preview_s, p, z)   # loop compares the move (wanted)
+            if new is not None:            # loop compares the move (wanted)
+                self.targets.push(t + self.preview_s, p, z)
             shifted, (p, z) = self.targets.targets(t)
             command = shifted if self.feedforward is not None else None
             hold = self.targets.hold_until

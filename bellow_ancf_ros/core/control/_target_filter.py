@@ -95,8 +95,14 @@ class TargetFilter:
 
     @property
     def hold_until(self) -> float | None:
-        """Until when a closed loop holds its correction (a jump's move) [s]; None: never."""
-        return None if self.jumps is None else self.jumps.hold_until
+        """Until when a closed loop holds its correction (a jump's move, a stopped stream's brake).
+
+        In seconds; None: never.
+        """
+        ends = [h for h in (None if self.jumps is None else self.jumps.hold_until,
+                            None if self.feedforward is None else self.feedforward.hold_until())
+                if h is not None]
+        return max(ends) if ends else None
 
     def reset(self, start=None) -> None:
         """Forget the stream (the next target is taken as it is).
@@ -128,10 +134,17 @@ class TargetFilter:
         self._arrived = False
 
     def busy(self, now: float) -> bool:
-        """True until the output stops moving: past the shaper's last impulse, a move's end."""
+        """True until the output stops moving: past the shaper's last impulse, a move's end.
+
+        Or a stopped stream's brake (the feedforward's).
+        """
+        if self.mode is None:
+            return False
+        if self.feedforward is not None and self.feedforward.busy(now):
+            return True
         if self.jumps is not None:   # (until a target at the move's end was given out)
-            return self.mode is not None and not self._arrived
-        return self.shaper is not None and self.mode is not None and not self._arrived
+            return not self._arrived
+        return self.shaper is not None and not self._arrived
 
     def target(self, now: float):
         """The target to command now: ``(position, z_axis or None)`` (shaped and shifted)."""
@@ -158,10 +171,17 @@ class TargetFilter:
             ref_p, ref_z = self.jumps.at(t)
             self._arrived = not self.jumps.busy(t)
         out_p, out_z = ref_p, ref_z
-        if self.feedforward is not None:
-            fp, fz = self.feedforward.target()
-            out_p = ref_p + (fp - p)
-            if ref_z is not None and fz is not None:
-                zz = ref_z + (fz - z)
-                out_z = zz / np.linalg.norm(zz)
+        if self.feedforward is not None:   # (a stopped stream brakes: the pose wanted moves)
+            bp, bz = self.feedforward.reference(now)
+            fp, fz = self.feedforward.target(now)
+            ref_p, ref_z = ref_p + (bp - p), _turned(ref_z, bz, z)
+            out_p, out_z = ref_p + (fp - bp), _turned(ref_z, fz, bz)
         return (out_p, out_z), (ref_p, ref_z)
+
+
+def _turned(z, to, frm):
+    """``z`` turned as ``frm`` turned to ``to`` (to first order; unit; None stays None)."""
+    if z is None or to is None or frm is None:
+        return z
+    zz = z + (to - frm)
+    return zz / np.linalg.norm(zz)

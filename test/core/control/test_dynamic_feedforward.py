@@ -83,3 +83,46 @@ def test_dynamic_feedforward_halves_the_error_at_ten_times_the_papers_speed(name
     assert dynamic['rmse_mm'] <= 0.5 * quasi_static['rmse_mm'], (quasi_static, dynamic)
     if 'rmse_deg' in dynamic:
         assert dynamic['rmse_deg'] <= 0.5 * quasi_static['rmse_deg'], (quasi_static, dynamic)
+
+
+def test_a_stopped_stream_brakes_back_to_its_last_target():
+    """A moving stream that stops: the pose wanted leaves with its speed and comes back to rest.
+
+    Holding the shifted target would leave the robot ``c1 v`` past the last
+    target (for ever without a closed loop); the brake ends exactly there.
+    """
+    omega = 2 * math.pi / 2.0
+    sine = _sine(omega, amp=0.01)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU, window_s=0.1)
+    for k in range(51):            # 50 Hz, stopping at t1 = 1 s, at full speed
+        st.push(k / 50, sine(k / 50)[0])
+    t1, p1 = 1.0, sine(1.0)[0]
+    v = 0.01 * omega * math.cos(omega * t1)
+    stale, T = st.stale_s(), st.brake_s
+    assert stale == pytest.approx(0.06) and T == pytest.approx(max(1 / F, 4 * TAU))
+    fresh = st.target()[0]
+    assert abs(fresh[0] - p1[0]) > 1e-3                      # moving: shifted
+    np.testing.assert_array_equal(st.target(t1 + 0.9 * stale)[0], fresh)   # not stopped yet
+    assert not st.busy(t1 + 0.9 * stale) and st.hold_until() is None
+    now = t1 + 1.1 * stale                                   # stopped: braking
+    assert st.busy(now) and st.hold_until() == pytest.approx(t1 + T)
+    ref = st.reference(now)[0]
+    tau = (now - t1) / T               # leaves with its speed: v T (tau - 6 tau^3 + ...), a = 0
+    assert ref[0] - p1[0] == pytest.approx(v * T * (tau - 6 * tau**3 + 8 * tau**4 - 3 * tau**5),
+                                           rel=0.02)
+    peak = max(abs(st.reference(t1 + s * T)[0][0] - p1[0]) for s in np.linspace(0, 1, 51))
+    assert peak <= 0.2 * abs(v) * T + 1e-6                   # the quintic's excursion
+    for now in (t1 + T, t1 + 1.2 * T):                       # at rest at the last target
+        np.testing.assert_allclose(st.reference(now)[0], p1, atol=1e-15)
+        np.testing.assert_allclose(st.target(now)[0], p1, atol=1e-15)
+    assert st.busy(t1 + 1.2 * T) and not st.busy(t1 + 1.6 * T)
+    st.push(t1 + 2.0, p1)                                    # a new target ends the brake
+    assert st.hold_until() is None and not st.busy(t1 + 2.0)
+
+
+def test_a_held_stream_that_stops_is_not_braked():
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    for k in range(10):
+        st.push(k / 50, np.array([0.01, 0.0, 0.2]))
+    assert not st.busy(5.0) and st.hold_until() is None
+    np.testing.assert_allclose(st.target(5.0)[0], [0.01, 0.0, 0.2], atol=1e-12)

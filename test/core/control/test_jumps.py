@@ -128,7 +128,7 @@ def test_the_feedback_holds_its_correction_through_a_move():
         t = 0.02 * k
         fb.measurement(t, target + [0.005, 0.0, 0.0])
         fb.corrected_target(t, target, hold_until=0.5)
-        assert fb.state.startswith('holding the correction: a target jump') and fb.frozen
+        assert fb.state.startswith('holding the correction: a move of its own') and fb.frozen
     np.testing.assert_array_equal(fb.correction_m, c)
     for k in range(26, 30):   # captured after it: integrated again
         t = 0.02 * k

@@ -16,6 +16,9 @@ from bellow_ancf_ros.core.control import (
     LoopSimulation,
     PlantEffects,
     SimulatedRobot,
+    StreamFeedforward,
+    default_loop,
+    draw_robot,
     paper_circle,
 )
 
@@ -196,3 +199,46 @@ def test_ten_times_the_papers_speed_after_one_period(name, goal_mm, goal_deg):
     assert s['rmse_mm'] <= goal_mm, s
     assert goal_deg is None or s['rmse_deg'] <= goal_deg, s
     assert sim.feedback.watchdog.trips == 0
+
+
+def _stop_mid_circle(sim, cfg, stop_after_s):
+    """The 10x circle streamed (not previewed) until ``stop_after_s``, then no more targets."""
+    from bellow_ancf_ros.core.experiments import spin_up
+    path = paper_circle(cfg, 2.0)
+    sim.run(2.0, lambda t: path(0.0))
+    t0 = sim.robot.time_s
+    sim.run(stop_after_s, lambda t: path(spin_up(t - t0, 1.0)))
+    return path(spin_up(sim.robot.time_s - t0, 1.0))[0]
+
+
+def test_a_stream_that_stops_leaves_the_robot_at_its_last_target_not_past_it():
+    """Feedforward alone, a matched robot: the shift of the moving stream is braked away.
+
+    Held, the shift (the regulators' lag times the speed, here about 3 mm)
+    would stay in the command for ever: nothing measures the robot.
+    """
+    model = RobotModel(load_robot('one_segment'))
+    robot = SimulatedRobot('one_segment', effects=PlantEffects.ideal())
+    ff = StreamFeedforward(1.0, 0.0, lag_s=0.1)
+    sim = LoopSimulation(model, robot, None, preview_s=0.0, feedforward=ff)
+    last = _stop_mid_circle(sim, model.cfg, 2.2)
+    shift = np.linalg.norm(ff.target()[0] - last)
+    assert shift > 1e-3                                  # moving: the command led the target
+    rec = sim.run(3.0, lambda t: None)
+    err = np.linalg.norm(rec.arrays()['true_p'][-10:] - last, axis=1)
+    assert err.max() < 2e-5 and rec.out_of_limits == 0
+
+
+def test_a_stream_that_stops_brings_a_swinging_robot_to_rest():
+    """The closed loop's defaults, a two-segment robot of the family (2.1 Hz, damping 0.09)."""
+    model = RobotModel(load_robot('two_segment'))
+    draw = draw_robot('two_segment', 2)
+    sim = default_loop(model, draw.robot())
+    last = _stop_mid_circle(sim, model.cfg, 2.2)
+    rec = sim.run(4.0, lambda t: None)
+    a = rec.arrays()
+    t = a['t'] - a['t'][0]
+    rest = a['true_p'][t > 3.0]
+    assert np.ptp(rest, axis=0).max() < 0.5e-3           # no ringing left after 3 s
+    assert np.linalg.norm(rest - last, axis=1).max() < 0.5e-3
+    assert sim.feedback.watchdog.trips == 0 and rec.out_of_limits == 0
