@@ -53,6 +53,14 @@ PARAMETERS = (
         'is sent at the edge of the band that puts the valve exactly at the pressure wanted '
         '(a change of direction no longer vanishes in the play; a shaped step then leaves no '
         'swing); 0 = off. Read on configure.', D, lo=0.0, hi=50.0)),
+    Param('creep_fraction', 0.0, descriptor(
+        "Part of the bellows' elongation that creeps after a pressure change (bellow-ancf "
+        'identify creep): each command leads the creep by its inverse, so that the robot '
+        'arrives at once instead of creeping the rest; 0 = off. Read on configure.', D,
+        lo=0.0, hi=0.9)),
+    Param('creep_time_constant_s', 2.0, descriptor(
+        "Time constant of the bellows' creep [s] (bellow-ancf identify creep). Read on "
+        'configure.', D, lo=0.05, hi=600.0)),
     Param('allow_other_publishers', False, descriptor(
         'Publish pressure_command even while another node publishes it (default false: '
         'vent once, deactivate and wait for activate; see ownership in docs/ros.md).', B)),

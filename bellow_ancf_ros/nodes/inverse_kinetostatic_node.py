@@ -43,7 +43,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ..core import ConfigError, InverseStatus, RobotModel, payload_problem, solve_inverse
 from ..core import geometry
-from ..core.control import PlayCompensation
+from ..core.control import CommandOutput
 from . import contract, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FeedbackLink
@@ -91,7 +91,7 @@ class InverseKinetostaticNode(LifecycleNode):
                          extra_check=self._configure_time_check)
         self._feedback = FeedbackLink(self, self._publish_diag)  # parameter feedback
         self._targets = TargetLink(self)   # target_shaping, dynamic_feedforward
-        self._play = None                  # regulator_play_kpa: PlayCompensation
+        self._output = None                # the play's and the creep's inverses: CommandOutput
         self._modes: ModeWatch | None = None   # the first mode, when something needs it
         self.add_post_set_parameters_callback(self._after_set)
 
@@ -99,8 +99,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._solve_lock = threading.Lock()   # one solve of the model at a time (worker, checks)
         self._last_target = None   # newest accepted target (position, z-axis), uncorrected
         self._held_item = None     # its worker item (re-solved when the payload changes)
-        self._active = False
-        self._configured = False
+        self._active = self._configured = False
         self._configure_error = ''
         self._model: RobotModel | None = None
         self._cfg = self._warm = self._start_pose = None
@@ -225,9 +224,9 @@ class InverseKinetostaticNode(LifecycleNode):
             # the first target after activate moves from here (the robot vented)
             self._start_pose = None if not start.success else (
                 start.position, start.z_axis if cfg.n_segments >= 2 else None)
-            play = 1e3 * float(self.get_parameter('regulator_play_kpa').value)
-            self._play = (PlayCompensation(model.A, play, cfg.p_min, cfg.p_max) if play > 0
-                          else None)
+            g = self.get_parameter
+            self._output = CommandOutput(model, 1e3 * float(g('regulator_play_kpa').value), (
+                float(g('creep_fraction').value), float(g('creep_time_constant_s').value)))
         qos = command_qos()
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'pressure_command', qos)
         self._owner = TopicOwner(self, 'pressure_command',
@@ -310,8 +309,7 @@ class InverseKinetostaticNode(LifecycleNode):
             vent = contract.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
             msg = pressure_message(vent, self._unit())
             self.last_command_pa = vent
-            if self._play is not None:
-                self._play.vent()
+            self._output.vent(time.monotonic())
             self._last_pose = None   # (the vented robot's pose is not a solve's)
             self.stats['vents'] += 1
             # under the lock: no solve result can be published after the vent
@@ -444,6 +442,9 @@ class InverseKinetostaticNode(LifecycleNode):
             period = 1.0 / float(self.get_parameter('command_rate_hz').value)
             if time.monotonic() - self._last_publish_t < 0.5 * period:
                 return
+            if self._output.timed and self._output.wanted is not None:   # (the creep's lead)
+                p = self.last_command_pa = contract.safe_pressures(self._output.again(
+                    time.monotonic()), self._cfg.p_min, self._cfg.p_max, self._model.A)
             self._pub_cmd.publish(pressure_message(p, self._unit()))
             if self._last_pose is not None:   # the model's pose for it (stamp: its target's)
                 self._pub_pose.publish(self._last_pose)
@@ -534,9 +535,9 @@ class InverseKinetostaticNode(LifecycleNode):
                 self._warm = inv
                 if stamp.sec == 0 and stamp.nanosec == 0:
                     stamp = self.get_clock().now().to_msg()
-                if self._play is not None:   # the valve at p, past the regulators' play
-                    p = contract.safe_pressures(self._play.command(p), cfg.p_min, cfg.p_max,
-                                                model.A)
+                # past the regulators' play, ahead of the creep (as configured)
+                p = contract.safe_pressures(self._output.command(p, time.monotonic()), cfg.p_min,
+                                            cfg.p_max, model.A)
                 self._pub_cmd.publish(pressure_message(p, unit))
                 self._last_publish_t = time.monotonic()
                 self._last_pose = pose_message(

@@ -195,3 +195,33 @@ def test_regulator_play_is_compensated_in_every_command_not_the_vent(h, one):
     np.testing.assert_allclose(valve, pb, atol=5.0)
     node.trigger_deactivate()
     wait_for(lambda: not np.any(np.asarray(h.last('pressure_command').data)), what='vent')
+
+
+def test_creep_is_led_by_the_commands_which_relax_onto_the_pressures_wanted(h, one):
+    """creep_fraction: the first command leads, the republished ones relax; the vent exactly 0."""
+    from std_msgs.msg import Float64MultiArray
+
+    from bellow_ancf_ros.core import solve_inverse
+    from bellow_ancf_ros.core.control import CreepCompensation
+    h.record(Float64MultiArray, 'pressure_command')
+    node = h.add(InverseKinetostaticNode, creep_fraction=0.15, creep_time_constant_s=0.5,
+                 command_rate_hz=20.0, target_shaping='none', name='creep')
+    a = solve_forward(one, [40e3, 20e3, 5e3]).position
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    n0 = h.count('pressure_command')
+    pub.publish(target_msg(a))
+    wait_for(lambda: h.count('pressure_command') > n0 + 40, timeout=10.0,
+             what='2 s of commands')
+    with h.lock:
+        sent = np.array([m.data for _, m in h.msgs['pressure_command'][n0:]])
+    pa = solve_inverse(one, a).pressures_pa
+    cfg = one.cfg    # the first command: the creep's inverse from rest at the vent
+    first = CreepCompensation(one.stage1, one.A, 0.15, 0.5, cfg.p_min, cfg.p_max).command(pa, 0.0)
+    np.testing.assert_allclose(sent[0], first, rtol=1e-4)
+    assert np.all(sent[0] > pa + 0.15 * pa)                  # leads ...
+    lead = np.abs(sent - pa)                                 # ... and relaxes: after 4 T,
+    assert np.all(lead[-1] < 0.05 * lead[0])                 # exp(-4) = 0.018 of the lead
+    assert np.all(np.diff(sent, axis=0) <= 1e-6)             # monotonically, on its way
+    node.trigger_deactivate()
+    wait_for(lambda: not np.any(np.asarray(h.last('pressure_command').data)), what='vent')

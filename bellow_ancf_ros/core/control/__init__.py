@@ -23,7 +23,9 @@
   (dynamic feedforward of a planned path); :class:`TargetFilter`: both on a
   target stream, as the inverse node applies them;
 * :class:`PlayCompensation`: commands at the edge of the regulators' play
-  band (the backlash inverse);
+  band (the backlash inverse); :class:`CreepCompensation`: commands that
+  lead the bellows' creep (its inverse); :class:`CommandOutput`: both, what
+  the regulators are sent for the pressures wanted;
 * :class:`OscillationWatchdog`: a sustained or growing swing of the measured
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
   its gain and holds its correction);
@@ -52,6 +54,7 @@ from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeChec
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._play import PlayCompensation
+from ._command_output import CommandOutput, CreepCompensation
 from ._regulators import BellowCreep, PressureRegulators
 from ._robot_family import FAMILY_RANGES, RobotDraw, draw_robot, first_mode
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
@@ -73,5 +76,5 @@ __all__ = [
     "PlayCompensation", "STEP_M", "circle_case", "default_loop", "held_case", "step_case",
     "LOOP_LAG_S", "LOOP_DELAY_S", "paper_circle",
     "FAMILY_RANGES", "RobotDraw", "draw_robot", "first_mode", "TARGET_SHAPINGS",
-    "JumpTransition",
+    "JumpTransition", "CommandOutput", "CreepCompensation",
 ]

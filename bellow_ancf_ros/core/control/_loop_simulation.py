@@ -33,7 +33,7 @@ from ..geometry import angle_between
 from ..model import RobotModel
 from ..solve import solve_forward, solve_inverse
 from ._feedback import FeedbackSettings, IntegralFeedback
-from ._play import PlayCompensation
+from ._command_output import CommandOutput
 from ._simulated_robot import SimulatedRobot
 from ._target_filter import TargetFilter
 
@@ -126,6 +126,10 @@ class LoopSimulation:
     play_compensation_pa : the regulators' play the commands are compensated
         for (:class:`~._play.PlayCompensation`, as the inverse node's
         ``regulator_play_kpa``); 0: none.
+    creep_compensation : ``(fraction, time_constant_s)`` of the bellows' creep
+        the commands are compensated for (:class:`~._command_output.CreepCompensation`,
+        as the inverse node's ``creep_fraction`` and ``creep_time_constant_s``);
+        None: none.
     jumps : a :class:`~._jumps.JumpTransition`: a jump of the (previewed)
         target becomes a minimum-jerk move at the first mode of
         ``mode_check``, and the feedback holds its correction through it (the
@@ -136,7 +140,8 @@ class LoopSimulation:
                  feedback: FeedbackSettings | None = None, control_rate_hz: float = 50.0,
                  physics_rate_hz: float = 200.0, preview_s: float = 0.0,
                  payload_kg: float | None = None, mode_check=None, feedforward=None,
-                 play_compensation_pa: float = 0.0, jumps=None) -> None:
+                 play_compensation_pa: float = 0.0, jumps=None,
+                 creep_compensation: tuple[float, float] | None = None) -> None:
         """Set up the loop at the robot's current time; nothing is commanded yet."""
         for name, v in (('control_rate_hz', control_rate_hz),
                         ('physics_rate_hz', physics_rate_hz)):
@@ -154,7 +159,8 @@ class LoopSimulation:
         self.preview_s = float(preview_s)
         self.payload_kg = model.cfg.payload if payload_kg is None else float(payload_kg)
         self.inverse = None                  # the last usable solve (warm start)
-        self.command = None
+        self.command = None                  # the last usable solve's pressures
+        self.sent = None                     # what the regulators were last sent
         self.corrupt: Callable | None = None  # corrupt(sample) -> sample, for tests
         self._outlier_since = False
         self._last = None                     # the newest target (position, z_axis)
@@ -167,8 +173,7 @@ class LoopSimulation:
                         else TargetFilter.of(jumps, feedforward))
         self.gains: list = []                 # (time, gain) whenever the automatic gain changed
         cfg = model.cfg
-        self.play = (PlayCompensation(cfg.n_actuators_total, play_compensation_pa, cfg.p_min,
-                                      cfg.p_max) if play_compensation_pa > 0 else None)
+        self.output = CommandOutput(model, play_compensation_pa, creep_compensation)
         t = robot.time_s
         self._next = {'physics': t + self.physics_dt, 'mocap': t, 'control': t}
         if jumps is not None or mode_check is not None:   # as the node at configure: the
@@ -219,14 +224,18 @@ class LoopSimulation:
                 usable = False
         if usable:
             self.inverse, self.command = inv, cmd
-            self.robot.command(cmd if self.play is None else self.play.command(cmd),
-                               t - self.robot.time_s)
+            self.sent = self.output.command(cmd, t)
+            self.robot.command(self.sent, t - self.robot.time_s)
             self._check_modes(t, fw)
             if fb is not None:
                 fb.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
                           fw.position, fw.z_axis)
-        elif fb is not None:
-            fb.no_command()
+        else:
+            if self.output.timed and self.output.wanted is not None:   # (as the node's
+                self.sent = self.output.again(t)                        # republishing)
+                self.robot.command(self.sent, t - self.robot.time_s)
+            if fb is not None:
+                fb.no_command()
         true_p, true_R = self.robot.true_pose()
         rec.t.append(t)
         rec.reference_p.append(np.asarray(ref_p, dtype=float))
@@ -235,7 +244,7 @@ class LoopSimulation:
         rec.true_p.append(true_p)
         rec.true_z.append(true_R[:, 2])
         rec.command_pa.append(self.robot.regulators.command_pa.copy()
-                              if self.command is None else self.command.copy())
+                              if self.sent is None else self.sent.copy())
         rec.sent.append(usable)
         rec.outlier_before.append(self._outlier_since)
         rec.state.append('' if fb is None else fb.state)
