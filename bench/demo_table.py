@@ -144,18 +144,25 @@ def markdown(runs: list) -> str:
     steps = [d.get('step') for d in runs]
     if any(steps):
         runs_ = [s['runs'] for s in steps if s]
-        g = next(s for s in steps if s)['goals'][0]
+        goals = {g['figure']: g for g in next(s for s in steps if s)['goals']}
         met = sum(1 for s in steps if s and s['met'])
         total = sum(1 for s in steps if s)
         verdict = (('met' if met else '**MISSED**') if total == 1 else f'met in {met}/{total}')
         missed = [t for s in steps if s for t in s['missed']]
+
+        def fig(run, key):
+            return spread([(r.get(run) or {}).get(key) for r in runs_])
+        text = ('Step phase (two segments, a 10 mm step target published once): feedforward, '
+                f'residual swing 1-2 s after the step unshaped {fig("none", "swing_mm")} mm, '
+                f'ZVD-shaped {fig("zvd", "swing_mm")} mm (goal {goals["swing_mm"]["limit"]:g} '
+                'mm)')
+        if 'overshoot_mm' in goals:
+            text += (f'; closed loop at its defaults, overshoot {fig("closed", "overshoot_mm")} '
+                     f'mm (goal {goals["overshoot_mm"]["limit"]:g} mm), error from 1.5 s after '
+                     f'the step {fig("closed", "late_mm")} mm (goal '
+                     f'{goals["late_mm"]["limit"]:g} mm)')
         out.append('')
-        out.append('Step phase (two segments, a 10 mm step target, feedforward): residual swing '
-                   '1-2 s after the step unshaped '
-                   f'{spread([(r.get("none") or {}).get("swing_mm") for r in runs_])} mm, '
-                   f'ZVD-shaped {spread([(r.get("zvd") or {}).get("swing_mm") for r in runs_])}'
-                   f' mm (goal {g["limit"]:g} mm): {verdict}'
-                   + (': ' + ', '.join(missed) if missed else '') + '.')
+        out.append(text + f': {verdict}' + (': ' + ', '.join(missed) if missed else '') + '.')
     return '\n'.join(out) + '\n'
 
 

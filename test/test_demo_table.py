@@ -40,7 +40,8 @@ def test_one_run_gives_its_figures_goals_and_misses():
     assert row[4] == '0.610 mm / 0.183 deg'
     assert row[5:7] == ['1.5 mm / 0.75 deg', '0.5 mm / 0.5 deg']
     assert row[-1] == '**MISSED**: held 0.610 > 0.500 mm'
-    assert 'ZVD-shaped 0.038 mm (goal 0.1 mm): met.' in table
+    assert ('ZVD-shaped 0.038 mm (goal 0.1 mm); closed loop at its defaults, overshoot 0.210 mm '
+            '(goal 0.5 mm), error from 1.5 s after the step 0.120 mm (goal 0.2 mm): met.') in table
     assert 'finite and within the limits: yes; every run ended with the vent: yes' in table
 
 
@@ -54,7 +55,8 @@ def test_several_runs_give_the_range_of_each_figure_and_goals_met_in_how_many():
     assert row[-1] == 'met in 1/2: RMSE 0.700 > 0.500 mm (run 2)'
     assert _row(table, 'one segment, 1x (20 s)')[3] == '0.080 mm (0.08)'   # the same twice
     assert _row(table, 'two segments, 1x (20 s)')[-1] == 'met in 2/2'
-    assert 'ZVD-shaped 0.020-0.050 mm (goal 0.1 mm): met in 2/2.' in table
+    assert 'ZVD-shaped 0.020-0.050 mm (goal 0.1 mm); closed loop' in table
+    assert '(goal 0.2 mm): met in 2/2.' in table
 
 
 def test_no_file_is_refused(tmp_path, capsys, monkeypatch):

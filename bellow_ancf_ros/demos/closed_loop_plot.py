@@ -146,14 +146,15 @@ def _bar_cell(ax, c: dict) -> None:
 
 
 def _step_cell(ax, step: dict | None) -> None:
-    """The step phase: residual swing unshaped and ZVD-shaped, the goal on the shaped one."""
+    """The step phase: the feedforward runs' residual swing, the closed loop's step figures."""
     ax.set_title('10 mm step, two segments:\nresidual swing 1-2 s after [mm]', fontsize=9)
     if step is None:
         ax.axis('off')
         ax.text(0.5, 0.5, 'step phase not run', ha='center', va='center', fontsize=8,
                 transform=ax.transAxes)
         return
-    g = step['goals'][0]
+    goals = {g['figure']: g for g in step['goals']}
+    g = goals['swing_mm']
     values = []
     for x, (key, name) in enumerate((('none', 'unshaped'), ('zvd', 'ZVD-shaped'))):
         r = step['runs'].get(key)
@@ -172,11 +173,19 @@ def _step_cell(ax, step: dict | None) -> None:
     ax.set_xlim(-0.5, 1.5)
     ax.tick_params(axis='y', which='both', labelsize=7)
     ax.grid(True, axis='y', alpha=0.3)
+    closed = [goals[k] for k in ('overshoot_mm', 'late_mm') if k in goals]
+    if closed:   # the closed loop's step: its figures against their goals, in the corner
+        text = 'closed loop: ' + ', '.join(
+            f'{c["goal"].removeprefix("closed-loop ")} '
+            + ('n/a' if c['value'] is None else f'{c["value"]:.2f}') + f' (<= {c["limit"]:g})'
+            for c in closed)
+        ax.text(0.02, 0.97, text.replace(', ', '\n  '), transform=ax.transAxes, fontsize=6,
+                va='top', color='tab:green' if all(c['met'] for c in closed) else MISSED)
     if step['missed'] or not step['ran']:
         ax.set_xlabel('MISSED: ' + ('\n'.join(step['missed']) or 'a run failed'),
                       color=MISSED, fontsize=7)
     else:
-        ax.set_xlabel('goal met', color='tab:green', fontsize=7)
+        ax.set_xlabel('goals met', color='tab:green', fontsize=7)
 
 
 def _run_text(data: dict) -> str:

@@ -18,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'plant_effects', 'play_kpa', 'tidy',
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'plant_effects', 'hardware_parameters', 'tidy',
            'wait_until', 'wait_up']
 
 
@@ -145,12 +145,18 @@ def plant_effects(plant: str):
     return PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
 
 
-def play_kpa(plant: str) -> float:
-    """The regulators' play the inverse node is told to compensate: the simulated plant's.
+def hardware_parameters(plant: str) -> dict:
+    """What the inverse node is told of the simulated plant's hardware, as a lab tells it.
 
-    A lab takes it from its regulators' data sheet (``regulator_play_kpa``).
+    The regulators' play (``regulator_play_kpa``: a lab takes it from their
+    data sheet) and the bellows' creep (``creep_fraction``,
+    ``creep_time_constant_s``: a lab identifies them from a recorded pressure
+    step, ``bellow-ancf identify creep``).
     """
-    return plant_effects(plant).regulator_hysteresis_pa / 1e3
+    e = plant_effects(plant)
+    return {'regulator_play_kpa': e.regulator_hysteresis_pa / 1e3,
+            'creep_fraction': e.creep_fraction,
+            'creep_time_constant_s': e.creep_time_constant_s}
 
 
 def record_qos():

@@ -64,14 +64,19 @@ def test_a_speed_without_a_goal_judges_only_the_held_target():
     assert c['met']
 
 
-def test_the_step_phase_goal():
-    def step(zvd):
+def test_the_step_phase_goals():
+    def step(zvd, overshoot=0.2, late=0.1):
+        closed = {'swing_mm': 0.1, 'before_mm': 0.0, 'overshoot_mm': overshoot,
+                  'late_mm': late}
         return demo.step_record({'ran': zvd is not None, 'shaper': '', 'runs': {
             'none': {'swing_mm': 2.5, 'before_mm': 0.0},
-            'zvd': None if zvd is None else {'swing_mm': zvd, 'before_mm': 0.0}}})
+            'zvd': None if zvd is None else {'swing_mm': zvd, 'before_mm': 0.0},
+            'closed': closed}})
     assert step(0.04)['met'] and step(0.04)['missed'] == []
     assert step(0.15)['missed'] == ['shaped swing 0.150 > 0.100 mm']
     assert step(None)['missed'] == ['shaped swing: no data']
+    assert step(0.04, overshoot=0.7, late=0.3)['missed'] == [
+        'closed-loop overshoot 0.700 > 0.500 mm', 'closed-loop error 1.5 s after 0.300 > 0.200 mm']
     assert demo.step_record(None) is None
 
 
@@ -90,7 +95,9 @@ def test_main_prints_each_miss_and_writes_what_it_printed(tmp_path, monkeypatch,
         run['period'], 0.7 if run['period'] == 2.0 else 0.1, 0.05, n=300))
     monkeypatch.setattr(demo, 'step_phase', lambda *a: {
         'ran': True, 'shaper': '', 'runs': {'none': {'swing_mm': 2.5, 'before_mm': 0.0},
-                                            'zvd': {'swing_mm': 0.2, 'before_mm': 0.0}}})
+                                            'zvd': {'swing_mm': 0.2, 'before_mm': 0.0},
+                                            'closed': {'swing_mm': 0.1, 'before_mm': 0.0,
+                                                       'overshoot_mm': 0.3, 'late_mm': 0.1}}})
     monkeypatch.setattr(demo, 'tidy', lambda *a: None)
     out_json = tmp_path / 'r' / 'results.json'
     rc = demo.main(['--results', str(out_json), '--plot', str(tmp_path / 'p.png')])
@@ -100,8 +107,8 @@ def test_main_prints_each_miss_and_writes_what_it_printed(tmp_path, monkeypatch,
     assert out.count('NOT met; MISSED: ') == 2
     assert 'RMSE <= 0.5 mm, held <= 0.3 mm, outlier step <= normal + 2 kPa: NOT met; ' \
            'MISSED: RMSE 0.700 > 0.500 mm' in out
-    assert 'shaped residual swing <= 0.1 mm: NOT met; MISSED: shaped swing 0.200 > 0.100 mm' \
-        in out
+    assert ('shaped swing <= 0.1 mm, closed-loop overshoot <= 0.5 mm, closed-loop error 1.5 s '
+            'after <= 0.2 mm: NOT met; MISSED: shaped swing 0.200 > 0.100 mm') in out
     data = json.loads(out_json.read_text())
     assert not data['passed'] and data['machine']['cpus'] >= 1
     assert all(len(c['load_at_start']) == 3 for c in data['cases'])

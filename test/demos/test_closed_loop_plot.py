@@ -71,7 +71,7 @@ def test_a_missed_goal_is_a_red_bar_and_a_line_that_names_it():
     assert len(met) == 6 and not any(np.allclose(p.get_facecolor(), RED)
                                      for ax in met for p in ax.patches)
     step = next(ax for ax in fig.get_axes() if ax.get_title().startswith('10 mm step'))
-    assert step.get_xlabel() == 'goal met'
+    assert step.get_xlabel() == 'goals met'
     missed = pictures.summary_figure(results(zvd_mm=0.2))
     step = next(ax for ax in missed.get_axes() if ax.get_title().startswith('10 mm step'))
     assert step.get_xlabel() == 'MISSED: shaped swing 0.200 > 0.100 mm'

@@ -41,7 +41,9 @@ def results(ff_mm=5.0, cl_mm=0.08, cl_10x_mm=0.3, held_mm=0.05, held_50g_mm=0.61
         cases.append(demo.column_record(col, res))
     step = demo.step_record({'ran': True, 'shaper': '',
                              'runs': {'none': {'swing_mm': 2.49, 'before_mm': 0.01},
-                                      'zvd': {'swing_mm': zvd_mm, 'before_mm': 0.01}}})
+                                      'zvd': {'swing_mm': zvd_mm, 'before_mm': 0.01},
+                                      'closed': {'swing_mm': 0.05, 'before_mm': 0.01,
+                                                 'overshoot_mm': 0.21, 'late_mm': 0.12}}})
     return {'format': demo.RESULTS_FORMAT, 'date': date, 'date_end': date, 'wall_s': 863.0,
             'machine': {'cpus': 2, 'load_start': [0.12, 0.2, 0.3], 'load_end': [1.9, 1.8, 1.2],
                         'platform': 'Linux', 'python': '3.12'},
