@@ -27,9 +27,12 @@ by default (``--ideal``: the clean robot): it has mass and rings
 0.05), regulators with 60 ms lag, 15 ms dead time and 1 kPa hysteresis,
 bellows creeping 15 % of their elongation over 2 s, a motion capture at 120 Hz
 with 8 ms latency, 0.15 mm noise, 0.5 % outliers of 10-30 mm and 0.5 s
-dropouts every 15 s. The trajectory publisher streams at 50 Hz and previews
-the regulators' dead time and half a target period, and for the quasi-static
-feedforward their time constant too (``preview_s`` 0.025 and 0.085 s).
+dropouts every 15 s. The trajectory publisher streams at 50 Hz; for the
+feedforward runs it previews the regulators' dead time and half a target
+period, and for the quasi-static feedforward their time constant too
+(``preview_s`` 0.025 and 0.085 s); for the closed loop it previews nothing
+(targets stamped when they are sent, as a lab's planner streams them: the
+node's dynamic feedforward inverts the lag and the mode from the stream).
 
 Each run: the nodes come up; this process holds the path's first point
 (lead-in) until the trajectory publisher, started with ``start_delay_s`` =
@@ -281,7 +284,7 @@ class Run:
                 'rate_hz': TARGET_RATE_HZ, 'period_s': self.col.period_s,
                 'start_delay_s': self.args.lead_in, 'spin_up_s': self.spin_up_s,
                 'ramp_in_s': 0.0,   # this process holds the path's first point (lead-in)
-                'preview_s': preview_s(self.args.plant, self.mode != 'none')}
+                'preview_s': preview_s(self.args.plant, self.mode)}
         if case.bending_angle_deg is not None:
             traj['bending_angle_deg'] = case.bending_angle_deg
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', traj, self.env,
@@ -355,7 +358,7 @@ class Run:
         with self.rec.lock:
             stamped = [m for _, m in self.rec.msgs['target_pose'] if _stamp(m) > 0]
         first, last = _stamp(stamped[0]), _stamp(stamped[-1])
-        d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode != 'none')
+        d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode)
         tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
         case, kw = self.case, self.col.path_kw
         clock = self.rec.node.get_clock()
@@ -410,13 +413,18 @@ class Run:
         return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap)
 
 
-def preview_s(plant: str, dynamic: bool = False) -> float:
-    """The trajectory's preview: the regulators' dead time and lag, half a target period.
+def preview_s(plant: str, mode: str = 'none') -> float:
+    """The trajectory's preview for the run of ``mode`` (:data:`MODES`).
 
-    ``dynamic``: without the lag (the dynamic feedforward inverts it).
+    ``none`` (the paper's quasi-static feedforward): the regulators' dead
+    time and lag, half a target period; ``dynamic``: without the lag (the
+    dynamic feedforward inverts it); ``integral``: none (targets nobody
+    previewed).
     """
+    if mode == 'integral':
+        return 0.0
     e = plant_effects(plant)
-    lag = e.regulator_time_constant_s if dynamic else 0.0
+    lag = e.regulator_time_constant_s if mode == 'dynamic' else 0.0
     return round(e.preview_s(TARGET_RATE_HZ) - lag, 3)
 
 
@@ -836,7 +844,8 @@ def main(argv=None) -> int:
     print(f'bellow_ancf_ros main job: the default model controls a simulated robot that is not '
           f'the model (config/*_mismatched.yaml), {args.plant} plant, targets at '
           f'{TARGET_RATE_HZ:g} Hz previewed by {preview_s(args.plant):g} s (with dynamic '
-          f'feedforward {preview_s(args.plant, True):g} s); {count(os.cpu_count(), "CPU")}, '
+          f'feedforward {preview_s(args.plant, "dynamic"):g} s, closed loop not previewed); '
+          f'{count(os.cpu_count(), "CPU")}, '
           f'load average {_load(start["load"])} at the start; node logs in '
           f'{log_dir} (kept if it fails)')
     t_all = time.monotonic()
