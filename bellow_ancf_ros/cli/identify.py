@@ -9,6 +9,7 @@
                               [--yaml-out FILE] [--json]
     bellow-ancf identify da --drop-mm D --tip-mass-kg M [--config C] [--elements N] [--json]
     bellow-ancf identify damping (--csv FILE | --bag DIR) ...   (module :mod:`.dynamics`)
+    bellow-ancf identify creep (--csv FILE | --bag DIR) ...     (module :mod:`.creep`)
 
 A readable table on stdout, or with ``--json`` one JSON object on one line
 (SI units, non-finite numbers as ``null``); plots are PNG files.  ``--yaml-out``
@@ -40,6 +41,7 @@ from ..core import identification as ident
 from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_out, emit_json,
                      finite_float, fraction, int_at_least, load_config, nonneg_float, one_line,
                      positive_float, print_lines, run_study, warn)
+from .creep import register_identify_creep
 from .dynamics import register_identify_damping
 from .output import (figure, fmt, robot_file_text, robot_name_for, save_figure, source_text,
                      table, write_text)
@@ -280,16 +282,17 @@ def _cmd_identify_da(args):
 
 # ------------------------------------------------------------ parser
 def register(subparsers):
-    """Add ``identify`` with its subcommands ``stiffness``, ``deff``, ``da`` and ``damping``."""
+    """Add ``identify`` and its subcommands: stiffness, deff, da, damping and creep."""
     ip = subparsers.add_parser(
-        'identify', help='identify k(lam), D_eff, D_a (paper section V) or the damping time '
-                         'from experiments',
+        'identify', help='identify k(lam), D_eff, D_a (paper section V), the damping time or '
+                         'the creep from experiments',
         description='Parameter identification of the equivalent actuator (paper section V).')
     isub = ip.add_subparsers(dest='identify_command', metavar='WHAT', required=True)
     _register_stiffness(isub)
     _register_deff(isub)
     _register_da(isub)
     register_identify_damping(isub)
+    register_identify_creep(isub)
 
 
 def _register_stiffness(isub):

@@ -12,11 +12,15 @@
 * :func:`fit_free_vibration`, :func:`identify_damping`: the first mode's
   frequency and damping from a recorded release or step, and the damping
   time that reproduces them; :func:`ringdown_window`: which part of a
-  recording to fit.
+  recording to fit;
+* :func:`fit_creep`: the bellows' creep fraction and time constant from a
+  recorded pressure step held still; :func:`pressure_step_time`: when a
+  recording's pressure command stepped.
 """
 
 from . import calibration, identification
 from ._cantilever import Cantilever, CantileverResult
+from ._creep import CreepFit, fit_creep, pressure_step_time
 from ._excitation import excitation_sequence, random_pressures, simulate_recording
 from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_STREAM_COLUMNS, POSE_TOPIC,
                           PRESSURE_TOPIC, BagWriter, PoseStream, Recording, RecordingError,
@@ -32,7 +36,7 @@ from .calibration import CalibrationError, CalibrationResult, calibrate
 __all__ = [
     "BagWriter", "CalibrationError", "DampingIdentification", "FreeVibrationFit",
     "fit_free_vibration", "identify_damping", "RingdownWindow", "ringdown_window",
-    "CalibrationResult", "Cantilever",
+    "CalibrationResult", "Cantilever", "CreepFit", "fit_creep", "pressure_step_time",
     "CantileverResult",
     "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_STREAM_COLUMNS", "POSE_TOPIC",
     "PRESSURE_TOPIC", "PoseStream", "Recording", "read_pose_stream", "read_pose_stream_bag",
