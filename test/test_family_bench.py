@@ -64,3 +64,33 @@ def test_the_docs_show_the_table_of_the_last_full_run():
     assert data['robots_per_count'] >= 100
     assert len(data['runs']) == len(family_bench.ROBOTS) * data['robots_per_count']
     assert family_bench.doc_block() == family_bench.markdown(data)
+
+
+def test_a_robots_creep_is_identified_from_a_simulated_step():
+    """``--creep identified``: the fit of a simulated 40 kPa step finds the drawn creep."""
+    from bellow_ancf_ros.core.control import draw_robot
+    draw = draw_robot('one_segment', 11)     # creep 0.19 over 3.5 s
+    got = family_bench.identified_creep(draw)
+    assert got['error'] == ''
+    assert got['fraction'] == pytest.approx(draw.values['creep_fraction'], abs=0.02)
+    assert got['time_constant_s'] == pytest.approx(draw.values['creep_time_constant_s'],
+                                                   rel=0.15)
+
+
+def test_the_identified_table_says_how_well_the_creep_was_found():
+    runs = [_run(i, 0.1, 0.05) for i in range(4)]
+    for i, r in enumerate(runs):
+        r['values']['creep_time_constant_s'] = 2.0
+        r['creep_identified'] = ({'fraction': 0.1 + 0.01 * i, 'time_constant_s': 2.2,
+                                  'error': ''} if i < 3 else
+                                 {'fraction': None, 'time_constant_s': None, 'error': 'no'})
+    text = family_bench.markdown({'robots_per_count': 4, 'creep': 'identified', 'runs': runs})
+    assert ('creep identified on 3 of 4 robots (fraction off by 0.010 median, 0.020 worst; '
+            'time constant by 10 % median, 10 % worst); the others ran without') in text
+
+
+def test_the_docs_show_the_identified_creep_table_of_its_last_full_run():
+    with open(os.path.join(ROOT, "bench", "family_creep.json")) as f:
+        data = json.load(f)
+    assert data['robots_per_count'] >= 100 and data['creep'] == 'identified'
+    assert family_bench.doc_block('identified') == family_bench.markdown(data)
