@@ -180,8 +180,9 @@ class StreamFeedforward:
     quintic that starts with the stream's velocity and acceleration and
     comes back to rest at that target after one brake time (``brake_periods``
     of the mode, at least ``4 lag_s``), shifted as any path: the robot
-    follows it and comes to rest at the last target without ringing
-    (:meth:`busy` while braking; the closed loop holds its integral then).
+    follows it and comes to rest at the last target, no shift left in the
+    command (:meth:`busy` while braking; the closed loop holds its integral
+    then).  An abrupt stop at speed still swings the robot at its mode.
     """
 
     def __init__(self, frequency_hz: float, damping_ratio: float, window_s: float = 0.08,
