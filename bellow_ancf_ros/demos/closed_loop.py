@@ -42,8 +42,9 @@ first period at full speed lets the integrator learn, the second is
 evaluated; then the trajectory publisher stops, this process brings the
 path to rest over the same time (``spin_down``) and holds its last target
 (``--hold``, default 4 s).  Then the step phase (:mod:`.step_target`): a
-10 mm step target, two segments, unshaped and ZVD-shaped, and the residual
-swing 1-2 s after it.
+10 mm step target, two segments, feedforward unshaped and ZVD-shaped (the
+residual swing 1-2 s after it) and the closed loop at its defaults (its
+overshoot and its error from 1.5 s after the step).
 
 Evaluated: the robot's true pose (``true_pose``, the simulator's ground
 truth; the motion capture's samples carry its noise and outliers) against
@@ -76,7 +77,9 @@ most 0.5 mm / 0.5 deg at the paper's speed, 1.0 mm (one segment) and 1.5 mm /
 times, with 50 g 0.5 mm / 0.5 deg at 1x and 1.5 mm / 0.75 deg at 10x; held
 target within 0.3 mm (one) and 0.5 mm / 0.5 deg (two); no command more than
 2 kPa beyond a normal step after an outlier; the shaped step's residual
-swing at most :data:`~.step_target.STEP_GOAL_M`); 1 otherwise.
+swing at most :data:`~.step_target.STEP_GOAL_M`, the closed-loop step's
+overshoot at most :data:`~.step_target.OVERSHOOT_GOAL_M` and its error from
+1.5 s after at most :data:`~.step_target.LATE_GOAL_M`); 1 otherwise.
 """
 
 from __future__ import annotations
