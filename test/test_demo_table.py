@@ -60,7 +60,7 @@ def test_several_runs_give_the_range_of_each_figure_and_goals_met_in_how_many():
 
 
 def test_no_file_is_refused(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(demo_table, 'committed', lambda: [])
+    monkeypatch.setattr(demo_table, 'committed', lambda stem='demo_results': [])
     assert demo_table.main([]) == 2
     assert 'no results file' in capsys.readouterr().err
     bad = tmp_path / 'bad.json'
@@ -79,3 +79,42 @@ def test_the_docs_show_the_table_of_the_committed_runs():
         assert [c['key'] for c in r['cases']] == [c.key for c in columns()]
         assert [list(c['runs']) for c in r['cases']] == [list(c.case.modes) for c in columns()]
     assert demo_table.doc_block() == demo_table.markdown(runs)
+
+
+def _loads(file, alone, compensated, passed=True):
+    """A loads results file: ``(rmse_mm, estimate under payload + push (x))`` per run."""
+    def run(compensate, rmse, x):
+        return {'name': 'n', 'compensate': compensate, 'safe': True, 'vent': True,
+                'n_commands': 600, 'rmse_mm': rmse, 'max_mm': 4 * rmse, 'phases': {
+                    'payload': {'estimate_n': [0.001, 0.0, -0.296],
+                                'truth_n': [0.0, 0.0, -0.2943], 'within': True},
+                    'payload + push': {'estimate_n': [x, 0.0, -0.294],
+                                       'truth_n': [0.1, 0.0, -0.2943],
+                                       'within': abs(x - 0.1) <= 0.03}}}
+    return {'file': file, 'date': '2026-12-04T07:40:00+00:00', 'wall_s': 40.0,
+            'passed': passed, 'tolerance_n': {'lateral': 0.03, 'vertical': 0.1},
+            'runs': [run(False, *alone), run(True, *compensated)]}
+
+
+def test_the_loads_table_gives_each_runs_figures_and_their_range():
+    one = demo_table.loads_markdown([_loads('loads_results_1.json', (0.4, 0.099),
+                                            (0.41, 0.1))])
+    assert one.startswith('One run of the loads phase (`loads_results_1.json`: '
+                          '2026-12-04 07:40 UTC, 40 s, PASS).')
+    assert ('| integral feedback alone | 0.40 mm (1.60) | 0.001, 0.000, -0.296 N | '
+            '0.099, 0.000, -0.294 N | 1/1 |') in one
+    assert 'estimator, payload + push (truth 0.100, 0.000, -0.294 N)' in one
+    two = demo_table.loads_markdown([
+        _loads('a.json', (0.4, 0.099), (0.41, 0.1)),
+        _loads('b.json', (0.38, 0.2), (0.39, 0.101), passed=False)])
+    assert '2 runs of the loads phase' in two and 'FAIL' in two
+    assert '| integral feedback alone | 0.38-0.40 mm (1.52-1.60) | ' in two
+    assert '0.099-0.200, 0.000, -0.294 N | 1/2 |' in two
+
+
+def test_the_docs_show_the_loads_table_of_the_committed_runs():
+    """docs/closed_loop.md's loads table is bench/loads_results*.json's, not typed by hand."""
+    files = demo_table.committed('loads_results')
+    assert files, 'no bench/loads_results*.json'
+    assert (demo_table.doc_block(demo_table.LOADS_START, demo_table.LOADS_END)
+            == demo_table.loads_markdown(demo_table.load(files)))

@@ -32,12 +32,17 @@ error (measured pose against the newest target, RMSE and maximum) from the
 payload's arrival to the end of the path, both ways.  Exit status 0 when
 both runs flowed, every command was finite and within the limits, the last
 one the vent, and the estimator read the loads within 0.03 N sideways and
-0.1 N vertically; 1 otherwise.
+0.1 N vertically; 1 otherwise.  Writes the figures to ``--results``
+(default ``loads_results.json``; ``bench/demo_table.py`` renders such files
+as the loads table of docs/closed_loop.md).
 """
 
 from __future__ import annotations
 
 import argparse
+from datetime import datetime, timezone
+import json
+import os
 import random
 import sys
 import tempfile
@@ -187,7 +192,11 @@ def main(argv=None) -> int:
     ap.add_argument('--period', type=float, default=20.0, help='[s] the planar circle')
     ap.add_argument('--seed', type=int, default=1, help='motion-capture noise seed')
     ap.add_argument('--startup-timeout', type=float, default=40.0, help='[s]')
+    ap.add_argument('--results', type=Path, default=Path('loads_results.json'),
+                    help='write the figures here (JSON)')
     args = ap.parse_args(argv)
+    t_all, date = time.monotonic(), datetime.now(timezone.utc).isoformat(timespec='seconds')
+    load_start = _load_average()
     from ..core import limit_blas_threads
     limit_blas_threads()
     log_dir = Path(tempfile.mkdtemp(prefix='bellow_ancf_ros_loads_'))
@@ -222,11 +231,18 @@ def main(argv=None) -> int:
     if not ok or len(starts) != 2:
         tidy(log_dir, False)
         return 1
+    records = []
     for r, res, t0 in zip(runs, results, starts):
         a = analyse(res, t0, args.period)
         good = a['safe'] and a['vent'] and all(c in (0, None) for c in a['codes'].values())
+        record = {'name': r.name, 'compensate': r.compensate, 'safe': bool(a['safe']),
+                  'vent': bool(a['vent']), 'n_commands': a['n_commands'], 'rmse_mm': None,
+                  'max_mm': None, 'phases': {}}
+        records.append(record)
         print(f'  {r.name}:')
         if len(a['err']):
+            record.update(rmse_mm=float(np.sqrt(np.mean(a['err'] ** 2))) * 1e3,
+                          max_mm=float(a['err'].max()) * 1e3)
             rmse = np.sqrt(np.mean(a['err'] ** 2))
             print(f'    tracking from the payload on: RMSE {rmse * 1e3:.2f} mm (max '
                   f'{a["err"].max() * 1e3:.2f}); {a["n_commands"]} commands, all finite '
@@ -240,13 +256,31 @@ def main(argv=None) -> int:
             within = (np.all(np.abs(est[:2] - truth[:2]) <= LATERAL_TOL_N)
                       and abs(est[2] - truth[2]) <= VERTICAL_TOL_N)
             good &= bool(within)
+            record['phases'][label] = {'estimate_n': [float(v) for v in est],
+                                       'truth_n': [float(v) for v in truth],
+                                       'within': bool(within)}
             print(f'    estimator, {label}: {numbers(est)} N against the truth '
                   f'{numbers(truth)} N ({"within" if within else "NOT within"} '
                   f'{LATERAL_TOL_N:g} N sideways, {VERTICAL_TOL_N:g} N vertically)')
         ok &= good
+    args.results.write_text(json.dumps({
+        'format': 1, 'what': 'make demo, loads (python -m bellow_ancf_ros.demos.forces)',
+        'date': date, 'wall_s': time.monotonic() - t_all, 'period_s': args.period,
+        'machine': {'cpus': os.cpu_count(), 'load_start': load_start,
+                    'load_end': _load_average()},
+        'tolerance_n': {'lateral': LATERAL_TOL_N, 'vertical': VERTICAL_TOL_N},
+        'passed': bool(ok), 'runs': records}, indent=1) + '\n')
+    print(f'  results written to {args.results}')
     print('PASS' if ok else 'FAIL')
     tidy(log_dir, ok)
     return 0 if ok else 1
+
+
+def _load_average():
+    try:
+        return [round(v, 2) for v in os.getloadavg()]
+    except OSError:       # not on every platform
+        return None
 
 
 if __name__ == '__main__':
