@@ -61,12 +61,13 @@ bench: $(STAMP)
 	fi; rc=$$?; rm -rf $$base; exit $$rc
 	$(VENV)/bin/python bench/fuzz_bench.py
 	$(VENV)/bin/python bench/budget_bench.py
-	$(VENV)/bin/python bench/redundant_bench.py
+	# writes bench/redundant.json and its table in docs/performance.md
+	$(VENV)/bin/python bench/redundant_bench.py --doc
 	# what each hardware effect costs the closed loop (10 min on 2 busy cores): writes
 	# bench/effects.json and its tables in docs/closed_loop.md
 	$(VENV)/bin/python bench/effects_bench.py --doc
-	$(VENV)/bin/python bench/stream_latency.py one_segment
-	$(VENV)/bin/python bench/stream_latency.py two_segment
+	# one and two segments: writes bench/stream_latency.json and its table in docs/performance.md
+	$(VENV)/bin/python bench/stream_latency.py --doc
 	$(VENV)/bin/python bench/dynamics_bench.py
 	$(VENV)/bin/python bench/remedies_bench.py
 	$(VENV)/bin/python bench/busy_bench.py

@@ -77,3 +77,6 @@ def test_loads_phase(tmp_path):
     assert out.count('all finite and within the limits: yes; ends with the vent: yes') == 2
     for name in ('integral feedback alone', 'integral feedback + force compensation'):
         assert f'  {name}:' in out
+    data = json.loads((tmp_path / 'loads_results.json').read_text())   # what it printed
+    assert data['passed'] and [r['compensate'] for r in data['runs']] == [False, True]
+    assert all(p['within'] for r in data['runs'] for p in r['phases'].values())
