@@ -104,3 +104,15 @@ def test_newton_damped_modes_equal_the_pencils(name, payload):
     for a, b in zip(few, many):
         assert a.damping_ratio == pytest.approx(b.damping_ratio, rel=1e-9)
         assert a.damped_frequency_hz == pytest.approx(b.damped_frequency_hz, rel=1e-9)
+
+
+def test_the_docs_show_the_table():
+    """docs/dynamics.md's table of first modes is this test's (the values it checks)."""
+    import pathlib
+    import re
+    doc = (pathlib.Path(__file__).parents[3] / 'docs' / 'dynamics.md').read_text()
+    rows = {'one': '| one segment |', 'two': '| two segments |'}
+    for robot, start in rows.items():
+        line = next(ln for ln in doc.splitlines() if ln.startswith(start) and 'Hz' in ln)
+        cells = [re.findall(r'\d+\.\d+', c) for c in line.strip('|').split('|')[1:]]
+        assert cells == [[f'{f:.3f}', f'{z:.3f}'] for _, f, z in TABLE[robot]], (robot, line)
