@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from datetime import datetime, timezone
 import json
 from multiprocessing import Pool
 import os
@@ -40,6 +39,7 @@ import time
 import numpy as np
 
 from bellow_ancf_ros.cli.output import count, number
+from bellow_ancf_ros.demos.pipeline import machine_state
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 from bellow_ancf_ros.core.control import (EFFECTS, FeedbackSettings, LoopSimulation,
                                           PlantEffects, SimulatedRobot, paper_circle)
@@ -109,15 +109,6 @@ def run_one(job):
     out['out_of_limits'] = int(rec.out_of_limits)
     out['wall_s'] = time.perf_counter() - t_wall
     return job[:3], out
-
-
-def _moment() -> dict:
-    """The date (UTC) and the load average now."""
-    try:
-        load = [round(v, 2) for v in os.getloadavg()]
-    except OSError:       # not on every platform
-        load = None
-    return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'), 'load': load}
 
 
 def record(jobs, results: dict, *, jobs_n: int, start: dict, end: dict, wall_s: float) -> dict:
@@ -234,11 +225,12 @@ def main(argv=None) -> int:
         speeds = (4.0,) if args.quick else SPEEDS
         jobs = [(r, v, label, eff, frame, fb) for r in ROBOTS for v in speeds
                 for label, eff, frame, fb in _rows()]
-        start, t0 = _moment(), time.perf_counter()
+        start, t0 = machine_state(), time.perf_counter()
         with Pool(args.jobs) as pool:
             results = dict(pool.map(run_one, jobs, chunksize=1))
         wall = time.perf_counter() - t0
-        data = record(jobs, results, jobs_n=args.jobs, start=start, end=_moment(), wall_s=wall)
+        data = record(jobs, results, jobs_n=args.jobs, start=start, end=machine_state(),
+                      wall_s=wall)
         text = render(data)
         args.out.write_text(json.dumps(data, indent=1) + '\n')
     print(text, end='')

@@ -23,7 +23,6 @@ that the document shows the committed file's table).
 from __future__ import annotations
 
 import argparse
-from datetime import datetime, timezone
 import json
 import os
 from pathlib import Path
@@ -35,6 +34,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from bellow_ancf_ros.cli.output import count, number  # noqa: E402
+from bellow_ancf_ros.demos.pipeline import machine_state  # noqa: E402
 from bellow_ancf_ros.core import (  # noqa: E402
     RobotModel, limit_blas_threads, load_robot, solve_forward, solve_inverse)
 from run_bench import scaling_robot  # noqa: E402
@@ -120,15 +120,6 @@ def good(row: dict, limits: dict) -> bool:
                 and np.median(row['walk']) < limits['median_s'])
 
 
-def _moment() -> dict:
-    """The date (UTC) and the load average now."""
-    try:
-        load = [round(v, 2) for v in os.getloadavg()]
-    except OSError:       # not on every platform
-        load = None
-    return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'), 'load': load}
-
-
 def _load(v) -> str:
     return 'n/a' if v is None else number(v[0], '.2f')
 
@@ -175,13 +166,13 @@ def main(argv=None) -> int:
                     help="put the table into docs/performance.md")
     args = ap.parse_args(argv)
     limit_blas_threads()
-    start, t0 = _moment(), time.perf_counter()
+    start, t0 = machine_state(), time.perf_counter()
     rows = []
     for m in args.segments:
         rows.append(run(m, args.seed))
         print(f"{m} segment(s) done", flush=True)
     wall = time.perf_counter() - t0
-    end = _moment()
+    end = machine_state()
     data = {'what': 'bench/redundant_bench.py: inverse solves from cold and along a walk',
             'date': start['date'], 'date_end': end['date'], 'wall_s': wall, 'seed': args.seed,
             'limits': {'worst_s': WORST_S, 'median_s': MEDIAN_S},

@@ -26,7 +26,6 @@ that the document shows the committed file's table)::
 from __future__ import annotations
 
 import argparse
-from datetime import datetime, timezone
 import json
 import os
 from pathlib import Path
@@ -38,6 +37,7 @@ import time
 import numpy as np
 
 from bellow_ancf_ros.cli.output import count, number
+from bellow_ancf_ros.demos.pipeline import machine_state
 from ros_latency import close   # same folder
 from update_readme import block, splice   # same folder
 
@@ -163,15 +163,6 @@ def measure(robot="one_segment", seconds=20.0, rate_hz=100.0, quiet=False):
     return out
 
 
-def _moment() -> dict:
-    """The date (UTC) and the load average now."""
-    try:
-        load = [round(v, 2) for v in os.getloadavg()]
-    except OSError:       # not on every platform
-        load = None
-    return {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "load": load}
-
-
 def _load(v) -> str:
     return "n/a" if v is None else number(v[0], ".2f")
 
@@ -217,10 +208,10 @@ def main(argv=None) -> int:
                     help="put the table into docs/performance.md")
     args = ap.parse_args(argv)
     rate_hz = 100.0
-    start, t0 = _moment(), time.perf_counter()
+    start, t0 = machine_state(), time.perf_counter()
     runs = [measure(robot, args.seconds, rate_hz) for robot in args.robots]
     wall = time.perf_counter() - t0
-    end = _moment()
+    end = machine_state()
     data = {"what": "bench/stream_latency.py: the inverse node's latency under a target stream "
                     "at its rate limit, against one target at a time",
             "date": start["date"], "date_end": end["date"], "wall_s": wall,

@@ -86,7 +86,6 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
-from datetime import datetime, timezone
 import json
 import math
 import os
@@ -103,8 +102,8 @@ from ..cli.output import count, number, numbers
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import (NodeProcess, Recorder, child_env, hardware_parameters, plant_effects,
-                       tidy, wait_until, wait_up)
+from .pipeline import (NodeProcess, Recorder, child_env, hardware_parameters, machine_state,
+                       plant_effects, tidy, wait_until, wait_up)
 from .step_target import LATE_GOAL_M, OVERSHOOT_GOAL_M, STEP_GOAL_M, step_phase
 from .step_target import RUNS as STEP_RUNS
 
@@ -762,15 +761,6 @@ def step_record(step: dict | None) -> dict | None:
                LATE_GOAL_M * 1e3, 'mm')]
     return dict(step, goals=gs, met=all(g['met'] for g in gs),
                 missed=[miss_text(g) for g in gs if not g['met']])
-
-
-def machine_state() -> dict:
-    """The time (UTC, ISO 8601) and the machine's load average (1, 5, 15 min)."""
-    try:
-        load = [round(v, 2) for v in os.getloadavg()]
-    except OSError:       # not on every platform
-        load = None
-    return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'), 'load': load}
 
 
 def _load(load) -> str:

@@ -40,7 +40,6 @@ as the loads table of docs/closed_loop.md).
 from __future__ import annotations
 
 import argparse
-from datetime import datetime, timezone
 import json
 import os
 import random
@@ -52,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cli.output import numbers
-from .pipeline import NodeProcess, Recorder, child_env, tidy, wait_until, wait_up
+from .pipeline import NodeProcess, Recorder, child_env, machine_state, tidy, wait_until, wait_up
 
 PLANT, MODEL = 'one_segment_mismatched', 'one_segment'
 PAYLOAD_KG, PUSH_N = 0.03, (0.1, 0.0, 0.0)
@@ -195,8 +194,7 @@ def main(argv=None) -> int:
     ap.add_argument('--results', type=Path, default=Path('loads_results.json'),
                     help='write the figures here (JSON)')
     args = ap.parse_args(argv)
-    t_all, date = time.monotonic(), datetime.now(timezone.utc).isoformat(timespec='seconds')
-    load_start = _load_average()
+    t_all, start = time.monotonic(), machine_state()
     from ..core import limit_blas_threads
     limit_blas_threads()
     log_dir = Path(tempfile.mkdtemp(prefix='bellow_ancf_ros_loads_'))
@@ -265,22 +263,15 @@ def main(argv=None) -> int:
         ok &= good
     args.results.write_text(json.dumps({
         'format': 1, 'what': 'make demo, loads (python -m bellow_ancf_ros.demos.forces)',
-        'date': date, 'wall_s': time.monotonic() - t_all, 'period_s': args.period,
-        'machine': {'cpus': os.cpu_count(), 'load_start': load_start,
-                    'load_end': _load_average()},
+        'date': start['date'], 'wall_s': time.monotonic() - t_all, 'period_s': args.period,
+        'machine': {'cpus': os.cpu_count(), 'load_start': start['load'],
+                    'load_end': machine_state()['load']},
         'tolerance_n': {'lateral': LATERAL_TOL_N, 'vertical': VERTICAL_TOL_N},
         'passed': bool(ok), 'runs': records}, indent=1) + '\n')
     print(f'  results written to {args.results}')
     print('PASS' if ok else 'FAIL')
     tidy(log_dir, ok)
     return 0 if ok else 1
-
-
-def _load_average():
-    try:
-        return [round(v, 2) for v in os.getloadavg()]
-    except OSError:       # not on every platform
-        return None
 
 
 if __name__ == '__main__':

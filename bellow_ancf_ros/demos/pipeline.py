@@ -10,6 +10,7 @@ this process with rclpy and stores every message with its arrival time.
 
 from __future__ import annotations
 
+from datetime import datetime, timezone
 import os
 import signal
 import subprocess
@@ -18,8 +19,8 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'plant_effects', 'hardware_parameters', 'tidy',
-           'wait_until', 'wait_up']
+__all__ = ['NodeProcess', 'Recorder', 'child_env', 'hardware_parameters', 'machine_state',
+           'plant_effects', 'tidy', 'wait_until', 'wait_up']
 
 
 class NodeProcess:
@@ -143,6 +144,18 @@ def plant_effects(plant: str):
     """The simulated robot's effects for its ``plant`` parameter (``realistic`` or ``ideal``)."""
     from ..core.control import PlantEffects
     return PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
+
+
+def machine_state() -> dict:
+    """The time (UTC, ISO 8601) and the machine's load average (1, 5, 15 min; None: unknown).
+
+    What a run's results file records at its start and end (the demos, the benches).
+    """
+    try:
+        load = [round(v, 2) for v in os.getloadavg()]
+    except OSError:       # not on every platform
+        load = None
+    return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'), 'load': load}
 
 
 def hardware_parameters(plant: str) -> dict:

@@ -12,29 +12,16 @@ import json
 import numpy as np
 import pytest
 
-from bellow_ancf_ros import cli
 from bellow_ancf_ros.core import geometry
 from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot
 from bellow_ancf_ros.core.fit import POSE_STREAM_COLUMNS, write_bag
+from test_cli import assert_one_line_error, run   # (the CLI tests' helpers)
 
 CREEP_FRACTION = 0.12
 CREEP_TIME_CONSTANT_S = 2.5
 CLOCK_S = 100.0
 STEP_S = 1.0
 STEP_PA = np.array([80e3, 0.0, 0.0])
-
-
-def run(capsys, *argv):
-    code = cli.main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_one_line_error(err, *fragments):
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith('bellow-ancf: error: '), err
-    for f in fragments:
-        assert f in lines[0], err
 
 
 def record_step(after_s=20.0, step=True, seed=4):
