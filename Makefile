@@ -68,6 +68,8 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/effects_bench.py --doc
 	# one and two segments: writes bench/stream_latency.json and its table in docs/performance.md
 	$(VENV)/bin/python bench/stream_latency.py --doc
+	# bench/integrator_checks.json and its table in docs/dynamics.md
+	$(VENV)/bin/python bench/integrator_checks.py --doc
 	$(VENV)/bin/python bench/dynamics_bench.py
 	$(VENV)/bin/python bench/remedies_bench.py
 	$(VENV)/bin/python bench/busy_bench.py
