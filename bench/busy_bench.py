@@ -73,7 +73,7 @@ from pathlib import Path
 import numpy as np
 
 from bellow_ancf_ros.core import load_robot
-from bellow_ancf_ros.core.control import STEP_M, paper_circle
+from bellow_ancf_ros.core.loop import STEP_M, paper_circle
 from bellow_ancf_ros.core.experiments import spin_down, spin_up
 from bellow_ancf_ros.core.geometry import (angle_between, quaternion_from_z_axis,
                                            z_axis_from_quaternion)

@@ -2,10 +2,10 @@
 
 The controller (default model, integral feedback, targets previewed by the
 regulators' lag) closed around the mismatched simulated robot in simulated
-time (:class:`~bellow_ancf_ros.core.control.LoopSimulation`, physics 200 Hz,
+time (:class:`~bellow_ancf_ros.core.loop.LoopSimulation`, physics 200 Hz,
 control 50 Hz): the paper's circle (one segment: planar circle; two: bending
 circle at 10 deg) at the paper's speed (20 s period) and at four times it.
-One row per effect alone (:data:`~bellow_ancf_ros.core.control.EFFECTS`, all
+One row per effect alone (:data:`~bellow_ancf_ros.core.sim.EFFECTS`, all
 others off, i.e. the ideal robot with that one effect), then all of them (the
 realistic robot), feedforward alone on it, and the closed loop with its
 correction integrated in the base frame instead of the azimuthal one.
@@ -41,8 +41,9 @@ import numpy as np
 from bellow_ancf_ros.cli.output import count, number
 from bellow_ancf_ros.demos.pipeline import machine_state
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
-from bellow_ancf_ros.core.control import (EFFECTS, FeedbackSettings, LoopSimulation,
-                                          PlantEffects, SimulatedRobot, paper_circle)
+from bellow_ancf_ros.core.sim import EFFECTS, PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.control import FeedbackSettings
+from bellow_ancf_ros.core.loop import LoopSimulation, paper_circle
 from update_readme import block, splice
 
 HERE = Path(__file__).resolve().parent

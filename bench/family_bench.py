@@ -1,7 +1,7 @@
 """The closed loop on a family of robots (`make bench`): each goal's distribution, not one run.
 
 Draws ``--robots`` robots per segment count from the documented family
-(:func:`bellow_ancf_ros.core.control.draw_robot`, seeds 0 to N-1: mode
+(:func:`bellow_ancf_ros.core.sim.draw_robot`, seeds 0 to N-1: mode
 0.7-1.4x the model's, damping ratio 0.02-0.25, regulators, creep, motion
 capture, stiffness and geometry off by up to 10 %), runs the closed loop's
 cases on each (:mod:`bellow_ancf_ros.core.control`: ``held_case``,
@@ -43,8 +43,8 @@ from joblib import Parallel, delayed
 from scipy.stats import spearmanr
 
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
-from bellow_ancf_ros.core.control import (circle_case, default_loop, draw_robot, held_case,
-                                          step_case)
+from bellow_ancf_ros.core.sim import draw_robot
+from bellow_ancf_ros.core.loop import circle_case, default_loop, held_case, step_case
 from bellow_ancf_ros.core.fit import fit_creep
 from update_readme import block, splice
 

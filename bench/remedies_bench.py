@@ -1,6 +1,6 @@
 """What the robot's swing costs, and what each remedy buys (`make bench`).
 
-In simulated time (:class:`~bellow_ancf_ros.core.control.LoopSimulation`,
+In simulated time (:class:`~bellow_ancf_ros.core.loop.LoopSimulation`,
 the dynamic simulated robot at its documented damping), one row per
 remedy against the case it is for:
 
@@ -40,9 +40,10 @@ import numpy as np
 
 from bellow_ancf_ros.core import (RobotModel, limit_blas_threads, load_robot, solve_forward,
                                   solve_inverse)
-from bellow_ancf_ros.core.control import (AUTO_GAIN, FeedbackSettings, LoopSimulation, ModeCheck,
-                                          PlantEffects, SimulatedRobot, StreamFeedforward,
-                                          paper_circle, shaped, shaper_impulses)
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.control import (AUTO_GAIN, FeedbackSettings, ModeCheck,
+                                          StreamFeedforward, shaped, shaper_impulses)
+from bellow_ancf_ros.core.loop import LoopSimulation, paper_circle
 from bellow_ancf_ros.core.dynamics import natural_modes
 from bellow_ancf_ros.core.experiments import trajectory_target
 

@@ -3,7 +3,7 @@
 
 The recording ``bellow-ancf calibrate --bag`` reads, made without ROS and
 repeatable (seeded): the simulated robot of ``make demo`` and ``make
-demo-calibrate`` (:class:`bellow_ancf_ros.core.control.SimulatedRobot`, the robot
+demo-calibrate`` (:class:`bellow_ancf_ros.core.sim.SimulatedRobot`, the robot
 file ``config/one_segment_mismatched.yaml``, whose pitch radius, ``D_a``,
 stiffness and masses differ from ``config/one_segment.yaml``; the ideal
 hardware of ``PlantEffects.ideal``: 0.1 s regulators, motion capture with
@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from bellow_ancf_ros.core import load_robot
-from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot
 from bellow_ancf_ros.core.fit import excitation_sequence, write_bag
 
 BAG_NAME = 'one_segment_bag'

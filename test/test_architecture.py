@@ -22,8 +22,9 @@ PKG = REPO / 'bellow_ancf_ros'
 NAME = 'bellow_ancf_ros'
 
 #: Rank of each part of core: a module may import parts of lower rank and its own part only.
-CORE_LAYERS = {'status': 0, 'geometry': 0, 'numba_cache': 0, 'linalg': 1, 'model': 2,
-               'solve': 3, 'experiments': 4, 'dynamics': 4, 'control': 5, 'fit': 6}
+CORE_LAYERS = {'status': 0, 'geometry': 0, 'history': 0, 'numba_cache': 0, 'linalg': 1,
+               'model': 2, 'solve': 3, 'experiments': 4, 'dynamics': 4, 'sim': 5, 'control': 5,
+               'loop': 6, 'fit': 6}
 
 
 def module_name(path: Path) -> str:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import load_robot
-from bellow_ancf_ros.core.control import STEP_M
+from bellow_ancf_ros.core.loop import STEP_M
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 sys.path.insert(0, os.path.join(ROOT, "bench"))

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from bellow_ancf_ros.core.control import EFFECTS, PlantEffects
+from bellow_ancf_ros.core.sim import EFFECTS, PlantEffects
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 sys.path.insert(0, os.path.join(ROOT, "bench"))

@@ -68,7 +68,7 @@ def test_the_docs_show_the_table_of_the_last_full_run():
 
 def test_a_robots_creep_is_identified_from_a_simulated_step():
     """``--creep identified``: the fit of a simulated 40 kPa step finds the drawn creep."""
-    from bellow_ancf_ros.core.control import draw_robot
+    from bellow_ancf_ros.core.sim import draw_robot
     draw = draw_robot('one_segment', 11)     # creep 0.19 over 3.5 s
     got = family_bench.identified_creep(draw)
     assert got['error'] == ''

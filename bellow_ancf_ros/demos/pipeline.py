@@ -142,7 +142,7 @@ def child_env(domain: int) -> dict:
 
 def plant_effects(plant: str):
     """The simulated robot's effects for its ``plant`` parameter (``realistic`` or ``ideal``)."""
-    from ..core.control import PlantEffects
+    from ..core.sim import PlantEffects
     return PlantEffects() if plant == 'realistic' else PlantEffects.ideal()
 
 

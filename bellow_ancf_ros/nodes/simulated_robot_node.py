@@ -1,6 +1,6 @@
 """Simulated robot node: plays the real robot (regulators, physics, motion capture).
 
-The physics is :class:`~bellow_ancf_ros.core.control.SimulatedRobot`
+The physics is :class:`~bellow_ancf_ros.core.sim.SimulatedRobot`
 (core, no ROS): pressure regulators (dead time, hysteresis, first-order lag,
 slew limit, hardware limits) and creeping bellows drive the quasi-static
 equilibrium of the node's *own* robot file, by default the shipped
@@ -8,7 +8,7 @@ equilibrium of the node's *own* robot file, by default the shipped
 (finer) element count; a motion capture with noise, latency, outliers and
 dropouts sees it.  Parameter ``plant``: ``realistic`` (the default; every
 effect at the figures of real hardware, each its own parameter, see
-:mod:`bellow_ancf_ros.core.control._plant_effects` and docs/closed_loop.md)
+:mod:`bellow_ancf_ros.core.sim._plant_effects` and docs/closed_loop.md)
 or ``ideal`` (the clean robot of earlier versions: a 0.1 s first-order
 regulator, motion capture at 100 Hz with noise only; the effect parameters
 are then ignored).
@@ -68,7 +68,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from ..core import load_robot
-from ..core.control import PlantEffects, SimulatedRobot
+from ..core.sim import PlantEffects, SimulatedRobot
 from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract

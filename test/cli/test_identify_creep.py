@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import geometry
-from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot
 from bellow_ancf_ros.core.fit import POSE_STREAM_COLUMNS, write_bag
 from test_cli import assert_one_line_error, run   # (the CLI tests' helpers)
 

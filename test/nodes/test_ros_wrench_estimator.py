@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
 from bellow_ancf_ros.core import geometry, solve_forward, solve_inverse  # noqa: E402
-from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot  # noqa: E402
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot  # noqa: E402
 from bellow_ancf_ros.nodes.measured_feedback import measured_pose_qos  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.wrench_estimator_node import WrenchEstimatorNode  # noqa: E402

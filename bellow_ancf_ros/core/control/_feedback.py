@@ -112,7 +112,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
-from ._history import bracket
+from ..history import bracket
 from ._median_gate import WINDOW, MedianGate
 from ._watchdog import OscillationWatchdog
 

@@ -36,13 +36,16 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from scipy.optimize import brentq
 
-__all__ = ['LoopMargins', 'MIN_GAIN_MARGIN', 'MIN_PHASE_MARGIN_DEG', 'loop_delay_s',
-           'loop_margins', 'safe_gain']
+__all__ = ['LOOP_DELAY_S', 'LOOP_LAG_S', 'LoopMargins', 'MIN_GAIN_MARGIN', 'MIN_PHASE_MARGIN_DEG',
+           'loop_delay_s', 'loop_margins', 'safe_gain']
 
 #: The smallest gain margin the package accepts for the integral loop.
 MIN_GAIN_MARGIN = 3.0
 #: The smallest phase margin the package accepts for the integral loop [deg].
 MIN_PHASE_MARGIN_DEG = 45.0
+#: The loop's lag and delay for its margins: the inverse node's ``feedback_loop_lag_s`` and
+#: ``feedback_loop_delay_s`` defaults.
+LOOP_LAG_S, LOOP_DELAY_S = 0.06, 0.05
 
 
 class LoopMargins(NamedTuple):

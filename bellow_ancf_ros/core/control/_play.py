@@ -3,7 +3,7 @@
 A proportional pressure regulator has a hysteresis band: its valve moves
 only when the set-point leaves a band of width ``h`` around where it stands
 (a play operator, ``w <- clip(w, c - h/2, c + h/2)``; the realistic
-simulated robot: 1 kPa, :mod:`~bellow_ancf_ros.core.control._regulators`).
+simulated robot: 1 kPa, :mod:`~bellow_ancf_ros.core.sim._regulators`).
 Any change of direction is therefore taken up by the play first: after a
 held target, the first part of a new command (up to ``h``) moves nothing.
 That is a small unshaped step inside a shaped one: a ZVD-shaped 10 mm step

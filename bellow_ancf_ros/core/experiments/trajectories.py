@@ -315,7 +315,7 @@ def trajectory_target(name: str, config: Any = 'one_segment', **params: Any):
 
     The parameters are checked once, here (``ValueError`` as
     :func:`trajectory`); the z-axis is None for one segment.  What a
-    closed-loop simulation (:class:`~bellow_ancf_ros.core.control.LoopSimulation`)
+    closed-loop simulation (:class:`~bellow_ancf_ros.core.loop.LoopSimulation`)
     is fed.
     """
     cfg = _config(config)

@@ -1,7 +1,7 @@
 """The bellows' creep from a recorded pressure step: its fraction and time constant.
 
 The creep model (the simulated robot's
-:class:`~bellow_ancf_ros.core.control.BellowCreep`): with ``x(p)`` the stage-1
+:class:`~bellow_ancf_ros.core.sim.BellowCreep`): with ``x(p)`` the stage-1
 elongation, a slow part ``s`` follows ``T ds/dt = x(p) - s`` and the bellows
 stand at ``(1 - c) x(p) + c s``.  After a pressure step held still, the tip
 therefore moves quickly (the regulators' rise, the first mode ringing) by

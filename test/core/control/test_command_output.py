@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core.control import (BellowCreep, CommandOutput, CreepCompensation,
-                                          LoopSimulation, PlantEffects, SimulatedRobot)
+from bellow_ancf_ros.core.sim import BellowCreep, PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.control import CommandOutput, CreepCompensation
+from bellow_ancf_ros.core.loop import LoopSimulation
 
 C, T = 0.15, 2.0
 

@@ -14,7 +14,7 @@ from bellow_ancf_ros.core.geometry import rotation_between, rotation_from_vector
 import pytest
 
 from bellow_ancf_ros.core import solve_forward, solve_inverse
-from bellow_ancf_ros.core.control import PlantEffects
+from bellow_ancf_ros.core.sim import PlantEffects
 from bellow_ancf_ros.core.control._feedback import (
     OUTLIER,
     SATURATED,
@@ -24,7 +24,7 @@ from bellow_ancf_ros.core.control._feedback import (
     IntegralFeedback,
 )
 from bellow_ancf_ros.core.control import loop_margins
-from bellow_ancf_ros.core.control._simulated_robot import SimulatedRobot
+from bellow_ancf_ros.core.sim._simulated_robot import SimulatedRobot
 
 CTRL_S, PHYS_S, MOCAP_S = 0.05, 0.02, 0.01
 IDEAL = PlantEffects.ideal()           # the clean robot: the law's basics

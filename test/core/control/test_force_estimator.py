@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot
-from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot, TipForceEstimator
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.control import TipForceEstimator
 
 PRESSURES = [30e3, 10e3, 50e3]
 

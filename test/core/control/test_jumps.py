@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import load_robot
-from bellow_ancf_ros.core.control import (FeedbackSettings, IntegralFeedback, JumpTransition,
-                                          paper_circle)
+from bellow_ancf_ros.core.control import FeedbackSettings, IntegralFeedback, JumpTransition
+from bellow_ancf_ros.core.loop import paper_circle
 from bellow_ancf_ros.core.control._jumps import CYCLES, MODE_SPREAD, SETTLE_S
 
 F = 2.4    # the two-segment model's first mode [Hz]

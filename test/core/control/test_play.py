@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core.control import PlayCompensation, PressureRegulators
+from bellow_ancf_ros.core.sim import PressureRegulators
+from bellow_ancf_ros.core.control import PlayCompensation
 
 
 def _valves(width, commands):

@@ -9,7 +9,7 @@ recording the docs ask for; and analytic curves.
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core.control import PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot
 from bellow_ancf_ros.core.fit import CreepFit, fit_creep, pressure_step_time
 
 T_STEP = 1.0

@@ -1,9 +1,9 @@
-"""Tests of the simulated motion capture (core/control/_motion_capture.py)."""
+"""Tests of the simulated motion capture (core/sim/_motion_capture.py)."""
 
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core.control import MotionCapture, PlantEffects
+from bellow_ancf_ros.core.sim import MotionCapture, PlantEffects
 
 POS = np.array([0.01, -0.02, 0.15])
 ROT = np.eye(3)

@@ -8,12 +8,7 @@ from bellow_ancf_ros.core.geometry import rotation_from_vector
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core.control import (
-    EFFECTS,
-    MotionCapture,
-    PlantEffects,
-    SimulatedRobot,
-)
+from bellow_ancf_ros.core.sim import EFFECTS, MotionCapture, PlantEffects, SimulatedRobot
 
 IDEAL = PlantEffects.ideal()
 

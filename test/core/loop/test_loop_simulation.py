@@ -11,16 +11,9 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core.control import (
-    FeedbackSettings,
-    LoopSimulation,
-    PlantEffects,
-    SimulatedRobot,
-    StreamFeedforward,
-    default_loop,
-    draw_robot,
-    paper_circle,
-)
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot, draw_robot
+from bellow_ancf_ros.core.control import FeedbackSettings, StreamFeedforward
+from bellow_ancf_ros.core.loop import LoopSimulation, default_loop, paper_circle
 
 PREVIEW_S = 0.09     # regulator dead time + lag + half a control period
 

@@ -3,7 +3,7 @@
 import pytest
 
 from bellow_ancf_ros.core import load_robot
-from bellow_ancf_ros.core.control import FAMILY_RANGES, draw_robot, first_mode
+from bellow_ancf_ros.core.sim import FAMILY_RANGES, draw_robot, first_mode
 
 
 @pytest.mark.parametrize('robot', ['one_segment', 'two_segment'])

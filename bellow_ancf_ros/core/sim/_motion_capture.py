@@ -2,7 +2,7 @@
 
 :class:`MotionCapture` turns the true end-effector pose at the capture time
 into what a motion-capture system delivers (settings and sources:
-:mod:`bellow_ancf_ros.core.control._plant_effects`):
+:mod:`bellow_ancf_ros.core.sim._plant_effects`):
 
 * Gaussian position noise per axis and a small random rotation;
 * latency: a sample delivered at ``t`` was captured at ``t - latency``

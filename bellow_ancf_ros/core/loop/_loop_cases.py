@@ -32,19 +32,14 @@ import numpy as np
 from ..experiments import spin_up, trajectory_target
 from ..model import RobotModel
 from ..solve import solve_forward
-from ._dynamic_feedforward import StreamFeedforward
-from ._feedback import FeedbackSettings
-from ._jumps import JumpTransition
+from ..control import (AUTO_GAIN, LOOP_DELAY_S, LOOP_LAG_S, FeedbackSettings, JumpTransition,
+                       ModeCheck, StreamFeedforward)
+from ..sim import SimulatedRobot
 from ._loop_simulation import LoopSimulation
-from ._mode_check import AUTO_GAIN, ModeCheck
-from ._simulated_robot import SimulatedRobot
 
-__all__ = ['LOOP_DELAY_S', 'LOOP_LAG_S', 'STEP_M', 'circle_case', 'default_loop', 'held_case',
+__all__ = ['STEP_M', 'circle_case', 'default_loop', 'held_case',
            'paper_circle', 'step_case']
 
-#: The loop's lag and delay for its margins: the inverse node's ``feedback_loop_lag_s`` and
-#: ``feedback_loop_delay_s`` defaults.
-LOOP_LAG_S, LOOP_DELAY_S = 0.06, 0.05
 #: The step target's size [m].
 STEP_M = 0.010
 #: A settled command: its mean over the last second of the step case.

@@ -14,7 +14,7 @@
   ``time_constant_s``; the equilibrium is solved at the *effective*
   pressure that gives the crept elongation.
 
-Settings and sources: :mod:`bellow_ancf_ros.core.control._plant_effects`.
+Settings and sources: :mod:`bellow_ancf_ros.core.sim._plant_effects`.
 Pressures are gauge pressures in Pa.
 """
 

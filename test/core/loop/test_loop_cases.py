@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot
-from bellow_ancf_ros.core.control import (STEP_M, LoopSimulation, PlantEffects, SimulatedRobot,
-                                          circle_case, default_loop, held_case, step_case)
+from bellow_ancf_ros.core.sim import PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.loop import (STEP_M, LoopSimulation, circle_case, default_loop,
+                                       held_case, step_case)
 from bellow_ancf_ros.core.experiments import trajectory_target
 
 #: the model's own robot, quasi-static, regulators that follow at once, a clean motion capture

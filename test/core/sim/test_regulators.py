@@ -1,4 +1,4 @@
-"""Tests of the simulated robot's actuation (core/control/_regulators.py).
+"""Tests of the simulated robot's actuation (core/sim/_regulators.py).
 
 Regulators: first-order lag (exact), slew and hardware limits, dead time,
 play hysteresis; bellows: creep of a part of the stage-1 elongation.
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot
-from bellow_ancf_ros.core.control import BellowCreep, PressureRegulators
+from bellow_ancf_ros.core.sim import BellowCreep, PressureRegulators
 
 
 def test_regulator_first_order_step_response_and_exact_discretisation():

@@ -39,11 +39,11 @@ from scipy.spatial.transform import Rotation
 
 from ..dynamics import GeneralizedAlpha, default_step, natural_modes
 from ..geometry import rotation_from_vector
+from ..history import bracket
 from ..model import RobotConfig, RobotModel, TipLoad, load_robot, tip_load
 from ..solve import ForwardResult, solve_forward
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import MIN_SAMPLES_PER_PERIOD, PlantEffects
-from ._history import bracket
 from ._regulators import BellowCreep, PressureRegulators
 
 __all__ = ['SimulatedRobot']

@@ -32,10 +32,8 @@ import numpy as np
 from ..geometry import angle_between
 from ..model import RobotModel
 from ..solve import solve_forward, solve_inverse
-from ._feedback import FeedbackSettings, IntegralFeedback
-from ._command_output import CommandOutput
-from ._simulated_robot import SimulatedRobot
-from ._target_filter import TargetFilter
+from ..control import CommandOutput, FeedbackSettings, IntegralFeedback, TargetFilter
+from ..sim import SimulatedRobot
 
 __all__ = ['LoopRecord', 'LoopSimulation']
 
