@@ -61,7 +61,7 @@ from .ros_util import (
     diagnostics_qos,
     guard_parameters,
     main_for,
-    monotonic_of,
+    control_time_of,
     pose_message,
     pressure_message,
     publish_and_wait_acked,
@@ -500,7 +500,7 @@ class InverseKinetostaticNode(LifecycleNode):
         try:
             # shaped and shifted for the robot's mode, then corrected by the closed loop
             # (which measures against the shaped pose wanted, not the shifted command)
-            cmd, ref = self._targets.targets(item, monotonic_of(self, stamp, future=True))
+            cmd, ref = self._targets.targets(item, control_time_of(self, stamp, future=True))
             pos, z = self._feedback.correct(ref[0], ref[1], stamp, command=cmd,
                                             hold_until=self._targets.hold_until())
             with self._solve_lock:

@@ -57,7 +57,7 @@ from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
 from .ros_util import (QOS_DEPTH, Param, StartupParameterError, declare_all, descriptor,
-                       monotonic_of)
+                       control_time_of)
 
 __all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'measured_pose_qos']
 
@@ -274,8 +274,8 @@ class FeedbackLink:
                 self._law.measurement(self._taken_at(msg.header.stamp), pos, z)
 
     def _monotonic(self, stamp, future: bool) -> float:
-        """A stamp as monotonic time (:func:`~.ros_util.monotonic_of`)."""
-        return monotonic_of(self.node, stamp, future)
+        """A stamp as monotonic time (:func:`~.ros_util.control_time_of`)."""
+        return control_time_of(self.node, stamp, future)
 
     def _taken_at(self, stamp) -> float:
         """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""

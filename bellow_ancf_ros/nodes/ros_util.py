@@ -49,8 +49,8 @@ __all__ = [
     'WARN_THROTTLE_S', 'Param', 'StartupEnvironmentError', 'StartupParameterError', 'Topic',
     'allowed_values', 'asks_for_help', 'command_qos', 'declare', 'declare_all', 'descriptor',
     'diagnostics_qos', 'executor_choice', 'guard_parameters', 'init_rclpy', 'main_for',
-    'make_executor', 'monotonic_of', 'node_help', 'pose_message', 'pressure_message',
-    'publish_and_wait_acked',
+    'make_executor', 'control_now', 'control_time_of', 'node_help', 'pose_message',
+    'pressure_message', 'publish_and_wait_acked',
     'request_stop', 'run_node', 'watch_parent',
 ]
 
@@ -169,13 +169,29 @@ def declare(node, name: str, default: Any, d: ParameterDescriptor) -> Any:
         raise StartupParameterError(name, value, allowed_values(d), reason) from None
 
 
-def monotonic_of(node, stamp, future: bool = False) -> float:
-    """A message stamp as ``time.monotonic()`` time, by its age on ``node``'s clock.
+def control_now(node) -> float:
+    """The node's control time [s]: what its timers, time windows and filters run on.
+
+    Under ``use_sim_time`` (the ROS clock follows ``/clock``) it is the
+    simulation time, which stops when the simulation pauses; otherwise
+    ``time.monotonic()``, which never jumps (as ros2_control's steady clock).
+    What must stay on the wall clock whatever the clock (solve budgets, the
+    exit deadline, the vent's acknowledgement) reads ``time.monotonic()``
+    itself.
+    """
+    clock = node.get_clock()
+    if getattr(clock, 'ros_time_is_active', False):
+        return clock.now().nanoseconds * 1e-9
+    return time.monotonic()
+
+
+def control_time_of(node, stamp, future: bool = False) -> float:
+    """A message stamp as control time (:func:`control_now`), by its age on ``node``'s clock.
 
     A zero stamp (or none) is now; a stamp in the future is now unless
     ``future`` (a target wanted later, e.g. a previewed trajectory).
     """
-    now = time.monotonic()
+    now = control_now(node)
     if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
         return now
     age = 1e-9 * (node.get_clock().now().nanoseconds
