@@ -12,11 +12,15 @@
 * :func:`draw_robot`, :data:`FAMILY_RANGES`, :class:`RobotDraw`: a robot of
   the documented family (mode, damping, regulators, creep, motion capture,
   stiffness and geometry), what the loop's defaults are measured on;
-  :func:`first_mode`: a robot's first mode at rest.
+  :func:`first_mode`: a robot's first mode at rest;
+* :class:`SimulationClock`: when the simulation's next fixed step may be
+  taken (paced by a real-time factor, in lockstep with a controller's
+  commands, paused or stepped): the simulated robot's node as ``/clock``.
 
 Nothing here knows the controller: :mod:`..loop` closes the two.
 """
 
+from ._clock import SimulationClock
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
@@ -26,5 +30,6 @@ from ._simulated_robot import SimulatedRobot
 __all__ = [
     "BellowCreep", "EFFECTS", "FAMILY_RANGES", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
     "MotionCapture", "PlantEffects", "PressureRegulators", "RobotDraw", "SimulatedRobot",
+    "SimulationClock",
     "draw_robot", "first_mode",
 ]

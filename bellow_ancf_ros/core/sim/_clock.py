@@ -1,0 +1,190 @@
+"""The simulation's clock: fixed steps, paced against the wall clock, lockstep, pause and step.
+
+A simulator that is the clock (Gazebo, Chrono::ROS) advances its physics by
+a fixed step and publishes the time it reached; every node on simulation
+time then runs its timers and windows on it, so a slow computer slows the
+simulation instead of changing its result.  :class:`SimulationClock` decides
+*when* the next step may be taken; the caller takes it and calls
+:meth:`SimulationClock.advanced`:
+
+* ``real_time_factor``: simulated seconds per wall second (1: real time;
+  0: as fast as the steps can be taken).  A step that is late by more than
+  :data:`MAX_LATE_S` re-anchors the pacing (no catch-up burst).
+* ``lockstep_period_s`` (lockstep on when set): the simulation runs at most
+  this far ahead of the newest command (:meth:`command_arrived`), so a
+  controller that falls behind holds the simulation back.  Until the first
+  command arrives, and after a wait of ``lockstep_timeout_s`` wall seconds
+  (a controller stopped or dead: counted in :attr:`lockstep_timeouts`) until
+  the next one, it runs free.
+* :meth:`pause`, :meth:`unpause`, :meth:`step`: no step while paused except
+  the ones asked for, which are taken at once (neither paced nor locked).
+
+Thread-safe: one thread waits in :meth:`wait_for_step` and steps; others
+pause, step, stop and report commands.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+__all__ = ['MAX_LATE_S', 'SimulationClock']
+
+#: A step later than this against the pacing [wall s] re-anchors it (no catch-up burst).
+MAX_LATE_S = 0.1
+#: Longest single wait [wall s] before the conditions are looked at again.
+_POLL_S = 0.1
+
+
+class SimulationClock:
+    """When the next fixed step of a simulation may be taken (see the module's text)."""
+
+    def __init__(self, step_s: float, real_time_factor: float = 1.0,
+                 lockstep_period_s: float | None = None, lockstep_timeout_s: float = 1.0,
+                 wall: Callable[[], float] = time.monotonic) -> None:
+        """``step_s`` [s]; ``real_time_factor`` >= 0; ``lockstep_period_s`` > 0 or None."""
+        for name, value, ok in (('step_s', step_s, step_s > 0),
+                                ('real_time_factor', real_time_factor, real_time_factor >= 0),
+                                ('lockstep_timeout_s', lockstep_timeout_s,
+                                 lockstep_timeout_s > 0),
+                                ('lockstep_period_s', lockstep_period_s,
+                                 lockstep_period_s is None or lockstep_period_s > 0)):
+            if not ok:
+                raise ValueError(f'{name} = {value} is not allowed: must be positive'
+                                 + (' or 0' if name == 'real_time_factor' else ''))
+        self.step_s = float(step_s)
+        self.real_time_factor = float(real_time_factor)
+        self.lockstep_period_s = lockstep_period_s
+        self.lockstep_timeout_s = float(lockstep_timeout_s)
+        self._wall = wall
+        self._cond = threading.Condition()
+        self._stopped = False
+        self.steps = 0                 # steps taken since the start
+        self.paused = False
+        self._pending = 0              # steps asked for while paused
+        self._anchor: tuple[float, float] | None = None   # (wall, simulated) of the pacing
+        self._command_t: float | None = None   # simulated time of the newest command
+        self._free = True              # lockstep released (no command yet, or timed out)
+        self._wait_since: float | None = None  # wall time a lockstep wait began
+        self.lockstep_waits = 0        # steps that waited for a command
+        self.lockstep_timeouts = 0     # waits given up after lockstep_timeout_s
+        self.lockstep_wait_s = 0.0     # wall time spent waiting for commands
+
+    # ------------------------------------------------------------ reading
+    @property
+    def time_s(self) -> float:
+        """Simulated time reached [s] (steps times the step: no accumulated rounding)."""
+        return self.steps * self.step_s
+
+    def measured_factor(self, since: tuple[float, float]) -> tuple[float, tuple[float, float]]:
+        """Simulated seconds per wall second since ``since`` = (wall, simulated), and now's pair.
+
+        The achieved real-time factor over a report period (NaN if no wall
+        time passed).
+        """
+        now = (self._wall(), self.time_s)
+        dw = now[0] - since[0]
+        return ((now[1] - since[1]) / dw if dw > 0 else float('nan')), now
+
+    # ------------------------------------------------------------ control
+    def pause(self) -> None:
+        """No further step (except those asked for by :meth:`step`)."""
+        with self._cond:
+            self.paused = True
+            self._cond.notify_all()
+
+    def unpause(self) -> None:
+        """Run again, paced from now."""
+        with self._cond:
+            self.paused, self._anchor = False, None
+            self._cond.notify_all()
+
+    def step(self, n: int) -> int:
+        """While paused: take ``n`` more steps at once; returns the step count to wait for.
+
+        ValueError when running (pause first) or for ``n`` < 1.
+        """
+        if int(n) < 1:
+            raise ValueError(f'steps = {n} is not allowed: at least 1')
+        with self._cond:
+            if not self.paused:
+                raise ValueError('the simulation is running: pause it first')
+            self._pending += int(n)
+            self._cond.notify_all()
+            return self.steps + self._pending
+
+    def wait_until(self, steps: int, timeout_s: float) -> bool:
+        """Wait (wall ``timeout_s`` at most) until ``steps`` steps are taken; True if they are."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self.steps < steps and not self._stopped:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return self.steps >= steps
+
+    def command_arrived(self) -> None:
+        """A command came: the lockstep's reference moves to the simulated time now."""
+        with self._cond:
+            self._command_t, self._free = self.time_s, False
+            self._cond.notify_all()
+
+    def stop(self) -> None:
+        """End :meth:`wait_for_step` (it returns False)."""
+        with self._cond:
+            self._stopped = True
+            self._cond.notify_all()
+
+    # ------------------------------------------------------------ stepping
+    def _locked(self) -> bool:
+        """True while lockstep holds the next step back (called with the lock held)."""
+        if self.lockstep_period_s is None or self._free or self._command_t is None:
+            return False
+        return self.time_s + self.step_s - self._command_t > self.lockstep_period_s + 1e-12
+
+    def wait_for_step(self) -> bool:
+        """Block until the next step may be taken; False once stopped."""
+        with self._cond:
+            while not self._stopped:
+                if self._pending > 0:
+                    return True
+                if self.paused:
+                    self._cond.wait(_POLL_S)
+                    continue
+                now = self._wall()
+                if self._locked():
+                    if self._wait_since is None:
+                        self._wait_since = now
+                        self.lockstep_waits += 1
+                    left = self._wait_since + self.lockstep_timeout_s - now
+                    if left <= 0:   # the controller stopped answering: run free until it does
+                        self.lockstep_timeouts += 1
+                        self._free = True
+                    else:
+                        self._cond.wait(min(left, _POLL_S))
+                    continue
+                if self._wait_since is not None:   # a wait ended: pace from now
+                    self.lockstep_wait_s += now - self._wait_since
+                    self._wait_since, self._anchor = None, None
+                if self.real_time_factor > 0:
+                    if self._anchor is None:
+                        self._anchor = (now, self.time_s)
+                    due = (self._anchor[0]
+                           + (self.time_s + self.step_s - self._anchor[1]) / self.real_time_factor)
+                    if due - now > 0:
+                        self._cond.wait(min(due - now, _POLL_S))
+                        continue
+                    if now - due > MAX_LATE_S:
+                        self._anchor = (now, self.time_s)
+                return True
+            return False
+
+    def advanced(self) -> None:
+        """The caller took the step: the simulated time moves on by one step."""
+        with self._cond:
+            self.steps += 1
+            if self._pending > 0:
+                self._pending -= 1
+            self._cond.notify_all()

@@ -1,0 +1,117 @@
+"""The simulation's clock: pacing, lockstep, pause and step (core/sim/_clock.py)."""
+
+import threading
+import time
+
+import pytest
+
+from bellow_ancf_ros.core.sim import SimulationClock
+
+
+class Runner:
+    """Steps ``clock`` in a thread as a simulator does; ``stop()`` joins it."""
+
+    def __init__(self, clock):
+        self.clock = clock
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while self.clock.wait_for_step():
+            self.clock.advanced()
+
+    def stop(self):
+        self.clock.stop()
+        self.thread.join(2.0)
+        assert not self.thread.is_alive()
+
+
+def steps_after(clock, wall_s):
+    time.sleep(wall_s)
+    return clock.steps
+
+
+@pytest.mark.parametrize("factor", [0.5, 2.0])
+def test_real_time_factor_paces_the_steps(factor):
+    clock = SimulationClock(0.01, real_time_factor=factor)
+    t0 = time.monotonic()
+    r = Runner(clock)
+    assert clock.wait_until(40, 30.0)
+    wall = time.monotonic() - t0
+    r.stop()
+    # 0.4 simulated seconds: 0.8 s at 0.5x, 0.2 s at 2x (never faster; slower on a busy machine)
+    assert wall >= 0.4 / factor - 0.02
+    assert wall < 0.4 / factor + 1.0
+
+
+def test_factor_zero_runs_as_fast_as_it_can():
+    clock = SimulationClock(0.01, real_time_factor=0.0)
+    r = Runner(clock)
+    assert clock.wait_until(2000, 10.0)   # 20 simulated seconds
+    r.stop()
+    assert clock.time_s == pytest.approx(clock.steps * 0.01, abs=0)
+
+
+def test_pause_holds_step_takes_exactly_the_steps_asked_and_unpause_runs_again():
+    clock = SimulationClock(0.01, real_time_factor=0.0)
+    r = Runner(clock)
+    clock.pause()
+    time.sleep(0.05)
+    held = clock.steps
+    assert steps_after(clock, 0.3) == held
+    with pytest.raises(ValueError, match="steps = 0 is not allowed"):
+        clock.step(0)
+    target = clock.step(7)
+    assert target == held + 7 and clock.wait_until(target, 5.0)
+    assert steps_after(clock, 0.2) == held + 7   # still paused
+    clock.unpause()
+    assert clock.wait_until(held + 100, 5.0)
+    with pytest.raises(ValueError, match="running: pause it first"):
+        clock.step(1)
+    r.stop()
+
+
+def test_lockstep_runs_at_most_one_period_ahead_of_the_newest_command():
+    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=5.0)
+    r = Runner(clock)
+    assert clock.wait_until(300, 5.0)   # no command yet: free
+    clock.pause()
+    time.sleep(0.05)
+    clock.command_arrived()
+    at = clock.steps
+    clock.unpause()
+    # the next step would go beyond the newest command by more than the period: it waits
+    assert steps_after(clock, 0.3) == at + 5
+    assert clock.lockstep_waits == 1
+    for k in range(2, 5):
+        clock.command_arrived()
+        assert steps_after(clock, 0.1) == at + 5 * k
+    r.stop()
+    assert clock.lockstep_timeouts == 0 and clock.lockstep_wait_s > 0.2
+
+
+def test_a_controller_that_stops_answering_releases_the_lockstep_after_its_timeout():
+    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=0.3)
+    clock.command_arrived()
+    t0 = time.monotonic()
+    r = Runner(clock)
+    assert clock.wait_until(5, 1.0)
+    assert clock.wait_until(200, 5.0)   # free after the timeout
+    assert time.monotonic() - t0 >= 0.3
+    assert clock.lockstep_timeouts == 1
+    clock.command_arrived()             # the controller is back: locked again
+    at = clock.steps
+    assert steps_after(clock, 0.2) == at + 5
+    r.stop()
+
+
+def test_bad_settings_named():
+    with pytest.raises(ValueError, match="real_time_factor = -1 is not allowed: must be "
+                                         "positive or 0"):
+        SimulationClock(0.01, real_time_factor=-1)
+    with pytest.raises(ValueError, match="lockstep_period_s = 0 is not allowed"):
+        SimulationClock(0.01, lockstep_period_s=0)
+    with pytest.raises(ValueError, match="step_s = 0 is not allowed"):
+        SimulationClock(0)
