@@ -6,7 +6,9 @@ checked against a list verified by hand (December 2026):
 * ROS packages released for Jazzy: the PyPI ``ros-jazzy-<name>`` wheels
   (rclpy, ament_index_python, *_msgs, rcl_interfaces, ament_flake8,
   ament_pep257; std_srvs: the ``ros-std-srvs`` wheel that
-  ``ros-jazzy-common-interfaces`` installs, ros2/common_interfaces) and
+  ``ros-jazzy-common-interfaces`` installs, ros2/common_interfaces;
+  rosgraph_msgs: the ``ros-rosgraph-msgs`` wheel that rclpy itself
+  installs, ros2/rcl_interfaces, the /clock message) and
   the Jazzy API docs on docs.ros.org (launch, launch_ros, tf2_ros: released
   from ros2/geometry2 for Jazzy; not on PyPI, so the nodes import it only
   where it is installed);
@@ -41,7 +43,7 @@ REPO = Path(__file__).resolve().parents[1]
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'ament_index_python', 'geometry_msgs', 'std_msgs',
                 'visualization_msgs', 'diagnostic_msgs', 'lifecycle_msgs', 'launch',
                 'launch_ros', 'ament_flake8', 'ament_pep257', 'builtin_interfaces', 'tf2_ros',
-                'std_srvs'}
+                'std_srvs', 'rosgraph_msgs'}
 SYSTEM_KEYS = {'python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-matplotlib',
                'python3-pytest', 'python3-hypothesis', 'python3-numba', 'python3-rosbags-pip',
                'python3-joblib'}

@@ -38,10 +38,32 @@ publishes
     refused input, ERROR when an equilibrium could not be computed (the last
     state is kept and published).
 
-The physics runs in its own thread at ``physics_rate_hz`` (default automatic:
-with dynamics 5 % above the slowest rate that resolves the first mode, at
-least 100 Hz: 181 Hz for the mismatched one-segment robot, 100 Hz for the
-two-segment one; else 100 Hz),
+services (std_srvs/Trigger)
+    ``~/pause``, ``~/unpause``, ``~/step`` (``step_count`` physics steps, while
+    paused; answered when they are taken), ``~/reset`` (the start state:
+    vented, at rest, the payload and force of the parameters; the clock runs
+    on).  Pause and step need ``publish_clock``.
+
+The simulated robot as the clock (``publish_clock``, as Gazebo and Chrono::ROS
+are): the physics takes fixed steps of ``1/physics_rate_hz`` of simulation
+time, publishes ``/clock`` (rosgraph_msgs/Clock) after every step, and
+stamps everything with simulation time, which starts at 0; nodes started
+with ``use_sim_time:=true`` (the simulated robot itself too: its
+``/diagnostics``) run on it.  ``real_time_factor`` paces it against the wall
+clock (1: real time, 0: as fast as it can).  With ``lockstep`` the
+simulation runs at most ``lockstep_period_s`` ahead of the newest
+``pressure_command`` (the inverse node republishes every 0.05 s), so a
+controller slowed by a busy computer slows the simulation instead of
+changing its result; after ``lockstep_timeout_s`` (wall) without a command
+it runs free until the next one (counted on ``/diagnostics``).  The motion
+capture, the regulators, creep, dropouts and outliers and the command
+timeout run on simulation time; the motion capture delivers at exact
+multiples of its period.
+
+Without ``publish_clock`` the physics runs in its own thread at
+``physics_rate_hz`` (default automatic: with dynamics 5 % above the slowest
+rate that resolves the first mode, at least 100 Hz: 181 Hz for the
+mismatched one-segment robot, 100 Hz for the two-segment one; else 100 Hz),
 each step advancing the regulators, the creep and the robot by the measured
 wall-clock time since the last one, so a slow machine gives coarser steps,
 never a wrong time scale.  With ``dynamics`` (default, realistic plant) the
@@ -65,10 +87,13 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
 from ..core import load_robot
-from ..core.sim import PlantEffects, SimulatedRobot
+from ..core.sim import PlantEffects, SimulatedRobot, SimulationClock
 from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract
@@ -86,8 +111,8 @@ from .ros_util import (
     pressure_message,
 )
 
-__all__ = ['EFFECT_PARAMETERS', 'MAX_PRESSURE_RATE_HZ', 'SimulatedRobotNode', 'main',
-           'plant_effects']
+__all__ = ['EFFECT_PARAMETERS', 'MAX_PRESSURE_RATE_HZ', 'STEP_TIMEOUT_S', 'SimulatedRobotNode',
+           'main', 'plant_effects']
 
 #: Highest rate of measured_pressure [Hz] (a physics rate above it publishes every n-th step).
 MAX_PRESSURE_RATE_HZ = 100.0
@@ -131,6 +156,8 @@ EFFECT_PARAMETERS = (
     ('mocap_dropout_duration_s', 'dropout_duration_s', 1.0, _R.dropout_duration_s,
      'Length of a dropout [s]; 0: none.', 0.0, 60.0),
 )
+#: Longest wait of a ~/step call for its steps [wall s] (they go on after it).
+STEP_TIMEOUT_S = 30.0
 #: Parameters that still apply to the ideal plant (noise, slew).
 _IDEAL_KEEPS = ('position_noise_mm', 'angle_noise_deg', 'regulator_slew_rate_kpa_per_s')
 
@@ -170,8 +197,33 @@ def plant_effects(get) -> PlantEffects:
                                     reason) from None
 
 
-D, S, INT, A = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-                ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE_ARRAY)
+def _simulation_clock(get, rate_hz: float) -> SimulationClock | None:
+    """The :class:`SimulationClock` of ``publish_clock`` and its settings, or None (wall clock).
+
+    ``real_time_factor`` and ``lockstep`` away from their defaults without
+    ``publish_clock`` raise :class:`StartupParameterError`: they would do nothing.
+    """
+    if not get('publish_clock').value:
+        for name, default in (('real_time_factor', 1.0), ('lockstep', False)):
+            if get(name).value != default:
+                raise StartupParameterError(name, get(name).value,
+                                            f'{default} without publish_clock',
+                                            'the simulation runs on the wall clock: set '
+                                            'publish_clock true')
+        return None
+    return SimulationClock(1.0 / rate_hz, float(get('real_time_factor').value),
+                           float(get('lockstep_period_s').value) if get('lockstep').value
+                           else None, float(get('lockstep_timeout_s').value))
+
+
+def _stamp(t: float):
+    """Simulation time ``t`` [s] as a message stamp."""
+    return Time(nanoseconds=int(round(t * 1e9))).to_msg()
+
+
+D, S, INT, A, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                   ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE_ARRAY,
+                   ParameterType.PARAMETER_BOOL)
 _RO = {'read_only': True}
 #: The node's parameters: what it declares and what ``--help`` prints.
 PARAMETERS = (
@@ -209,7 +261,7 @@ PARAMETERS = (
     Param('dynamics', True, descriptor(
         "The robot's inertia and damping (the robot file's dynamics.damping_time_s): it "
         'swings and rings; false: it jumps from equilibrium to equilibrium.  Realistic '
-        'plant only (the ideal plant is quasi-static).', ParameterType.PARAMETER_BOOL, **_RO)),
+        'plant only (the ideal plant is quasi-static).', B, **_RO)),
     Param('physics_rate_hz', 0.0, descriptor(
         'Regulator, creep and robot update rate [Hz]; also the measured_pressure rate (at '
         'most 100 Hz).  0 = automatic: with dynamics 5 % above the slowest rate that '
@@ -223,6 +275,24 @@ PARAMETERS = (
         '0 = off (a bench fed single commands).', D, lo=0.0, hi=60.0, **_RO)),
     Param('seed', -1, descriptor('Seed of the noise generator; -1 = random.', INT,
                                  lo=-1, hi=2**31 - 1, **_RO)),
+    Param('publish_clock', False, descriptor(
+        'Be the clock: fixed physics steps of simulation time, /clock after each, every stamp '
+        'in simulation time (run the other nodes with use_sim_time:=true).', B, **_RO)),
+    Param('real_time_factor', 1.0, descriptor(
+        'With publish_clock: simulated seconds per wall second (1: real time; 0: as fast as '
+        'the computer and the nodes allow).', D, lo=0.0, hi=1000.0, **_RO)),
+    Param('lockstep', False, descriptor(
+        'With publish_clock: run at most lockstep_period_s ahead of the newest '
+        'pressure_command (a slow computer slows the simulation, not its result).', B, **_RO)),
+    Param('lockstep_period_s', 0.1, descriptor(
+        'How far the simulation may run ahead of the newest command [s of simulation time] '
+        "(two periods of the inverse node's 20 Hz keepalive).", D, lo=0.001, hi=10.0, **_RO)),
+    Param('lockstep_timeout_s', 1.0, descriptor(
+        'Wall seconds lockstep waits for a command before it runs free until the next one '
+        '(a stopped controller; counted on /diagnostics).', D, lo=0.01, hi=60.0, **_RO)),
+    Param('step_count', 1, descriptor(
+        'Physics steps one ~/step call takes (settable at run time).', INT, lo=1,
+        hi=1_000_000)),
 )
 TOPICS = (
     Topic('subscribes', 'pressure_command', 'std_msgs/Float64MultiArray',
@@ -233,6 +303,12 @@ TOPICS = (
     Topic('publishes', 'measured_pressure', 'std_msgs/Float64MultiArray',
           'the regulated pressures, at physics_rate_hz (at most 100 Hz)'),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz status'),
+    Topic('publishes', '/clock', 'rosgraph_msgs/Clock',
+          'simulation time, after every physics step (publish_clock)'),
+    Topic('services', '~/pause', 'std_srvs/Trigger', 'stop the simulation (publish_clock)'),
+    Topic('services', '~/unpause', 'std_srvs/Trigger', 'run it again'),
+    Topic('services', '~/step', 'std_srvs/Trigger', 'take step_count physics steps, paused'),
+    Topic('services', '~/reset', 'std_srvs/Trigger', 'the start state, vented'),
 )
 
 
@@ -252,17 +328,10 @@ class SimulatedRobotNode(Node):
         contract.check_unit(unit)
         cfg = load_robot(g('robot_config').value)   # ConfigError: the node does not start
         seed = int(g('seed').value)
-        n_el = int(g('n_elements').value)
-        self.robot = SimulatedRobot(
-            cfg, n_elements=n_el or None,
-            payload_kg=contract.validate_payload(g('payload_kg').value),
-            effects=plant_effects(g), seed=None if seed < 0 else seed)
-        try:
-            self.robot.set_tip_force(list(g('tip_force_n').value))
-        except ValueError as exc:
-            raise StartupParameterError('tip_force_n', list(g('tip_force_n').value),
-                                        'three finite numbers [N], at most 1000 N',
-                                        str(exc)) from None
+        self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
+        self._robot_args = dict(n_elements=int(g('n_elements').value) or None,
+                                effects=plant_effects(g), seed=None if seed < 0 else seed)
+        self.robot = self._new_robot()
         rate = float(g('physics_rate_hz').value) or self.robot.auto_physics_rate_hz
         try:
             self.robot.check_physics_rate(rate)
@@ -272,7 +341,6 @@ class SimulatedRobotNode(Node):
                 'physics_rate_hz', rate, f'at least {need:.0f} Hz',
                 f'too coarse for the robot\'s first mode ({self.robot.first_mode_hz:.3g} Hz; '
                 f'20 steps per period)') from None
-        self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
         self._mocap_frame = None   # MocapFrame: the base's pose in the mocap frame
         if g('mocap_frame_id').value:
             pos_m, quat = list(g('mocap_position_m').value), list(g('mocap_quaternion_xyzw').value)
@@ -284,32 +352,45 @@ class SimulatedRobotNode(Node):
             except ValueError as exc:
                 raise StartupParameterError('mocap_quaternion_xyzw', quat,
                                             'a non-zero quaternion (x, y, z, w)', str(exc))
+        self.clock = _simulation_clock(g, rate)   # None: the wall clock
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
-                      'timeouts': 0, 'dropped_poses': 0, 'outliers': 0}
+                      'timeouts': 0, 'dropped_poses': 0, 'outliers': 0, 'resets': 0}
         self._timeout_s = float(g('command_timeout_s').value)
         self._last_cmd_t: float | None = None
         self._commands: deque = deque()   # (pressures, arrival time): for the physics thread
+        # held while the physics steps or a reset replaces the robot
+        self._step_lock = threading.Lock()
+        self._t_offset = 0.0   # simulation time of the robot's time 0 (the last reset's)
         self.last_refusal_reason = ''
         qos = command_qos()
         self._pub_pose = self.create_publisher(PoseStamped, 'measured_pose', qos)
         self._pub_true = self.create_publisher(PoseStamped, 'true_pose', qos)
         self._pub_p = self.create_publisher(Float64MultiArray, 'measured_pressure', qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self._pub_clock = (self.create_publisher(Clock, '/clock', 10)
+                           if self.clock is not None else None)
         self._refusals = Refusals(self, 'pressures', self._publish_diag)
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_command, qos)
-        self._mocap_timer = self.create_timer(1.0 / self.robot.effects.mocap_rate_hz,
-                                              self._mocap)
+        for name, handler in (('pause', self._on_pause), ('unpause', self._on_unpause),
+                              ('step', self._on_step), ('reset', self._on_reset)):
+            self.create_service(Trigger, f'~/{name}', handler)
+        self._mocap_timer = (self.create_timer(1.0 / self.robot.effects.mocap_rate_hz,
+                                               self._mocap) if self.clock is None else None)
         self._diag_timer = self.create_timer(1.0, self._status)
+        self._factor_since = (time.monotonic(), 0.0)   # (wall, simulated) of the last status
         self._stop = threading.Event()
         self._state_stamp = self.get_clock().now()   # when the robot reached its state
         self._physics_period = 1.0 / rate
         # measured_pressure at most MAX_PRESSURE_RATE_HZ: a regulator's sensor, not every step
         self._pressure_every = max(1, math.ceil(rate / MAX_PRESSURE_RATE_HZ - 1e-9))
-        self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
+        self._thread = threading.Thread(
+            target=self._wall_loop if self.clock is None else self._clock_loop,
+            name='physics', daemon=True)
         self._thread.start()
         e = self.robot.effects
+        c = self.clock
         self.get_logger().info(
             f'simulating robot {cfg.name!r} ({self.robot.model.A} actuators, '
             f'{self.robot.model.n} elements per actuator), {g("plant").value} plant: '
@@ -323,7 +404,23 @@ class SimulatedRobotNode(Node):
                f'{self.robot.dynamics.inertia.damping_time * 1e3:g} ms, step '
                f'{self.robot.dynamics.step_s * 1e3:.3g} ms; ' if self.robot.dynamics else
                'quasi-static; ')
-            + f'physics {rate:g} Hz; commands in {unit}')
+            + f'physics {rate:g} Hz; commands in {unit}; '
+            + ('wall clock' if c is None else
+               f'publishing /clock, real-time factor {c.real_time_factor:g}'
+               + (f', lockstep {c.lockstep_period_s:g} s' if c.lockstep_period_s else '')))
+
+    def _new_robot(self) -> SimulatedRobot:
+        """The simulated robot at its start state: vented, at rest, the parameters' loads."""
+        g = self.get_parameter
+        robot = SimulatedRobot(self.cfg, payload_kg=contract.validate_payload(
+            g('payload_kg').value), **self._robot_args)
+        try:
+            robot.set_tip_force(list(g('tip_force_n').value))
+        except ValueError as exc:
+            raise StartupParameterError('tip_force_n', list(g('tip_force_n').value),
+                                        'three finite numbers [N], at most 1000 N',
+                                        str(exc)) from None
+        return robot
 
     # ------------------------------------------------------------ params
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -354,6 +451,12 @@ class SimulatedRobotNode(Node):
             self.last_refusal_reason = str(exc)
             self._refusals.report(str(exc), self.stats['refused'])
             return
+        if self.clock is not None:   # arrives at the simulation's time now
+            now = self.clock.time_s
+            self._commands.append((p, now))
+            self._last_cmd_t = now
+            self.clock.command_arrived()
+            return
         now = time.monotonic()
         # handed to the physics thread with its arrival time: it takes effect then (plus the
         # dead time), not at a physics tick (a shaped step's levels would land on its grid)
@@ -361,7 +464,34 @@ class SimulatedRobotNode(Node):
         self._last_cmd_t = now
 
     # ------------------------------------------------------------ physics
-    def _physics_loop(self) -> None:
+    def _physics_step(self, now: float, last: float) -> None:
+        """Commands, the command timeout, one step of the robot from ``last`` to ``now``.
+
+        Times on the physics' clock: monotonic wall seconds, or simulation
+        seconds with ``publish_clock``.  Called with the step lock held.
+        """
+        t_cmd = self._last_cmd_t
+        if self._timeout_s > 0 and t_cmd is not None and now - t_cmd > self._timeout_s:
+            self._last_cmd_t = None   # vent once, as a driver does
+            self.robot.command(contract.vent_pressures(self.robot.model.A, self.cfg.p_min,
+                                                       self.cfg.p_max))
+            self.stats['timeouts'] += 1
+            self.get_logger().warning(f'vented: no pressure_command for '
+                                      f'{self._timeout_s:g} s (controller dead or stopped)')
+        while self._commands:   # in the order they arrived, each at its time
+            p_cmd, t_arr = self._commands.popleft()
+            self.robot.command(p_cmd, min(max(t_arr - last, 0.0), now - last))
+        failures = self.robot.failures
+        self.robot.step(now - last)   # only the physics thread steps the robot
+        if self.robot.failures > failures:
+            self.stats['failed_solves'] += 1
+            msg = (f'robot state not computed ({self.robot.last_failure}); last state kept'
+                   if self.robot.dynamics is None else
+                   f'dynamics step failed ({self.robot.last_failure}); restarted at rest')
+            self.get_logger().error(msg, throttle_duration_sec=2.0)
+            self._publish_diag(DiagnosticStatus.ERROR, msg, {})
+
+    def _wall_loop(self) -> None:
         last = time.monotonic()   # the instant the robot's state is at
         next_t = last
         tick = 0
@@ -373,47 +503,82 @@ class SimulatedRobotNode(Node):
             else:
                 next_t = time.monotonic()   # running late: no catch-up burst
             now = time.monotonic()
-            t_cmd = self._last_cmd_t
-            if self._timeout_s > 0 and t_cmd is not None and now - t_cmd > self._timeout_s:
-                self._last_cmd_t = None   # vent once, as a driver does
-                self.robot.command(contract.vent_pressures(self.robot.model.A, self.cfg.p_min,
-                                                           self.cfg.p_max))
-                self.stats['timeouts'] += 1
-                self.get_logger().warning(f'vented: no pressure_command for '
-                                          f'{self._timeout_s:g} s (controller dead or stopped)')
-            while self._commands:   # in the order they arrived, each at its time
-                p_cmd, t_arr = self._commands.popleft()
-                self.robot.command(p_cmd, min(max(t_arr - last, 0.0), now - last))
-            failures = self.robot.failures
-            self.robot.step(now - last)   # only this thread steps the robot
+            with self._step_lock:
+                self._physics_step(now, last)
+                p = self.robot.pressures_pa
             # the state is the robot's at `now` (the tick), not when its computation ended
             self._state_stamp = self.get_clock().now() - Duration(
                 nanoseconds=int((time.monotonic() - now) * 1e9))
-            failed = self.robot.failures > failures
-            p = self.robot.pressures_pa
             last = now
-            if failed:
-                self.stats['failed_solves'] += 1
-                msg = (f'robot state not computed ({self.robot.last_failure}); last state kept'
-                       if self.robot.dynamics is None else
-                       f'dynamics step failed ({self.robot.last_failure}); restarted at rest')
-                self.get_logger().error(msg, throttle_duration_sec=2.0)
-                self._publish_diag(DiagnosticStatus.ERROR, msg, {})
             tick += 1
-            if tick % self._pressure_every:
-                continue
-            try:
-                self._pub_p.publish(pressure_message(p, self._unit))
-            except Exception:  # noqa: BLE001 - publisher gone at shutdown
+            if tick % self._pressure_every == 0 and not self._publish_pressures(p):
                 return
+
+    def _clock_loop(self) -> None:
+        clock, dt = self.clock, self.clock.step_s
+        e = self.robot.effects
+        mocap_dt = 1.0 / e.mocap_rate_hz
+        # deliveries at exact multiples of the period, the first one latency after the start
+        k_mocap = max(1, math.ceil(e.mocap_latency_s / mocap_dt - 1e-9))
+        self._publish_clock(0.0)
+        while clock.wait_for_step():
+            last = clock.time_s
+            now = last + dt
+            with self._step_lock:
+                self._physics_step(now, last)
+                clock.advanced()
+                now = clock.time_s   # steps times the step: no accumulated rounding
+                while k_mocap * mocap_dt <= now + 1e-9:
+                    self._deliver(k_mocap * mocap_dt)
+                    k_mocap += 1
+                p = self.robot.pressures_pa
+            if not self._publish_clock(now):
+                return
+            if clock.steps % self._pressure_every == 0 and not self._publish_pressures(p):
+                return
+
+    def _publish_clock(self, t: float) -> bool:
+        msg = Clock()
+        msg.clock = _stamp(t)
+        try:
+            self._pub_clock.publish(msg)
+        except Exception:  # noqa: BLE001 - publisher gone at shutdown
+            return False
+        return True
+
+    def _publish_pressures(self, p) -> bool:
+        try:
+            self._pub_p.publish(pressure_message(p, self._unit))
+        except Exception:  # noqa: BLE001 - publisher gone at shutdown
+            return False
+        return True
+
+    def _deliver(self, t: float) -> None:
+        """The motion capture's delivery at simulation time ``t`` (the step lock held)."""
+        t_robot = t - self._t_offset
+        pos, R = self.robot.pose_at(t_robot)
+        self._publish_poses(pos, R, _stamp(t), self.robot.capture(t_robot),
+                            lambda captured: _stamp(captured + self._t_offset))
 
     def _mocap(self) -> None:
         # the newest complete state (no lock needed) and when it was reached, on the ROS clock
         state_t, state_stamp = self.robot.time_s, self._state_stamp
         pos, R = self.robot.true_pose()
-        self._pub_true.publish(pose_message(pos, geometry.quaternion_from_rotation(R),
-                                            self._frame, state_stamp.to_msg()))
-        sample = self.robot.capture(state_t)
+        self._publish_poses(pos, R, state_stamp.to_msg(), self.robot.capture(state_t),
+                            lambda captured: (state_stamp - Duration(nanoseconds=int(
+                                (state_t - captured) * 1e9))).to_msg())
+
+    def _publish_poses(self, pos, R, stamp, sample, capture_stamp) -> None:
+        """``true_pose`` (``pos``, ``R`` at ``stamp``), and ``sample`` on ``measured_pose``.
+
+        ``sample``: the motion capture's (None: a dropout); stamped with
+        ``capture_stamp(sample.captured_s)``.
+        """
+        try:
+            self._pub_true.publish(pose_message(pos, geometry.quaternion_from_rotation(R),
+                                                self._frame, stamp))
+        except Exception:  # noqa: BLE001 - publisher gone at shutdown
+            return
         if sample is None:   # a dropout: the motion capture delivers nothing
             self.stats['dropped_poses'] += 1
             return
@@ -422,11 +587,66 @@ class SimulatedRobotNode(Node):
         if self._mocap_frame is not None:   # as a motion capture in its own frame sees it
             frame = self._mocap_frame.frame_id
             pos, R = self._mocap_frame.from_base(pos, R)
-        stamp = state_stamp - Duration(nanoseconds=int((state_t - sample.captured_s) * 1e9))
         self._pub_pose.publish(pose_message(pos, geometry.quaternion_from_rotation(R), frame,
-                                            stamp.to_msg()))
+                                            capture_stamp(sample.captured_s)))
         self.stats['published_poses'] += 1
         self.stats['outliers'] += int(sample.outlier)
+
+    # ------------------------------------------------------------ services
+    def _needs_clock(self, resp):
+        resp.success = False
+        resp.message = ('needs publish_clock: true (this simulation runs on the wall clock)')
+        return resp
+
+    def _on_pause(self, _req, resp):
+        if self.clock is None:
+            return self._needs_clock(resp)
+        self.clock.pause()
+        resp.success, resp.message = True, f'paused at {self.clock.time_s:.6f} s'
+        self.get_logger().info(resp.message)
+        return resp
+
+    def _on_unpause(self, _req, resp):
+        if self.clock is None:
+            return self._needs_clock(resp)
+        self.clock.unpause()
+        resp.success, resp.message = True, f'running from {self.clock.time_s:.6f} s'
+        self.get_logger().info(resp.message)
+        return resp
+
+    def _on_step(self, _req, resp):
+        if self.clock is None:
+            return self._needs_clock(resp)
+        n = int(self.get_parameter('step_count').value)
+        try:
+            target = self.clock.step(n)
+        except ValueError as exc:
+            resp.success, resp.message = False, str(exc)
+            return resp
+        done = self.clock.wait_until(target, STEP_TIMEOUT_S)
+        resp.success = done
+        resp.message = (f'{n} steps taken: {self.clock.time_s:.6f} s' if done else
+                        f'{n} steps asked, not all taken in {STEP_TIMEOUT_S:g} s: '
+                        f'{self.clock.time_s:.6f} s (they go on)')
+        return resp
+
+    def _on_reset(self, _req, resp):
+        with self._step_lock:
+            try:
+                robot = self._new_robot()
+            except (ValueError, RuntimeError) as exc:
+                resp.success, resp.message = False, f'not reset: {exc}'
+                return resp
+            self.robot = robot
+            self._commands.clear()
+            self._last_cmd_t = None
+            self._t_offset = self.clock.time_s if self.clock is not None else 0.0
+            self.stats['resets'] += 1
+        resp.success = True
+        resp.message = ('reset to the start state (vented, at rest)'
+                        + (f' at {self._t_offset:.6f} s' if self.clock is not None else ''))
+        self.get_logger().info(resp.message)
+        return resp
 
     def _status(self) -> None:
         level = DiagnosticStatus.WARN if self.stats['failed_solves'] else DiagnosticStatus.OK
@@ -436,7 +656,19 @@ class SimulatedRobotNode(Node):
                       first_mode_hz=self.robot.first_mode_hz or 0.0,
                       tip_force_n=' '.join(f'{v:g}' for v in self.robot.tip_force_n),
                       pressures=' '.join(f'{v:.6g}' for v in contract.to_unit(p, self._unit)))
-        self._publish_diag(level, 'simulating', values)
+        c, message = self.clock, 'simulating'
+        if c is not None:
+            factor, self._factor_since = c.measured_factor(self._factor_since)
+            values.update(simulation_time_s=f'{c.time_s:.6f}', paused=c.paused,
+                          real_time_factor=c.real_time_factor,
+                          achieved_real_time_factor=f'{factor:.3g}',
+                          lockstep_waits=c.lockstep_waits,
+                          lockstep_timeouts=c.lockstep_timeouts,
+                          lockstep_wait_s=f'{c.lockstep_wait_s:.3f}')
+            message = ('paused' if c.paused else
+                       f'simulating at {factor:.3g}x real time' if math.isfinite(factor)
+                       else message)
+        self._publish_diag(level, message, values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
         publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: simulated robot',
@@ -445,6 +677,8 @@ class SimulatedRobotNode(Node):
     def destroy_node(self):
         """Stop the physics thread, then destroy the node."""
         self._stop.set()
+        if self.clock is not None:
+            self.clock.stop()
         self._thread.join(5.0)
         return super().destroy_node()
 

@@ -129,7 +129,7 @@ class PlantEffects:
         if self.outlier_max_m < self.outlier_min_m:
             raise ValueError(f'plant setting outlier_max_m: {self.outlier_max_m!r} must be >= '
                              f'outlier_min_m ({self.outlier_min_m!r})')
-        if self.dropout_duration_s > 0 and self.dropout_duration_s >= self.dropout_every_s:
+        if 0 < self.dropout_every_s <= self.dropout_duration_s:
             raise ValueError(f'plant setting dropout_duration_s: {self.dropout_duration_s!r} '
                              f'must be shorter than dropout_every_s ({self.dropout_every_s!r})')
 

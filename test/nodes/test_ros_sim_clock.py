@@ -1,0 +1,170 @@
+"""simulated_robot_node as the clock: /clock, simulation-time stamps, pause, step, reset, lockstep.
+
+Real rclpy nodes in one process on an isolated ROS_DOMAIN_ID (the harness of
+test_ros_nodes); the simulated robot steps in its own thread.
+"""
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bellow_ancf_ros.nodes.ros_util import StartupParameterError  # noqa: E402
+from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
+import test_ros_nodes as _rn  # noqa: E402
+from test_ros_nodes import pressure_msg, wait_for  # noqa: E402
+
+pytestmark = pytest.mark.ros
+h = _rn.h
+RATE_HZ = 200.0   # a physics step of exactly 5 ms
+LATENCY_S = 0.01
+DEEP = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                  depth=10000)
+
+
+def seconds(stamp):
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def ns(stamp):
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def clock_sim(h, **params):
+    """A simulated robot that is the clock (200 Hz physics, 120 Hz mocap, 10 ms latency)."""
+    for topic, kind in (('/clock', Clock), ('measured_pose', PoseStamped),
+                        ('true_pose', PoseStamped), ('/diagnostics', DiagnosticArray),
+                        ('measured_pressure', Float64MultiArray)):
+        h.record(kind, topic, DEEP)   # every message: none dropped by a busy test process
+    params = dict(dict(publish_clock=True, physics_rate_hz=RATE_HZ, seed=5,
+                       mocap_latency_s=LATENCY_S, mocap_dropout_every_s=0.0,
+                       mocap_outlier_probability=0.0), **params)
+    sim = h.add(SimulatedRobotNode, **params)
+    sim.set_parameters([Parameter('use_sim_time', value=True)])
+    return sim
+
+
+def last_clock(h):
+    return seconds(h.last('/clock').clock)
+
+
+def test_it_publishes_the_clock_and_stamps_everything_in_simulation_time(h):
+    sim = clock_sim(h, real_time_factor=2.0)
+    wait_for(lambda: h.count('/clock') > 10, what='/clock')
+    t0_wall, t0_sim = time.monotonic(), last_clock(h)
+    time.sleep(2.0)
+    factor = (last_clock(h) - t0_sim) / (time.monotonic() - t0_wall)
+    assert 1.0 < factor < 2.1, factor   # paced at 2x (slower only on a busy machine)
+    clocks = [ns(m.clock) for _, m in h.msgs['/clock']]
+    # every step exactly 5 ms of simulation time, in order, from 0
+    assert clocks[0] % 5_000_000 == 0 and np.all(np.diff(clocks) == 5_000_000)
+    end = clocks[-1]
+    # the motion capture delivers at exact multiples of 1/120 s, captured one latency earlier
+    true = np.array([seconds(m.header.stamp) for _, m in h.msgs['true_pose']])
+    measured = np.array([seconds(m.header.stamp) for _, m in h.msgs['measured_pose']])
+    assert len(true) > 100 and np.all(true * 1e9 <= end + 1)
+    np.testing.assert_allclose(true * 120.0, np.round(true * 120.0), atol=1e-6)
+    np.testing.assert_allclose(np.diff(true), 1 / 120.0, atol=1e-8)
+    np.testing.assert_allclose((measured + LATENCY_S) * 120.0,
+                               np.round((measured + LATENCY_S) * 120.0), atol=1e-6)
+    # the node's own /diagnostics run on the clock it publishes (use_sim_time)
+    wait_for(lambda: any(s.name.endswith('simulated robot') for _, a in h.msgs['/diagnostics']
+                         for s in a.status), what='a status')
+    stamps = [seconds(a.header.stamp) for _, a in h.msgs['/diagnostics']
+              if any(s.name.endswith('simulated robot') for s in a.status)]
+    assert all(0.0 < s <= last_clock(h) + 1e-9 for s in stamps), (stamps, last_clock(h))
+    status = [s for _, a in h.msgs['/diagnostics'] for s in a.status
+              if s.name.endswith('simulated robot')][-1]
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['real_time_factor'] == '2.0' and values['paused'] == 'False'
+    assert 0.9 < float(values['achieved_real_time_factor']) < 2.2
+    assert 0 <= sim.stats['published_poses'] - len(h.msgs['measured_pose']) <= 3   # in flight
+
+
+def test_pause_freezes_the_clock_step_takes_exactly_the_steps_and_reset_vents(h):
+    sim = clock_sim(h)
+    pressures = h.publisher(Float64MultiArray, 'pressure_command')
+    pub_p = np.array([60e3, 0.0, 20e3])
+    pressures.publish(pressure_msg(pub_p))
+    wait_for(lambda: h.count('measured_pressure') > 0
+             and h.last('measured_pressure').data[0] > 30e3, what='the regulators to follow')
+    pause = h.service(Trigger, 'simulated_robot_node/pause')
+    step = h.service(Trigger, 'simulated_robot_node/step')
+    unpause = h.service(Trigger, 'simulated_robot_node/unpause')
+    reset = h.service(Trigger, 'simulated_robot_node/reset')
+    res = h.call(step, Trigger.Request())
+    assert not res.success and 'pause it first' in res.message
+    assert h.call(pause, Trigger.Request()).success
+    time.sleep(0.2)
+    held, poses = ns(h.last('/clock').clock), h.count('measured_pose')
+    time.sleep(0.5)
+    assert ns(h.last('/clock').clock) == held and h.count('measured_pose') == poses
+    assert sim.clock.time_s * 1e9 == pytest.approx(held, abs=1)
+    sim.set_parameters([Parameter('step_count', value=12)])
+    res = h.call(step, Trigger.Request())
+    assert res.success, res.message
+    wait_for(lambda: ns(h.last('/clock').clock) == held + 12 * 5_000_000, what='12 steps')
+    time.sleep(0.3)
+    assert ns(h.last('/clock').clock) == held + 12 * 5_000_000   # still paused
+    # 60 ms: 7 or 8 motion-capture deliveries, never more
+    assert 7 <= h.count('measured_pose') - poses <= 8
+    assert h.call(unpause, Trigger.Request()).success
+    wait_for(lambda: ns(h.last('/clock').clock) > held + 100 * 5_000_000, what='running again')
+    start = sim._new_robot().true_pose()[0]
+    res = h.call(reset, Trigger.Request())
+    assert res.success and 'vented' in res.message, res.message
+    assert sim.stats['resets'] == 1
+    np.testing.assert_array_equal(sim.robot.pressures_pa, np.zeros(3))
+    np.testing.assert_allclose(sim.robot.true_pose()[0], start, atol=1e-9)
+    after = ns(h.last('/clock').clock)
+    wait_for(lambda: ns(h.last('/clock').clock) > after, what='the clock runs on after a reset')
+
+
+def test_lockstep_holds_the_simulation_to_the_newest_command_and_lets_go_of_a_dead_one(h):
+    sim = clock_sim(h, real_time_factor=0.0, lockstep=True, lockstep_period_s=0.1,
+                    lockstep_timeout_s=1.0)
+    wait_for(lambda: h.count('/clock') > 0 and last_clock(h) > 2.0,
+             what='running free before any command')
+    pressures = h.publisher(Float64MultiArray, 'pressure_command')
+    pressures.publish(pressure_msg(np.zeros(3)))
+    wait_for(lambda: sim.clock.lockstep_waits >= 1, what='a wait for the next command')
+    time.sleep(0.3)
+    held = last_clock(h)
+    time.sleep(0.3)
+    assert last_clock(h) == held   # one period past the command, no further
+    for _ in range(5):   # a slow controller: a command every 0.25 wall seconds
+        pressures.publish(pressure_msg(np.zeros(3)))
+        time.sleep(0.25)
+    advanced = last_clock(h) - held
+    assert 0.4 <= advanced <= 0.6 + 1e-9, advanced   # 0.1 s of simulation per command
+    assert sim.clock.lockstep_timeouts == 0
+    wait_for(lambda: sim.clock.lockstep_timeouts == 1, timeout=5.0,
+             what='the lockstep to give up on a controller that stopped')
+    wait_for(lambda: last_clock(h) > held + advanced + 2.0, what='running free again')
+
+
+def test_clock_settings_without_the_clock_are_refused_and_its_services_say_why(h):
+    with pytest.raises(StartupParameterError, match='parameter real_time_factor = 2.0 is not '
+                                                    'allowed .*set publish_clock true'):
+        h.add(SimulatedRobotNode, real_time_factor=2.0)
+    with pytest.raises(StartupParameterError, match='parameter lockstep = True'):
+        h.add(SimulatedRobotNode, lockstep=True)
+    sim = h.add(SimulatedRobotNode, seed=2)
+    assert sim.clock is None
+    res = h.call(h.service(Trigger, 'simulated_robot_node/pause'), Trigger.Request())
+    assert not res.success and 'needs publish_clock: true' in res.message
+    res = h.call(h.service(Trigger, 'simulated_robot_node/reset'), Trigger.Request())
+    assert res.success and sim.stats['resets'] == 1
