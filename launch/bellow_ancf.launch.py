@@ -16,7 +16,11 @@ rviz2 is installed; otherwise a log line says it is not), and with
 ``sim:=true`` ``simulated_robot_node`` (``sim_robot_config``, default the
 mismatched one-segment robot, ``sim_plant`` realistic or ideal hardware; it
 vents after ``command_timeout_s`` 0.5 s without a command, as a regulator
-driver does).  ``feedback`` and
+driver does).  ``use_sim_time`` (default: as ``sim``) puts every node on
+``/clock``; with ``sim:=true`` the simulated robot publishes it, paced by
+``sim_real_time_factor`` (1.0) and in lockstep with the controller's commands
+(``sim_lockstep``, default true), as Gazebo and Chrono::ROS are the clock of
+their simulations.  ``feedback`` and
 ``payload_kg`` go to the controller (and the payload to the forward node and
 the trajectory publisher, whose lead-in starts at the robot at rest).  The
 trajectory publisher sends its first target once the controller is active
@@ -114,6 +118,17 @@ def generate_launch_description():
                               description="the simulated robot's hardware: realistic (lag, "
                                           'dead time, hysteresis, creep, mocap latency, '
                                           'outliers, dropouts) or ideal'),
+        # after 'sim': its default is sim's value
+        DeclareLaunchArgument('use_sim_time', default_value=LaunchConfiguration('sim'),
+                              description='every node on /clock (simulation time); default: '
+                                          'as sim (the simulated robot is the clock)'),
+        DeclareLaunchArgument('sim_real_time_factor', default_value='1.0',
+                              description='simulated seconds per wall second (0: as fast as '
+                                          'the computer allows); with use_sim_time'),
+        DeclareLaunchArgument('sim_lockstep', default_value='true',
+                              description='the simulation waits for the controller\'s commands '
+                                          '(a busy computer slows it, not its result); with '
+                                          'use_sim_time'),
         DeclareLaunchArgument('rviz', default_value='false',
                               description='start rviz2 with the package RViz config'),
         DeclareLaunchArgument('rviz_config', default_value=default_rviz,
@@ -128,18 +143,20 @@ def generate_launch_description():
     unit = {'pressure_unit': _typed('pressure_unit', str)}
 
     payload = {'payload_kg': _typed('payload_kg', float)}
+    sim_time = {'use_sim_time': _typed('use_sim_time', bool)}
     ends_all = Shutdown(reason='a node of the pipeline ended')
 
     inverse = Node(
         package=PACKAGE, executable='inverse_kinetostatic_node',
         name='inverse_kinetostatic_node', output='screen',
-        parameters=[params_file, robot, unit, payload, {'feedback': _typed('feedback', str)}],
+        parameters=[params_file, robot, unit, payload, sim_time,
+                    {'feedback': _typed('feedback', str)}],
         sigterm_timeout='10', on_exit=ends_all,
     )
     forward = Node(
         package=PACKAGE, executable='forward_kinetostatic_node',
         name='forward_kinetostatic_node', output='screen',
-        parameters=[params_file, robot, unit, payload],
+        parameters=[params_file, robot, unit, payload, sim_time],
         remappings=[('pressure_command', LaunchConfiguration('pressure_topic'))],
         on_exit=ends_all,
     )
@@ -149,13 +166,16 @@ def generate_launch_description():
         parameters=[params_file, {'robot_config': _typed('sim_robot_config', str),
                                   'base_frame': _typed('base_frame', str),
                                   'plant': _typed('sim_plant', str),
-                                  'command_timeout_s': 0.5}, unit],
+                                  'command_timeout_s': 0.5,
+                                  'publish_clock': _typed('use_sim_time', bool),
+                                  'real_time_factor': _typed('sim_real_time_factor', float),
+                                  'lockstep': _typed('sim_lockstep', bool)}, unit, sim_time],
         condition=IfCondition(LaunchConfiguration('sim')), on_exit=ends_all,
     )
     trajectory = Node(
         package=PACKAGE, executable='trajectory_publisher', name='trajectory_publisher',
         output='screen',
-        parameters=[params_file, robot, payload, {
+        parameters=[params_file, robot, payload, sim_time, {
             'trajectory': _typed('trajectory', str),
             'bending_angle_deg': _typed('bending_angle_deg', float),
             'period_s': _typed('period_s', float),
@@ -165,7 +185,7 @@ def generate_launch_description():
     if _installed(RVIZ_PACKAGE):
         rviz = Node(
             package=RVIZ_PACKAGE, executable='rviz2', name='rviz2', output='screen',
-            arguments=['-d', LaunchConfiguration('rviz_config')],
+            arguments=['-d', LaunchConfiguration('rviz_config')], parameters=[sim_time],
             condition=IfCondition(LaunchConfiguration('rviz')),
         )
     else:

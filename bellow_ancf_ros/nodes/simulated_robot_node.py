@@ -197,19 +197,20 @@ def plant_effects(get) -> PlantEffects:
                                     reason) from None
 
 
-def _simulation_clock(get, rate_hz: float) -> SimulationClock | None:
+def _simulation_clock(get, rate_hz: float, log) -> SimulationClock | None:
     """The :class:`SimulationClock` of ``publish_clock`` and its settings, or None (wall clock).
 
     ``real_time_factor`` and ``lockstep`` away from their defaults without
-    ``publish_clock`` raise :class:`StartupParameterError`: they would do nothing.
+    ``publish_clock`` do nothing: ``log`` says so (a launch passes them whether
+    or not it runs on simulation time).
     """
     if not get('publish_clock').value:
-        for name, default in (('real_time_factor', 1.0), ('lockstep', False)):
-            if get(name).value != default:
-                raise StartupParameterError(name, get(name).value,
-                                            f'{default} without publish_clock',
-                                            'the simulation runs on the wall clock: set '
-                                            'publish_clock true')
+        ignored = [f'{name} = {get(name).value}' for name, default in
+                   (('real_time_factor', 1.0), ('lockstep', False))
+                   if get(name).value != default]
+        if ignored:
+            log(f'{", ".join(ignored)} ignored: without publish_clock the simulation runs on '
+                'the wall clock')
         return None
     return SimulationClock(1.0 / rate_hz, float(get('real_time_factor').value),
                            float(get('lockstep_period_s').value) if get('lockstep').value
@@ -352,7 +353,7 @@ class SimulatedRobotNode(Node):
             except ValueError as exc:
                 raise StartupParameterError('mocap_quaternion_xyzw', quat,
                                             'a non-zero quaternion (x, y, z, w)', str(exc))
-        self.clock = _simulation_clock(g, rate)   # None: the wall clock
+        self.clock = _simulation_clock(g, rate, self.get_logger().warning)   # None: wall clock
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
                       'timeouts': 0, 'dropped_poses': 0, 'outliers': 0, 'resets': 0}

@@ -186,14 +186,21 @@ def load_launch_file(installed=('bellow_ancf_ros',)):
 
 
 def launch_context(description, cli_args):
-    """Launch configurations: the declared defaults, then ``name:=value`` arguments."""
-    declared = {e.name: e.default_value for e in description.entities
-                if isinstance(e, DeclareLaunchArgument)}
-    context = dict(declared)
+    """Launch configurations: ``name:=value`` arguments, then the declared defaults.
+
+    As launch does: each ``DeclareLaunchArgument``, in order, sets its
+    default (a substitution: evaluated then) where no argument was given.
+    """
+    declared = [e for e in description.entities if isinstance(e, DeclareLaunchArgument)]
+    context = {}
     for arg in shlex.split(cli_args) if isinstance(cli_args, str) else cli_args:
         name, value = arg.split(':=', 1)
-        assert name in declared, f'launch argument {name!r} is not declared by the launch file'
+        assert name in {e.name for e in declared}, \
+            f'launch argument {name!r} is not declared by the launch file'
         context[name] = value
+    for e in declared:
+        if e.name not in context:
+            context[e.name] = _perform(e.default_value, context)
     return context
 
 
@@ -287,12 +294,12 @@ def test_issue_example_launch_arguments_win_over_the_params_file(domain_id, tmp_
         assert got == expected, exe
     assert results['trajectory_publisher'][1] == {
         'robot_config': 'two_segment', 'base_frame': 'base', 'trajectory': 'bending_circle',
-        'bending_angle_deg': 10.0, 'period_s': 20.0, 'payload_kg': 0.0}
+        'bending_angle_deg': 10.0, 'period_s': 20.0, 'payload_kg': 0.0, 'use_sim_time': False}
     for exe in ('inverse_kinetostatic_node', 'forward_kinetostatic_node'):
         got = dict(results[exe][1])
         assert got.pop('payload_kg') == 0.0 and got.pop('feedback', 'none') == 'none'
         assert got == {'robot_config': 'two_segment', 'base_frame': 'base',
-                       'pressure_unit': 'kPa'}
+                       'pressure_unit': 'kPa', 'use_sim_time': False}
 
 
 def test_defaults_are_the_declared_defaults(domain_id, tmp_path):
@@ -406,6 +413,24 @@ def test_sim_feedback_and_payload_arguments(domain_id, tmp_path):
     assert results['trajectory_publisher'][1]['payload_kg'] == 0.02   # the robot at rest
     sim = results['simulated_robot_node'][1]
     assert sim['robot_config'] == 'one_segment_mismatched' and sim['command_timeout_s'] == 0.5
+    # the simulated robot is the clock, in lockstep; every node runs on it
+    assert sim['publish_clock'] and sim['lockstep'] and sim['real_time_factor'] == 1.0
+    assert all(got['use_sim_time'] for _, got in results.values())
+
+
+@pytest.mark.parametrize('args,sim_time', [('', False), ('sim:=true use_sim_time:=false', False),
+                                           ('use_sim_time:=true', True),
+                                           ('sim:=true sim_real_time_factor:=0.5', True)])
+def test_use_sim_time_reaches_every_node_and_the_simulated_robot_is_the_clock(
+        domain_id, tmp_path, args, sim_time):
+    results = run_launch(domain_id, tmp_path, args)
+    for exe, (expected, got) in results.items():
+        assert got == expected, exe
+        assert got['use_sim_time'] is sim_time, exe
+    if 'simulated_robot_node' in results:
+        sim = results['simulated_robot_node'][1]
+        assert sim['publish_clock'] is sim_time
+        assert sim['real_time_factor'] == (0.5 if '0.5' in args else 1.0)
 
 
 def test_one_outcome_and_time_to_vent():

@@ -22,7 +22,6 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bellow_ancf_ros.nodes.ros_util import StartupParameterError  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 import test_ros_nodes as _rn  # noqa: E402
 from test_ros_nodes import pressure_msg, wait_for  # noqa: E402
@@ -156,14 +155,11 @@ def test_lockstep_holds_the_simulation_to_the_newest_command_and_lets_go_of_a_de
     wait_for(lambda: last_clock(h) > held + advanced + 2.0, what='running free again')
 
 
-def test_clock_settings_without_the_clock_are_refused_and_its_services_say_why(h):
-    with pytest.raises(StartupParameterError, match='parameter real_time_factor = 2.0 is not '
-                                                    'allowed .*set publish_clock true'):
-        h.add(SimulatedRobotNode, real_time_factor=2.0)
-    with pytest.raises(StartupParameterError, match='parameter lockstep = True'):
-        h.add(SimulatedRobotNode, lockstep=True)
-    sim = h.add(SimulatedRobotNode, seed=2)
+def test_without_the_clock_its_settings_do_nothing_and_its_services_say_why(h, capfd):
+    sim = h.add(SimulatedRobotNode, seed=2, real_time_factor=2.0, lockstep=True)
     assert sim.clock is None
+    assert ('real_time_factor = 2.0, lockstep = True ignored: without publish_clock'
+            in capfd.readouterr().err)
     res = h.call(h.service(Trigger, 'simulated_robot_node/pause'), Trigger.Request())
     assert not res.success and 'needs publish_clock: true' in res.message
     res = h.call(h.service(Trigger, 'simulated_robot_node/reset'), Trigger.Request())
