@@ -102,8 +102,8 @@ from ..cli.output import count, number, numbers
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import (NodeProcess, Recorder, child_env, hardware_parameters, machine_state,
-                       plant_effects, tidy, wait_until, wait_up)
+from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, hardware_parameters,
+                       machine_state, plant_effects, tidy, wait_until, wait_up)
 from .step_target import LATE_GOAL_M, OVERSHOOT_GOAL_M, STEP_GOAL_M, step_phase
 from .step_target import RUNS as STEP_RUNS
 
@@ -197,14 +197,14 @@ def columns(cases=CASES, speeds=SPEEDS, period_scale: float = 1.0) -> list:
 
 
 # ---------------------------------------------------------------- one run
-def _recorder(domain: int, name: str) -> Recorder:
+def _recorder(domain: int, name: str, sim_time: bool) -> Recorder:
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
     from std_msgs.msg import Float64MultiArray
     return Recorder(domain, {
         'target_pose': PoseStamped, 'pressure_command': Float64MultiArray,
         'measured_pose': PoseStamped, 'true_pose': PoseStamped, 'predicted_pose': PoseStamped,
-        '/diagnostics': DiagnosticArray}, name=name)
+        '/diagnostics': DiagnosticArray}, name=name, sim_time=sim_time)
 
 
 class Run:
@@ -216,7 +216,7 @@ class Run:
         self.case, self.col, self.mode, self.args, self.log_dir = case, col, mode, args, log_dir
         self.name = f'{col.label}, {MODE_NAMES[mode]}'
         self.env = child_env(domain)
-        self.rec = _recorder(domain, f'ros_demo_recorder_{mode}')
+        self.rec = _recorder(domain, f'ros_demo_recorder_{mode}', args.sim_time)
         self.procs: dict[str, NodeProcess] = {}
         self.tag = f'{col.key.replace("@", "_")}_{mode}_'
         self.ok = True
@@ -225,15 +225,16 @@ class Run:
         self.t0 = time.monotonic()
         self.procs['robot'] = NodeProcess('simulated_robot_node', {
             'robot_config': case.plant, 'seed': args.seed, 'plant': args.plant,
-            'physics_rate_hz': args.physics_rate, 'payload_kg': case.payload_kg}, self.env,
-            log_dir, tag=self.tag)
+            'physics_rate_hz': args.physics_rate, 'payload_kg': case.payload_kg,
+            **clock_parameters(args.sim_time, robot=True)}, self.env, log_dir, tag=self.tag)
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
             'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
             'dynamic_feedforward': mode != 'none', 'payload_kg': case.payload_kg,
-            **hardware_parameters(args.plant)},
+            **hardware_parameters(args.plant), **clock_parameters(args.sim_time)},
             self.env, log_dir, tag=self.tag)
         self.procs['forward'] = NodeProcess('forward_kinetostatic_node', {
-            'robot_config': case.robot, 'max_rate_hz': 5.0}, self.env, log_dir,
+            'robot_config': case.robot, 'max_rate_hz': 5.0,
+            **clock_parameters(args.sim_time)}, self.env, log_dir,
             remaps={'pressure_command': 'measured_pressure'}, tag=self.tag)
 
     def _check(self) -> None:
@@ -286,7 +287,8 @@ class Run:
                 'rate_hz': TARGET_RATE_HZ, 'period_s': self.col.period_s,
                 'start_delay_s': self.args.lead_in, 'spin_up_s': self.spin_up_s,
                 'ramp_in_s': 0.0,   # this process holds the path's first point (lead-in)
-                'preview_s': preview_s(self.args.plant, self.mode)}
+                'preview_s': preview_s(self.args.plant, self.mode),
+                **clock_parameters(self.args.sim_time)}
         if case.bending_angle_deg is not None:
             traj['bending_angle_deg'] = case.bending_angle_deg
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', traj, self.env,
@@ -334,9 +336,7 @@ class Run:
 
     def run_until_stop(self) -> None:
         """Wait for the end of the evaluated period (a dead node raises)."""
-        while time.monotonic() < self.times['stop']:
-            time.sleep(0.05)
-            self._check()
+        self.rec.wait_for(self.times['stop'], self._check)
 
     def stop_trajectory(self) -> None:
         """Stop the trajectory publisher; this process brings the path to rest, then holds it.
@@ -384,14 +384,12 @@ class Run:
                 self._hold_timer = self.rec.node.create_timer(0.1, tick)
         self._hold_timer = self.rec.node.create_timer(1.0 / TARGET_RATE_HZ, tick)
         proc.stop()
-        self.times['hold'] = time.monotonic() + d
+        self.times['hold'] = self.rec.now() + d
         self.times['end'] = self.times['hold'] + self.hold_s
 
     def hold(self) -> None:
         """Wait until the end of the hold phase (a dead node raises)."""
-        while time.monotonic() < self.times['end']:
-            time.sleep(0.05)
-            self._check()
+        self.rec.wait_for(self.times['end'], self._check)
         self._hold_timer.cancel()
 
     def fail(self, exc: Exception) -> None:
@@ -627,6 +625,10 @@ def _parse(argv):
                     help='skip the step-target phase (10 mm step, unshaped and ZVD-shaped)')
     ap.add_argument('--no-goals', action='store_true',
                     help='exit 0 without checking the closed-loop goals (short test runs)')
+    ap.add_argument('--wall-clock', dest='sim_time', action='store_false',
+                    help='run the nodes on the wall clock, as with a real robot, instead of on '
+                         "the simulated robot's clock in lockstep (the default: a busy "
+                         'computer slows the run, not its figures)')
     return ap.parse_args(argv)
 
 

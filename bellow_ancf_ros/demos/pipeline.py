@@ -6,6 +6,13 @@ process (``python -m bellow_ancf_ros.nodes.<module> --ros-args ...``) in its
 own session, on an isolated ``ROS_DOMAIN_ID`` with
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; :class:`Recorder` subscribes in
 this process with rclpy and stores every message with its arrival time.
+
+Simulation time (the default of the demos): the simulated robot is the
+clock (``publish_clock``, in ``lockstep`` with the controller's commands,
+:func:`clock_parameters`), every node and the recorder run on it
+(``use_sim_time``), and the demos' phases are measured on it
+(:meth:`SpunNode.now`, :meth:`SpunNode.wait_for`), so a busy computer slows
+the run instead of changing its figures.
 """
 
 from __future__ import annotations
@@ -19,8 +26,29 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'child_env', 'hardware_parameters', 'machine_state',
-           'plant_effects', 'tidy', 'wait_until', 'wait_up']
+__all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'child_env', 'clock_parameters',
+           'hardware_parameters', 'machine_state', 'plant_effects', 'tidy', 'wait_until',
+           'wait_up']
+
+#: Wall seconds without the simulation's clock moving before a wait gives up.
+STALL_S = 30.0
+
+
+class SimulationStalled(RuntimeError):
+    """The simulation's clock did not move for :data:`STALL_S` wall seconds."""
+
+
+def clock_parameters(sim_time: bool, robot: bool = False) -> dict:
+    """The parameters that put a node on simulation time (``robot``: the one that is the clock).
+
+    The simulated robot publishes ``/clock`` in lockstep with the
+    controller's commands at real time; every node uses it.  Nothing without
+    ``sim_time`` (the wall clock).
+    """
+    if not sim_time:
+        return {}
+    return dict({'use_sim_time': True},
+                **({'publish_clock': True, 'lockstep': True} if robot else {}))
 
 
 class NodeProcess:
@@ -187,16 +215,18 @@ class SpunNode:
     then call :meth:`start`; ``self.lock`` guards what callbacks store.
     """
 
-    def __init__(self, domain: int, name: str) -> None:
-        """Own context and node; not spinning until :meth:`start`."""
+    def __init__(self, domain: int, name: str, sim_time: bool = False) -> None:
+        """Own context and node (``sim_time``: on ``/clock``); not spinning until :meth:`start`."""
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
 
         self.rclpy = rclpy
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=domain)
-        self.node = rclpy.create_node(name, context=self.ctx)
+        self.node = rclpy.create_node(name, context=self.ctx, parameter_overrides=[
+            Parameter('use_sim_time', value=bool(sim_time))])
         self.lock = threading.Lock()
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
@@ -205,6 +235,27 @@ class SpunNode:
     def start(self) -> None:
         """Spin the node in its thread."""
         self.thread.start()
+
+    def now(self) -> float:
+        """The node's time [s]: simulation time on ``/clock``, else the monotonic clock."""
+        from ..nodes.ros_util import control_now
+        return control_now(self.node)
+
+    def wait_for(self, until: float, check=None) -> None:
+        """Wait until :meth:`now` reaches ``until``, calling ``check()`` every 50 ms.
+
+        Raises :class:`SimulationStalled` when the clock did not move for
+        :data:`STALL_S` wall seconds (a simulation that stopped).
+        """
+        last, moved = self.now(), time.monotonic()
+        while (now := self.now()) < until:
+            if check is not None:
+                check()
+            if now != last:
+                last, moved = now, time.monotonic()
+            elif time.monotonic() - moved > STALL_S:
+                raise SimulationStalled(f'the clock stood at {now:.3f} s for {STALL_S:g} s')
+            time.sleep(0.05)
 
     def _spin(self) -> None:
         try:
@@ -224,9 +275,13 @@ class SpunNode:
 class Recorder(SpunNode):
     """rclpy in this process: records ``topics`` (name -> message type) with arrival times."""
 
-    def __init__(self, domain: int, topics: dict, name: str = 'ros_demo_recorder') -> None:
-        """Own context on ``domain``, one subscription per topic, spun in a thread."""
-        super().__init__(domain, name)
+    def __init__(self, domain: int, topics: dict, name: str = 'ros_demo_recorder',
+                 sim_time: bool = False) -> None:
+        """Own context on ``domain``, one subscription per topic, spun in a thread.
+
+        Arrival times on :meth:`now` (simulation time with ``sim_time``).
+        """
+        super().__init__(domain, name, sim_time)
         qos = record_qos()
         self.msgs = {t: [] for t in topics}
         self.subs = {}
@@ -237,7 +292,7 @@ class Recorder(SpunNode):
 
     def _store(self, topic: str, msg) -> None:
         with self.lock:
-            self.msgs[topic].append((time.monotonic(), msg))
+            self.msgs[topic].append((self.now(), msg))
 
     def publishers(self, topic: str) -> int:
         """Number of publishers matched on ``topic``."""
@@ -249,7 +304,7 @@ class Recorder(SpunNode):
             return len(self.msgs[topic])
 
     def snapshot(self) -> dict:
-        """A copy of everything recorded: topic -> [(arrival time, message), ...]."""
+        """A copy of everything recorded: topic -> [(arrival time (:meth:`now`), message), ...]."""
         with self.lock:
             return {k: list(v) for k, v in self.msgs.items()}
 

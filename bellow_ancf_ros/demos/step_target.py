@@ -21,13 +21,13 @@ overshoot of at most :data:`OVERSHOOT_GOAL_M` and an error of at most
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ..cli.output import number
-from .pipeline import NodeProcess, Recorder, child_env, hardware_parameters, wait_up
+from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, hardware_parameters,
+                       wait_up)
 
 __all__ = ['LATE_GOAL_M', 'OVERSHOOT_GOAL_M', 'RUNS', 'STEP_GOAL_M', 'STEP_M',
            'residual_swing', 'step_phase']
@@ -76,14 +76,17 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
     env = child_env(domain)
     feedback, shaping = RUNS[kind]
     tag = f'step_{kind}_'
-    rec = Recorder(domain, {'true_pose': PoseStamped}, name=f'ros_demo_step_{kind}')
+    rec = Recorder(domain, {'true_pose': PoseStamped}, name=f'ros_demo_step_{kind}',
+                   sim_time=args.sim_time)
     procs = {
         'robot': NodeProcess('simulated_robot_node', {
             'robot_config': ROBOT + '_mismatched', 'seed': args.seed, 'plant': args.plant,
-            'physics_rate_hz': args.physics_rate}, env, log_dir, tag=tag),
+            'physics_rate_hz': args.physics_rate,
+            **clock_parameters(args.sim_time, robot=True)}, env, log_dir, tag=tag),
         'inverse': NodeProcess('inverse_kinetostatic_node', {
             'robot_config': ROBOT, 'feedback': feedback, 'target_shaping': shaping,
-            **hardware_parameters(args.plant)}, env, log_dir, tag=tag)}
+            **hardware_parameters(args.plant), **clock_parameters(args.sim_time)}, env,
+            log_dir, tag=tag)}
     out = {'ok': False}
     try:
         pub = rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
@@ -93,11 +96,11 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
         msgs = [pose_message(p, quaternion_from_z_axis(z), 'base', Time(sec=0, nanosec=0))
                 for p, z in poses]
         timer = rec.node.create_timer(0.1, lambda: pub.publish(msgs[0]))
-        time.sleep(SETTLE_S)
+        rec.wait_for(rec.now() + SETTLE_S)
         timer.cancel()   # the step target once (the node holds it): no re-solve of the same
         pub.publish(msgs[1])   # target between the shaper's levels
-        t_step = time.monotonic()
-        time.sleep(AFTER_S)
+        t_step = rec.now()
+        rec.wait_for(t_step + AFTER_S)
         snap = rec.snapshot()['true_pose']
         t = np.array([a for a, _ in snap]) - t_step
         pos = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
