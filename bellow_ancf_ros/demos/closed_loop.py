@@ -886,7 +886,7 @@ def main(argv=None) -> int:
                         'period_scale': args.period_scale, 'lead_in_s': args.lead_in,
                         'hold_s': args.hold, 'spin_up_s': args.spin_up, 'seed': args.seed,
                         'sequential': args.sequential, 'goals_checked': not args.no_goals,
-                        'step': not args.no_step},
+                        'step': not args.no_step, 'simulation_time': args.sim_time},
             'paper': PAPER, 'passed': bool(passed), 'cases': records, 'step': step}
     out = Path(args.results)
     out.parent.mkdir(parents=True, exist_ok=True)
