@@ -163,8 +163,14 @@ def test_bag_without_the_topics(tmp_path, capsys):
     assert code == 2 and "no topic 'pressure_command'" in err and '/chatter' in err
 
 
-def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
-    """``bellow-ancf record`` (no rosbag2): commands and poses in, a bag calibrate reads out."""
+@pytest.mark.parametrize('sim_time', [False, True])
+def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context, sim_time):
+    """``bellow-ancf record`` (no rosbag2): commands and poses in, a bag calibrate reads out.
+
+    With ``--use-sim-time`` the reception times are a ``/clock``'s (here one at
+    0.25x real time from 100 s, as a simulation or a bag played with
+    ``--clock``), and the poses' simulation-time stamps match them.
+    """
     import os
     import subprocess
     import sys
@@ -177,14 +183,25 @@ def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
 
     from bellow_ancf_ros.core.fit import read_bag
 
+    from rclpy.time import Time
+    from rosgraph_msgs.msg import Clock
+
     node = rclpy.create_node('record_source', context=ros_context)
     pub_p = node.create_publisher(Float64MultiArray, 'pressure_command', 10)
     pub_x = node.create_publisher(PoseStamped, 'measured_pose', 10)
+    pub_c = node.create_publisher(Clock, '/clock', 10)
     stop = threading.Event()
+    t0 = time.monotonic()
+
+    def now():
+        if not sim_time:
+            return node.get_clock().now()
+        return Time(nanoseconds=int((100.0 + 0.25 * (time.monotonic() - t0)) * 1e9))
 
     def publish():
         k = 0
         while not stop.is_set():
+            pub_c.publish(Clock(clock=now().to_msg()))
             # (steps of 1 s; a slow start of the recorder on a busy machine: held at 90 kPa)
             m = Float64MultiArray(data=[10e3 * min(k // 20, 9), 0.0, 0.0])
             m.layout.dim = [MultiArrayDimension(label='actuator_pressure_gauge_pa', size=3,
@@ -192,7 +209,7 @@ def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
             pub_p.publish(m)
             x = PoseStamped()
             x.header.frame_id = 'world'
-            x.header.stamp = node.get_clock().now().to_msg()
+            x.header.stamp = now().to_msg()
             x.pose.position.z = 0.1 + 1e-3 * (k // 20)
             x.pose.orientation.w = 1.0
             pub_x.publish(x)
@@ -203,7 +220,8 @@ def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
     bag = tmp_path / 'bag'
     try:
         res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.cli', 'record', '--out',
-                              str(bag), '--duration', '4', '--storage', 'mcap'],
+                              str(bag), '--duration', '4', '--storage', 'mcap']
+                             + (['--use-sim-time'] if sim_time else []),
                              env=dict(os.environ), capture_output=True, text=True, timeout=60)
     finally:
         stop.set()
@@ -214,6 +232,17 @@ def test_record_writes_a_bag_calibrate_reads(tmp_path, ros_context):
     rec = read_bag(bag, settle_s=0.2, n_actuators=3)
     assert len(rec) >= 2 and rec.frame_id == 'world'
     assert set(np.round(rec.pressures_pa[:, 0] / 10e3)) <= set(range(10))
+    if sim_time:   # every reception time on the /clock, just after the pose's stamp
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+        with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+            got = [(c.topic, t, reader.deserialize(raw, c.msgtype))
+                   for c, t, raw in reader.messages()]
+        end = 100.0 + 0.25 * (time.monotonic() - t0)
+        assert all(100.0 <= t * 1e-9 <= end for _, t, _ in got)
+        lag = [t * 1e-9 - (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
+               for topic, t, m in got if topic == '/measured_pose']
+        assert len(lag) > 10 and -0.02 <= min(lag) and max(lag) <= 0.1, (min(lag), max(lag))
 
 
 def test_values_in_place_keeps_layout_and_reads_back(one_cfg):
