@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 from . import worker
-from .ros_util import WARN_THROTTLE_S
+from .ros_util import WARN_THROTTLE_S, control_clock
 
 __all__ = [
     'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
@@ -232,13 +231,14 @@ class Refusals:
 
     def __init__(self, node, what: str, publish_diag) -> None:
         self.node, self.what, self.publish_diag = node, what, publish_diag
-        self._last = ('', 0.0)
+        self._clock = control_clock(node)   # the rate limit: control time (use_sim_time)
+        self._last = ('', -math.inf)
 
     def report(self, reason: str, total: int) -> None:
         """Log and report one refusal (``total``: refusals so far)."""
         self.node.get_logger().warning(f'{self.what} refused: {reason}',
                                        throttle_duration_sec=WARN_THROTTLE_S)
-        now = time.monotonic()
+        now = self._clock.now()
         if reason != self._last[0] or now - self._last[1] >= REFUSAL_DIAG_INTERVAL_S:
             self._last = (reason, now)
             self.publish_diag(DiagnosticStatus.WARN, f'{self.what} refused: {reason}',
@@ -259,6 +259,7 @@ class ThrottledStatus:
 
     def __init__(self, node, pub, name: str, period_s: float = STATUS_PERIOD_S) -> None:
         self.node, self.pub, self.name, self.period_s = node, pub, name, period_s
+        self._clock = control_clock(node)   # the throttle: control time, as the flush timer
         self._lock = threading.Lock()
         self._last = (None, None, -math.inf)  # level, message, time of the last published
         self._pending = None
@@ -267,7 +268,7 @@ class ThrottledStatus:
 
     def submit(self, hardware_id: str, level: bytes, message: str, values: dict) -> None:
         """Publish this status now, or keep it for :meth:`flush` (see the class docstring)."""
-        now = time.monotonic()
+        now = self._clock.now()
         with self._lock:
             lvl, msg, t = self._last
             if (level, message) == (lvl, msg) and now - t < self.period_s:
@@ -282,7 +283,7 @@ class ThrottledStatus:
         with self._lock:
             if self._pending is not None:
                 pending, self._pending = self._pending, None
-                self._publish(time.monotonic(), *pending)
+                self._publish(self._clock.now(), *pending)
 
     def _publish(self, now, hardware_id, level, message, values) -> None:
         self._last = (level, message, now)

@@ -43,6 +43,7 @@ from .ros_util import (
     Topic,
     VENT_ACK_TIMEOUT_S,
     command_qos,
+    control_clock,
     declare_all,
     descriptor,
     diagnostics_qos,
@@ -131,7 +132,8 @@ class ExcitationPublisher(Node):
         self._owner = TopicOwner(self, 'pressure_command',
                                  'start the excitation again once the other node has stopped')
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
-        self._t0 = None
+        self._control = control_clock(self)   # the steps' clock: control time (use_sim_time)
+        self._t0 = None   # (set at the first tick with the subscribers wanted)
         rate = float(self.get_parameter('rate_hz').value)
         self._timer = self.create_timer(1.0 / rate, self._tick)
         self.get_logger().info(
@@ -179,14 +181,14 @@ class ExcitationPublisher(Node):
             wanted = int(self.get_parameter('wait_for_subscribers').value)
             if self._pub.get_subscription_count() < wanted:
                 return
-            self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
-        t = time.monotonic() - self._t0
+            self._t0 = self._control.now() + float(self.get_parameter('start_delay_s').value)
+        t = self._control.now() - self._t0
         if t < 0:
             return
         step = int(t // self.dwell)
         if step > self.step + 1:   # a stall (a busy CPU) would skip a step: each is sent, and
             step = self.step + 1   # held for its whole dwell from when it went out
-            self._t0 = time.monotonic() - step * self.dwell
+            self._t0 = self._control.now() - step * self.dwell
         if step >= len(self.sequence):
             self.vent('excitation finished')
             self.finished = True
@@ -232,7 +234,7 @@ class ExcitationPublisher(Node):
             n = self._pub.get_subscription_count()
             if n == 0:
                 return
-            t0 = time.monotonic()
+            t0 = time.monotonic()   # the vent's acknowledgement: real seconds, whatever the clock
             ok = self._pub.wait_for_all_acked(Duration(seconds=VENT_ACK_TIMEOUT_S))
         except Exception:  # noqa: BLE001 - best effort on the way out
             return

@@ -13,14 +13,12 @@ Bad messages are refused by :func:`.contract.validate_force`.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 
 from . import contract
-from .ros_util import command_qos
+from .ros_util import command_qos, control_clock
 
 __all__ = ['ExternalForce']
 
@@ -40,6 +38,7 @@ class ExternalForce:
         """
         self.node, self.base_frame, self.timeout_s = node, base_frame, float(timeout_s)
         self._refuse, self._on_change = refuse, on_change
+        self._clock = control_clock(node)   # the timeout: control time (use_sim_time)
         self._force, self._t, self._source = None, -np.inf, ''
         self._applied = np.zeros(3)
         self._said_stale = False
@@ -59,7 +58,7 @@ class ExternalForce:
             self.refused += 1
             self._refuse(f'{topic}: {exc}')
             return
-        self._force, self._t, self._source = force, time.monotonic(), topic
+        self._force, self._t, self._source = force, self._clock.now(), topic
         self._said_stale = False
         if np.max(np.abs(force - self._applied)) > RESOLVE_CHANGE_N:
             self._on_change()
@@ -68,7 +67,7 @@ class ExternalForce:
         """The force in effect [N] (a tuple), or None: none yet, or older than the timeout."""
         if self._force is None:
             return None
-        if time.monotonic() - self._t > self.timeout_s:
+        if self._clock.now() - self._t > self.timeout_s:
             if not self._said_stale:
                 self._said_stale = True
                 self.node.get_logger().warning(

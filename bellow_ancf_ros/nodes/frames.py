@@ -77,6 +77,10 @@ class PoseFrames:
         self.mocap = mocap_frame
         self._tf = tf_buffer
         self._known = (-float('inf'), [])   # (when read, tf2's frames)
+        self._clock = None   # its age: the node's control time (ros_util.ControlClock)
+        if hasattr(node, 'get_clock'):   # (else, e.g. no node: time.monotonic())
+            from .ros_util import control_clock   # (lazily: this module needs no rclpy)
+            self._clock = control_clock(node)
         if use_tf2 and tf_buffer is None:
             try:   # a ROS install has tf2_ros; the PyPI wheels of this venv do not
                 from tf2_ros import Buffer, TransformListener
@@ -100,7 +104,7 @@ class PoseFrames:
         """The frames tf2 knows (read at most once a second); empty without tf2."""
         if self._tf is None:
             return []
-        now = time.monotonic()
+        now = time.monotonic() if self._clock is None else self._clock.now()
         if now - self._known[0] >= _FRAMES_MAX_AGE_S:
             self._known = (now, tf2_frame_names(self._tf))
         return self._known[1]

@@ -44,13 +44,12 @@ from std_msgs.msg import Float64MultiArray
 from ..core import ConfigError, InverseStatus, RobotModel, payload_problem, solve_inverse
 from ..core import geometry
 from ..core.control import CommandOutput
-from . import contract, worker
+from . import contract, diagnostics, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FeedbackLink
 from .mode_watch import ModeWatch
 from .target_link import TARGET_PARAMETER_TABLE, TargetLink
 from .ownership import TopicOwner
-from . import diagnostics
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .inverse_interface import CONFIGURE_PARAMETERS, PARAMETERS, TOPICS
 from .ros_util import (
@@ -60,8 +59,8 @@ from .ros_util import (
     declare_all,
     diagnostics_qos,
     guard_parameters,
+    control_clock,
     main_for,
-    control_time_of,
     pose_message,
     pressure_message,
     publish_and_wait_acked,
@@ -117,7 +116,8 @@ class InverseKinetostaticNode(LifecycleNode):
         self.stats = {'received': 0, 'refused': 0, 'ignored_inactive': 0, 'solved': 0,
                       'published': 0, 'failed': 0, 'unreachable': 0, 'vents': 0,
                       'over_budget': 0, 'republished': 0}
-        self._last_publish_t = -float('inf')
+        self._last_publish_t = -float('inf')   # control time (ControlClock), as every window
+        self._now = control_clock(self).now   # (solve budgets, the vent's ack: the wall clock)
         self._last_pose = None   # the commanded_pose of the current command
         self.solve_stats = worker.SolveStats()
         self._slices = worker.BudgetSlices(MAX_CONTINUATIONS)   # budget slices of one target
@@ -309,7 +309,7 @@ class InverseKinetostaticNode(LifecycleNode):
             vent = contract.vent_pressures(self._model.A, cfg.p_min, cfg.p_max)
             msg = pressure_message(vent, self._unit())
             self.last_command_pa = vent
-            self._output.vent(time.monotonic())
+            self._output.vent(self._now())
             self._last_pose = None   # (the vented robot's pose is not a solve's)
             self.stats['vents'] += 1
             # under the lock: no solve result can be published after the vent
@@ -415,7 +415,7 @@ class InverseKinetostaticNode(LifecycleNode):
         except contract.InputError as exc:
             self._refuse(str(exc))
             return
-        item = (pos, z, msg.header.stamp, time.monotonic())
+        item = (pos, z, msg.header.stamp, self._now())
         with self._lock:
             self._last_target = (pos, z)
             self._held_item = item
@@ -439,16 +439,16 @@ class InverseKinetostaticNode(LifecycleNode):
             if self._owner is None or not self._owner.may_publish():
                 self._yield_requested = True   # _watch_owner vents and deactivates
                 return
-            period = 1.0 / float(self.get_parameter('command_rate_hz').value)
-            if time.monotonic() - self._last_publish_t < 0.5 * period:
+            now, rate = self._now(), float(self.get_parameter('command_rate_hz').value)
+            if now - self._last_publish_t < 0.5 / rate:
                 return
             if self._output.timed and self._output.wanted is not None:   # (the creep's lead)
-                p = self.last_command_pa = contract.safe_pressures(self._output.again(
-                    time.monotonic()), self._cfg.p_min, self._cfg.p_max, self._model.A)
+                p = self.last_command_pa = contract.safe_pressures(
+                    self._output.again(now), self._cfg.p_min, self._cfg.p_max, self._model.A)
             self._pub_cmd.publish(pressure_message(p, self._unit()))
             if self._last_pose is not None:   # the model's pose for it (stamp: its target's)
                 self._pub_pose.publish(self._last_pose)
-            self._last_publish_t = time.monotonic()
+            self._last_publish_t = self._now()
             self.stats['republished'] += 1
 
     def _watch_owner(self) -> None:
@@ -500,7 +500,7 @@ class InverseKinetostaticNode(LifecycleNode):
         try:
             # shaped and shifted for the robot's mode, then corrected by the closed loop
             # (which measures against the shaped pose wanted, not the shifted command)
-            cmd, ref = self._targets.targets(item, control_time_of(self, stamp, future=True))
+            cmd, ref = self._targets.targets(item, control_clock(self).time_of(stamp, True))
             pos, z = self._feedback.correct(ref[0], ref[1], stamp, command=cmd,
                                             hold_until=self._targets.hold_until())
             with self._solve_lock:
@@ -536,10 +536,10 @@ class InverseKinetostaticNode(LifecycleNode):
                 if stamp.sec == 0 and stamp.nanosec == 0:
                     stamp = self.get_clock().now().to_msg()
                 # past the regulators' play, ahead of the creep (as configured)
-                p = contract.safe_pressures(self._output.command(p, time.monotonic()), cfg.p_min,
+                p = contract.safe_pressures(self._output.command(p, self._now()), cfg.p_min,
                                             cfg.p_max, model.A)
                 self._pub_cmd.publish(pressure_message(p, unit))
-                self._last_publish_t = time.monotonic()
+                self._last_publish_t = self._now()
                 self._last_pose = pose_message(
                     fw.position, geometry.quaternion_from_rotation(fw.rotation),
                     self.get_parameter('base_frame').value, stamp)

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from typing import Any, Callable
 
 import numpy as np
@@ -56,8 +55,8 @@ from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, LOOP_DELAY_S, LOOP_LAG_S,
 from ..core import geometry
 from .diagnostics import Refusals
 from .frames import PoseFrames
-from .ros_util import (QOS_DEPTH, Param, StartupParameterError, declare_all, descriptor,
-                       control_time_of)
+from .ros_util import (QOS_DEPTH, Param, StartupParameterError, control_clock, declare_all,
+                       descriptor)
 
 __all__ = ['FEEDBACK_PARAMETERS', 'FEEDBACK_PARAMETER_TABLE', 'FeedbackLink', 'measured_pose_qos']
 
@@ -134,6 +133,7 @@ class FeedbackLink:
         if mode not in FEEDBACK_MODES:
             raise StartupParameterError('feedback', mode, "one of: 'none', 'integral'")
         self.node = node
+        self._clock = control_clock(node)   # every time here: control time (use_sim_time)
         self._gain_setting = self._read_gain()
         self._lock = threading.Lock()
         self._refusals = Refusals(node, 'measured poses', publish_diag)
@@ -208,7 +208,7 @@ class FeedbackLink:
             # a held target keeps being corrected; a target stream is solved anyway, and a
             # re-solve would only take the next target's slot of the rate limit
             item = self._last_item
-            if item is not None and time.monotonic() - item[3] >= period:
+            if item is not None and self._clock.now() - item[3] >= period:
                 resubmit(item)
         self._timer = self.node.create_timer(period, tick)
         if modes is not None:
@@ -252,8 +252,8 @@ class FeedbackLink:
     def remember(self, item: Any) -> None:
         """The newest accepted target item (re-submitted at ``feedback_rate_hz`` while held).
 
-        ``item[3]``: its arrival time (``time.monotonic()``); no re-solve
-        within one feedback period of it.
+        ``item[3]``: its arrival time (control time, :class:`~.ros_util.ControlClock`);
+        no re-solve within one feedback period of it.
         """
         self._last_item = item
 
@@ -273,13 +273,13 @@ class FeedbackLink:
             if self._law is not None:
                 self._law.measurement(self._taken_at(msg.header.stamp), pos, z)
 
-    def _monotonic(self, stamp, future: bool) -> float:
-        """A stamp as monotonic time (:func:`~.ros_util.control_time_of`)."""
-        return control_time_of(self.node, stamp, future)
+    def _control_time(self, stamp, future: bool) -> float:
+        """A stamp as control time (:meth:`~.ros_util.ControlClock.time_of`)."""
+        return self._clock.time_of(stamp, future)
 
     def _taken_at(self, stamp) -> float:
-        """Monotonic time the pose was taken: from its stamp (zero or future stamp: now)."""
-        return self._monotonic(stamp, future=False)
+        """Control time the pose was taken: from its stamp (zero or future stamp: now)."""
+        return self._control_time(stamp, future=False)
 
     def correct(self, position: np.ndarray, z_axis: np.ndarray | None, stamp=None,
                 command: tuple | None = None, hold_until: float | None = None):
@@ -289,7 +289,7 @@ class FeedbackLink:
         the future: a target that previews the robot's lag).  ``command``:
         the target to correct when it is not the pose wanted (a dynamic
         feedforward's shift).  ``hold_until``: the correction is held for
-        measurements captured before it (monotonic s; a jump's move).  A
+        measurements captured before it (control time [s]; a jump's move).  A
         change between integrating and holding the
         correction through a dropout is logged, not only reported on
         ``/diagnostics``.
@@ -297,15 +297,15 @@ class FeedbackLink:
         with self._lock:
             if self._law is None:
                 return (position, z_axis) if command is None else command
-            out = self._law.corrected_target(time.monotonic(), position, z_axis,
-                                             wanted_at=self._monotonic(stamp, future=True),
+            out = self._law.corrected_target(self._clock.now(), position, z_axis,
+                                             wanted_at=self._control_time(stamp, future=True),
                                              command=command, hold_until=hold_until)
             degraded, state = self._law.blind, self._law.state
             wd = self._law.watchdog
             trip = None
             if wd is not None and wd.trips > self._trips_logged:
                 self._trips_logged, trip = wd.trips, wd.last_trip
-                self._trip_t, gain = time.monotonic(), self._law.gain_per_s
+                self._trip_t, gain = self._clock.now(), self._law.gain_per_s
         self._log_dropout(degraded, state)
         if trip is not None:
             self.node.get_logger().error(
@@ -315,7 +315,7 @@ class FeedbackLink:
 
     def _log_dropout(self, degraded: bool, state: str) -> None:
         """A dropout: INFO at its start and end (counted); a WARN once if it lasts too long."""
-        now, log = time.monotonic(), self.node.get_logger()
+        now, log = self._clock.now(), self.node.get_logger()
         if degraded != self._was_fallback:
             self._was_fallback = degraded
             if degraded:
@@ -380,7 +380,8 @@ class FeedbackLink:
         """What the oscillation watchdog saw, for :data:`TRIP_REPORT_S` after its last trip."""
         law = self._law
         wd = None if law is None else law.watchdog
-        if wd is None or wd.last_trip is None or time.monotonic() - self._trip_t > TRIP_REPORT_S:
+        if (wd is None or wd.last_trip is None
+                or self._clock.now() - self._trip_t > TRIP_REPORT_S):
             return None
         return f'{wd.last_trip.message}; feedback gain cut to {law.gain_per_s:.3g} /s'
 
@@ -437,7 +438,7 @@ class FeedbackLink:
         with self._lock:
             if self._law is None:
                 return {'feedback': 'none'}
-            values = self._law.status(time.monotonic())
+            values = self._law.status(self._clock.now())
             res = self._mode_result
             if res is not None:
                 values.update(res.values())

@@ -18,15 +18,17 @@ one of its levels (a level 10-25 ms late left 0.24-0.41 mm of swing after a
 from __future__ import annotations
 
 import threading
-import time
 from typing import Callable
 
 from ..core.control import ModeCheck, ModeCheckResult
+from .ros_util import control_clock
 
 __all__ = ['ModeWatch']
 
-#: How often the thread looks for a new equilibrium [s].
+#: How often the thread looks for a new equilibrium [s of wall time].
 _POLL_S = 0.2
+#: Longest wall-clock wait between two looks at the control time while held off [s].
+_QUIET_POLL_S = 0.01
 
 
 class ModeWatch:
@@ -34,13 +36,14 @@ class ModeWatch:
 
     def __init__(self, node, check: ModeCheck) -> None:
         self.node, self.check = node, check
+        self._clock = control_clock(node)   # when an analysis is due, and the quiet: control time
         self.result: ModeCheckResult | None = None
         self._listeners: list[Callable] = []
         self._fw = None
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._quiet_until = 0.0
+        self._quiet_until = -float('inf')
 
     def listen(self, fn: Callable[[ModeCheckResult | None, ModeCheckResult], None]) -> None:
         """Call ``fn(before, result)`` with every new answer (in the watch's thread)."""
@@ -63,7 +66,7 @@ class ModeWatch:
         self._thread = None
 
     def quiet(self, until: float) -> None:
-        """No modal analysis starts before ``until`` (``time.monotonic()`` time)."""
+        """No modal analysis starts before ``until`` (control time, ``ControlClock``)."""
         self._quiet_until = max(self._quiet_until, float(until))
 
     def offer(self, fw) -> None:
@@ -74,7 +77,7 @@ class ModeWatch:
 
     def _answer(self, fw) -> None:
         before = self.result
-        res = self.check.update(fw, time.monotonic())
+        res = self.check.update(fw, self._clock.now())
         if res is None:
             return
         self.result = res
@@ -86,10 +89,12 @@ class ModeWatch:
         while not self._stop.is_set():
             self._wake.wait(_POLL_S)
             self._wake.clear()
-            while not self._stop.is_set() and time.monotonic() < self._quiet_until:
-                self._stop.wait(self._quiet_until - time.monotonic())
+            # the thread waits on the wall clock; what it waits for is in control time
+            while not self._stop.is_set() and self._clock.now() < self._quiet_until:
+                left = self._quiet_until - self._clock.now()   # (simulated: no wall time)
+                self._stop.wait(min(left, _QUIET_POLL_S) if self._clock.simulated else left)
             fw = self._fw
-            if self._stop.is_set() or fw is None or not self.check.due(fw, time.monotonic()):
+            if self._stop.is_set() or fw is None or not self.check.due(fw, self._clock.now()):
                 continue
             try:
                 self._answer(fw)

@@ -59,11 +59,20 @@ class TopicOwner:
         self.resume = resume
         self.allow_param = allow_param
         self.others: list[str] = []
-        self.yielded_at: float | None = None   # monotonic time of the yield
+        # the yield's and the reminders' times: the node's control time (simulation time
+        # under use_sim_time, ros_util.ControlClock); a stand-in without a clock: monotonic
+        self._clock = None
+        if hasattr(node, 'get_clock'):
+            from .ros_util import control_clock   # (lazily: this module needs no rclpy)
+            self._clock = control_clock(node)
+        self.yielded_at: float | None = None   # control time of the yield
         self.yielded_to = ''                   # the other node(s), as the ERROR named them
         self._reported = False
-        self._reminded_at = 0.0
+        self._reminded_at = -float('inf')
         self._left = False
+
+    def _now(self) -> float:
+        return time.monotonic() if self._clock is None else self._clock.now()
 
     # ------------------------------------------------------------ the graph
     def _publishers(self) -> tuple[list[str], int]:
@@ -101,7 +110,7 @@ class TopicOwner:
     def start_yield(self, vented: bool = True) -> None:
         """The node has stopped (``vented``: and sent the vent): :meth:`report`, no resume."""
         if self.yielded_at is None:
-            self.yielded_at = time.monotonic()
+            self.yielded_at = self._now()
             self._reported, self._left, self.yielded_to = False, False, ''
             self._vented = vented
 
@@ -120,7 +129,7 @@ class TopicOwner:
         """
         if self.yielded_at is None:
             return None
-        now = time.monotonic() if now is None else now
+        now = self._now() if now is None else now
         names, unknown = self._publishers()
         if not self._reported:
             if unknown and not names and now - self.yielded_at < NAME_WAIT_S:

@@ -46,7 +46,8 @@ from std_msgs.msg import Float64MultiArray
 from ..core import load_robot
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
-from .ros_util import Param, Topic, command_qos, declare_all, descriptor, diagnostics_qos, main_for
+from .ros_util import (Param, Topic, command_qos, control_clock, declare_all, descriptor,
+                       diagnostics_qos, main_for)
 
 __all__ = ['RegulatorDriver', 'main', 'run']
 
@@ -90,6 +91,7 @@ class RegulatorDriver(Node):
         self.timeout_s = float(self.get_parameter('command_timeout_s').value)
         self._write = write or self._log_write
         self._lock = threading.Lock()
+        self._control = control_clock(self)   # the timeout: control time (simulation time too)
         self._last_cmd_t: float | None = None
         self.state = 'waiting for pressure_command'
         self.last_written: np.ndarray | None = None
@@ -108,7 +110,7 @@ class RegulatorDriver(Node):
 
     # ------------------------------------------------------------ the hardware call
     def _log_write(self, p: np.ndarray) -> None:
-        now = time.monotonic()
+        now = time.monotonic()   # a log line's throttle: the wall clock
         if now - self._logged_t >= 1.0 or not np.any(p):
             self._logged_t = now
             self.get_logger().info('regulators <- ' + ' '.join(f'{v / 1e3:.2f}' for v in p)
@@ -131,7 +133,7 @@ class RegulatorDriver(Node):
                                   self.stats['refused'])
             return
         with self._lock:
-            self._last_cmd_t = time.monotonic()
+            self._last_cmd_t = self._control.now()
             self.stats['commands'] += 1
             self.state = 'commanding'
             self._send(p)
@@ -139,7 +141,7 @@ class RegulatorDriver(Node):
     def _check_timeout(self) -> None:
         with self._lock:
             t = self._last_cmd_t
-            if t is None or time.monotonic() - t <= self.timeout_s:
+            if t is None or self._control.now() - t <= self.timeout_s:
                 return
             self._last_cmd_t = None   # vent once; wait for the controller again
             self.stats['timeouts'] += 1
@@ -168,7 +170,7 @@ class RegulatorDriver(Node):
         with self._lock:
             t, state = self._last_cmd_t, self.state
         level = DiagnosticStatus.OK if state == 'commanding' else DiagnosticStatus.WARN
-        age = 'none' if t is None else f'{time.monotonic() - t:.3f}'
+        age = 'none' if t is None else f'{self._control.now() - t:.3f}'
         self._diag(level, state, {'command_age_s': age})
 
     def _diag(self, level: bytes, message: str, values: dict) -> None:

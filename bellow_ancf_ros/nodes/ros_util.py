@@ -45,13 +45,13 @@ from ..core import ConfigError, limit_blas_threads, numba_cache
 from . import contract
 
 __all__ = [
-    'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT', 'VENT_ACK_TIMEOUT_S',
-    'WARN_THROTTLE_S', 'Param', 'StartupEnvironmentError', 'StartupParameterError', 'Topic',
-    'allowed_values', 'asks_for_help', 'command_qos', 'declare', 'declare_all', 'descriptor',
-    'diagnostics_qos', 'executor_choice', 'guard_parameters', 'init_rclpy', 'main_for',
-    'make_executor', 'control_now', 'control_time_of', 'node_help', 'pose_message',
-    'pressure_message', 'publish_and_wait_acked',
-    'request_stop', 'run_node', 'watch_parent',
+    'ControlClock', 'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT',
+    'VENT_ACK_TIMEOUT_S', 'WARN_THROTTLE_S', 'Param', 'StartupEnvironmentError',
+    'StartupParameterError', 'Topic', 'allowed_values', 'asks_for_help', 'command_qos',
+    'declare', 'declare_all', 'descriptor', 'diagnostics_qos', 'executor_choice',
+    'guard_parameters', 'init_rclpy', 'main_for', 'make_executor', 'control_clock',
+    'control_now', 'control_time_of', 'node_help', 'pose_message', 'pressure_message',
+    'publish_and_wait_acked', 'request_stop', 'run_node', 'watch_parent',
 ]
 
 QOS_DEPTH = 5
@@ -197,6 +197,84 @@ def control_time_of(node, stamp, future: bool = False) -> float:
     age = 1e-9 * (node.get_clock().now().nanoseconds
                   - (stamp.sec * 1_000_000_000 + stamp.nanosec))
     return now - age if (age >= 0.0 or future) else now
+
+
+class ControlClock:
+    """A node's control time (:func:`control_now`) that never runs backwards.
+
+    The ROS clock goes back when a simulation is reset or a recorded bag
+    starts over.  This time then stands still across the jump and runs on
+    from there (``jumps_back`` counts them): every window measured on it (a
+    timeout, a keepalive's spacing, a path's clock, the creep's lead) counts
+    nothing for the jump instead of going negative or waiting for the clock
+    to come back.  Message stamps map onto it by their age (:meth:`time_of`,
+    as :func:`control_time_of`).  Off simulation time it is
+    ``time.monotonic()`` itself, as it is for a stand-in node without a clock.
+    Under ``use_sim_time`` the ROS clock reads 0 until the first ``/clock``:
+    0 is a time like any other here (never "no time yet"), and the first
+    ``/clock`` is a jump forwards.  Thread-safe; :func:`control_clock` gives
+    a node's own.
+    """
+
+    def __init__(self, node) -> None:
+        self.node = node
+        self._lock = threading.Lock()
+        self._offset = 0.0              # the jumps back so far [s]
+        self._last = -float('inf')      # the newest time given
+        self.jumps_back = 0
+
+    @property
+    def simulated(self) -> bool:
+        """True while the node's ROS clock follows ``/clock`` (``use_sim_time``)."""
+        get_clock = getattr(self.node, 'get_clock', None)
+        return get_clock is not None and bool(getattr(get_clock(), 'ros_time_is_active', False))
+
+    def now(self) -> float:
+        """The control time now [s]: :func:`control_now` without its jumps back."""
+        with self._lock:   # (read and compared at once: two threads see one order)
+            raw = control_now(self.node) if hasattr(self.node, 'get_clock') else time.monotonic()
+            t = raw + self._offset
+            if t < self._last:
+                self._offset += self._last - t
+                self.jumps_back += 1
+                t = self._last
+            self._last = t
+            return t
+
+    def time_of(self, stamp, future: bool = False) -> float:
+        """A message stamp as this clock's time, by its age on the node's ROS clock.
+
+        A zero stamp (or none) is now; a stamp in the future is now unless
+        ``future`` (a target wanted later, e.g. a previewed trajectory).
+        """
+        now = self.now()
+        if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0) or not hasattr(
+                self.node, 'get_clock'):
+            return now
+        age = 1e-9 * (self.node.get_clock().now().nanoseconds
+                      - (stamp.sec * 1_000_000_000 + stamp.nanosec))
+        return now - age if (age >= 0.0 or future) else now
+
+
+_CLOCKS_LOCK = threading.Lock()
+
+
+def control_clock(node) -> ControlClock:
+    """``node``'s :class:`ControlClock` (made at the first call; one per node).
+
+    ``None`` or a node that takes no attribute gets a clock of its own each call.
+    """
+    clock = getattr(node, '_bellow_control_clock', None)
+    if clock is None:
+        with _CLOCKS_LOCK:
+            clock = getattr(node, '_bellow_control_clock', None)
+            if clock is None:
+                clock = ControlClock(node)
+                try:
+                    node._bellow_control_clock = clock
+                except AttributeError:   # None, or slots
+                    pass
+    return clock
 
 
 class Param(NamedTuple):

@@ -39,13 +39,12 @@ lag too with ``dynamic_feedforward: false``.
 from __future__ import annotations
 
 import threading
-import time
 from typing import Any, Callable
 
 from rcl_interfaces.msg import ParameterType
 
 from ..core.control import TARGET_SHAPINGS, TargetFilter
-from .ros_util import Param, StartupParameterError, declare_all, descriptor
+from .ros_util import Param, StartupParameterError, control_clock, declare_all, descriptor
 
 __all__ = ['SHAPING_RATE_HZ', 'TARGET_PARAMETER_TABLE', 'TargetLink']
 
@@ -85,6 +84,7 @@ class TargetLink:
         """Declare the parameters on ``node`` (refuses a bad ``target_shaping``)."""
         declare_all(node, TARGET_PARAMETER_TABLE)
         self.node = node
+        self._clock = control_clock(node)   # every time here: control time (use_sim_time)
         self._kind = self._read_kind()
         self._lock = threading.Lock()
         self._filter: TargetFilter | None = None
@@ -92,7 +92,7 @@ class TargetLink:
         self._last_item = None
         self._resubmit: Callable[[Any], None] | None = None
         self._modes = None                          # the node's ModeWatch
-        self._levels: list[threading.Timer] = []   # one-shot re-solves at impulse times
+        self._levels: list = []   # one-shot re-solves at impulse times (_level_timer)
         self._last_pose = None
         self._last_pose_t: float | None = None     # when the newest pose was first wanted
 
@@ -127,7 +127,7 @@ class TargetLink:
             def tick():
                 item = self._last_item
                 with self._lock:
-                    busy = self._filter is not None and self._filter.busy(time.monotonic())
+                    busy = self._filter is not None and self._filter.busy(self._clock.now())
                     timed = any(t.is_alive() for t in self._levels)
                 if item is not None and busy and not timed:   # (a step's levels are timed:
                     resubmit(item)   # a re-solve in between would only delay one of them)
@@ -181,18 +181,28 @@ class TargetLink:
             return   # a stream: the 50 Hz re-solves
         if self._modes is not None:   # no modal analysis stalls a level
             self._modes.quiet(wanted_at + filt.shaper.duration_s + 0.05)
-        resubmit, now = self._resubmit, time.monotonic()
+        resubmit, now = self._resubmit, self._clock.now()
 
         def level() -> None:   # the newest item, if it still wants this pose (republished)
             cur = self._last_item
             if cur is not None and resubmit is not None and _pose_key(cur) == pose:
                 resubmit(cur)
         for t_i in filt.shaper.times[1:]:
-            timer = threading.Timer(max(wanted_at + float(t_i) + IMPULSE_LEAD_S - now, 0.0),
-                                    level)
-            timer.daemon = True
-            timer.start()
-            self._levels.append(timer)
+            self._levels.append(self._level_timer(
+                max(wanted_at + float(t_i) + IMPULSE_LEAD_S - now, 0.0), level))
+
+    def _level_timer(self, delay_s: float, fn: Callable[[], None]):
+        """Call ``fn`` once ``delay_s`` of control time from now (``is_alive``, ``cancel``).
+
+        A thread's timer on the wall clock (exact to the millisecond), or under
+        ``use_sim_time`` a one-shot timer on the node's clock: its simulation seconds.
+        """
+        if self._clock.simulated:
+            return _OneShot(self.node, delay_s, fn)
+        timer = threading.Timer(delay_s, fn)
+        timer.daemon = True
+        timer.start()
+        return timer
 
     @staticmethod
     def refusal(param) -> str:
@@ -225,10 +235,10 @@ class TargetLink:
                 self._last_item = item
                 filt.push(wanted_at, pos, z)
                 self._schedule_levels(item, filt, wanted_at)
-            return filt.targets(time.monotonic())
+            return filt.targets(self._clock.now())
 
     def hold_until(self) -> float | None:
-        """Until when the closed loop holds its correction (a jump's move; monotonic s)."""
+        """Until when the closed loop holds its correction (a jump's move; control time)."""
         with self._lock:
             return None if self._filter is None else self._filter.hold_until
 
@@ -242,3 +252,34 @@ class TargetLink:
                     'target_shaping_delay_s': f'{filt.delay_s:.3f}',
                     'dynamic_feedforward': str(filt.feedforward is not None).lower(),
                     'target_mode_hz': 'none' if filt.mode is None else f'{filt.mode[0]:.4g}'}
+
+
+class _OneShot:
+    """A one-shot timer on ``node``'s clock (simulation time): ``threading.Timer``'s use here."""
+
+    def __init__(self, node, delay_s: float, fn: Callable[[], None]) -> None:
+        self._node, self._fn = node, fn
+        self._lock = threading.Lock()
+        self._done = False
+        self._timer = node.create_timer(delay_s, self._fire)
+
+    def _end(self) -> bool:
+        """Stop and destroy the timer; whether it was still pending."""
+        with self._lock:
+            pending, self._done = not self._done, True
+        if pending:
+            self._timer.cancel()
+            self._node.destroy_timer(self._timer)   # (safe from its own callback)
+        return pending
+
+    def _fire(self) -> None:
+        if self._end():
+            self._fn()
+
+    def is_alive(self) -> bool:
+        """True until it fired or was cancelled."""
+        return not self._done
+
+    def cancel(self) -> None:
+        """Do not fire (no-op once fired)."""
+        self._end()

@@ -52,7 +52,6 @@ heartbeat ``'<node>: status'`` (trajectory, targets published, finished).
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import numpy as np
@@ -75,6 +74,7 @@ from .ros_util import (
     StartupParameterError,
     Topic,
     command_qos,
+    control_clock,
     declare_all,
     descriptor,
     diagnostics_qos,
@@ -191,7 +191,12 @@ class TrajectoryPublisher(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self.cfg.name)
-        self._t0 = time.monotonic() + float(self.get_parameter('start_delay_s').value)
+        # every time here is control time (ros_util.ControlClock: simulation time under
+        # use_sim_time); stamps are the ROS clock's.  The path's clock starts now, or under
+        # use_sim_time at the first tick: the clock reads 0 until the first /clock arrives
+        self._control = control_clock(self)
+        self._t0 = (None if self._control.simulated
+                    else self._control.now() + float(self.get_parameter('start_delay_s').value))
         # where the robot is, newest of each source: (position, z-axis, arrival time)
         self._seen = {'target_pose': None, 'measured_pose': None, 'commanded_pose': None,
                       'predicted_pose': None}
@@ -219,7 +224,7 @@ class TrajectoryPublisher(Node):
         self._state_future, self._state_asked = None, -math.inf
         self._said_waiting = False
         self._expect_answer = False   # a controller answers our targets on commanded_pose
-        self._hold_since = None       # holding the lead-in's first point since (monotonic)
+        self._hold_since = None       # holding the lead-in's first point since (control time)
         self._hold_stamp_ns = None    # the stamp of its first copy
         self._answered = False        # a commanded_pose answered one of them
         self.published = 0
@@ -310,7 +315,7 @@ class TrajectoryPublisher(Node):
             return
         pos = np.array([p.x, p.y, p.z])
         if np.all(np.isfinite(pos)):
-            self._seen[topic] = (pos, z, time.monotonic())
+            self._seen[topic] = (pos, z, self._control.now())
 
     #: The sources of where the robot is, in order, with the age [s] up to which each counts.
     _SOURCES = (('target_pose', math.inf), ('measured_pose', 1.0), ('commanded_pose', 2.0),
@@ -318,7 +323,7 @@ class TrajectoryPublisher(Node):
 
     def _fresh(self, topic: str) -> bool:
         seen, max_age = self._seen[topic], dict(self._SOURCES)[topic]
-        return seen is not None and time.monotonic() - seen[2] <= max_age
+        return seen is not None and self._control.now() - seen[2] <= max_age
 
     def _held_pose(self):
         """Where the robot is, seen on a topic: ``(topic, (position, z-axis, time))`` or None.
@@ -347,7 +352,7 @@ class TrajectoryPublisher(Node):
             self.get_logger().warning(f'the robot at rest (vented, payload {payload:g} kg) '
                                       f'was not solved ({fw.message})')
             return None
-        return fw.position, fw.z_axis, time.monotonic()
+        return fw.position, fw.z_axis, self._control.now()
 
     def _poll_controller(self) -> None:
         """Ask ``controller_node`` its lifecycle state (one question at a time, throttled)."""
@@ -361,7 +366,7 @@ class TrajectoryPublisher(Node):
                 self._controller_state = res.current_state.label
                 if self._controller_state == 'active':
                     return
-        now = time.monotonic()
+        now = self._control.now()
         if now - self._state_asked >= CONTROLLER_POLL_S and self._state_client.service_is_ready():
             self._state_asked = now
             self._state_future = self._state_client.call_async(GetState.Request())
@@ -459,7 +464,7 @@ class TrajectoryPublisher(Node):
         ``commanded_pose`` stamped with one of ours says that it follows.  At
         most :data:`ANSWER_WAIT_S` (then a warning); False: the lead-in moves on now.
         """
-        waited = time.monotonic() - self._hold_since
+        waited = self._control.now() - self._hold_since
         if not self._answered and waited < ANSWER_WAIT_S:
             stamp = self._stamp(now, preview)
             if self._hold_stamp_ns is None:
@@ -478,7 +483,9 @@ class TrajectoryPublisher(Node):
     def _tick(self) -> None:
         # one instant for the path's clock and the stamp: the pose is the one wanted at it
         now = self.get_clock().now()
-        t = time.monotonic() - self._t0
+        if self._t0 is None:
+            self._t0 = self._control.now() + float(self.get_parameter('start_delay_s').value)
+        t = self._control.now() - self._t0
         if t < 0 or self.finished:
             return
         if self._ramp is None:
@@ -486,10 +493,10 @@ class TrajectoryPublisher(Node):
             if decision is None:
                 return
             # the lead-in (or the path) starts now: after the decision (a forward solve)
-            now, t = self.get_clock().now(), time.monotonic() - self._t0
+            now, t = self.get_clock().now(), self._control.now() - self._t0
             self._ramp, self._waited = decision, t
             if decision and self._expect_answer:
-                self._hold_since = time.monotonic()
+                self._hold_since = self._control.now()
         preview = float(self.get_parameter('preview_s').value)
         if self._hold_since is not None:
             if self._hold_first_point(now, preview):

@@ -89,6 +89,7 @@ class LatestWorker:
         self._stop = False
         self._busy = False
         self._last_start = -math.inf
+        # the start credit is the CPU's: wall clock even under use_sim_time (as its waits)
         self._credit, self._credit_t = float(BURST), time.monotonic()
         self.submitted = 0
         self.dropped = 0
@@ -254,7 +255,8 @@ class SolveStats:
     ``record(seconds, ok)`` after every solve; :meth:`summary` gives the count,
     the last/median/95th-percentile/maximum solve time over the window [s],
     the age of the last solve [s] (None before the first) and whether it
-    succeeded.  Memory is bounded by ``window``.  Thread-safe.
+    succeeded.  Memory is bounded by ``window``.  Thread-safe.  Wall-clock
+    seconds (``clock``), whatever the node's clock: they describe the computer.
     """
 
     def __init__(self, window: int = 1000, clock: Callable[[], float] = time.monotonic) -> None:

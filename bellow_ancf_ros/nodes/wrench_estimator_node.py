@@ -27,7 +27,6 @@ Use the calibrated robot file: the estimator reads any model error as a force.
 from __future__ import annotations
 
 import collections
-import time
 from typing import Any
 
 import numpy as np
@@ -48,7 +47,7 @@ from .diagnostics import Heartbeat, Refusals, publish_diagnostic
 from .frames import PoseFrames
 from .measured_feedback import measured_pose_qos
 from .ros_util import (WARN_THROTTLE_S, Param, StartupParameterError, Topic, command_qos,
-                       declare_all, descriptor, diagnostics_qos, main_for)
+                       control_clock, declare_all, descriptor, diagnostics_qos, main_for)
 
 __all__ = ['WrenchEstimatorNode', 'main']
 
@@ -155,6 +154,7 @@ class WrenchEstimatorNode(Node):
         self.timeout = float(self.get_parameter('pressure_timeout_s').value)
         self.frames = PoseFrames(self, self.get_parameter('base_frame').value,
                                  self.cfg.mocap_frame)
+        self._control = control_clock(self)   # every time here: control time (use_sim_time)
         self._pressures = {'measured': (None, -np.inf), 'command': (None, -np.inf)}
         self.stats = {'poses': 0, 'refused': 0, 'outliers': 0, 'published': 0}
         self._recent = collections.deque(maxlen=OUTLIER_WINDOW)   # outlier or not, per pose
@@ -185,10 +185,10 @@ class WrenchEstimatorNode(Node):
         except contract.InputError as exc:
             self._refuse(f'{key} pressures: {exc}')
             return
-        self._pressures[key] = (p, time.monotonic())
+        self._pressures[key] = (p, self._control.now())
 
     def _current_pressures(self):
-        now = time.monotonic()
+        now = self._control.now()
         p, t = self._pressures['measured']
         if p is not None and now - t <= self.timeout:
             return p
@@ -208,7 +208,7 @@ class WrenchEstimatorNode(Node):
             return
         self._tip = xyz
         outliers = self.estimator.outliers
-        ok = self.estimator.update(p, xyz, z, time_s=time.monotonic())
+        ok = self.estimator.update(p, xyz, z, time_s=self._control.now())
         outlier = self.estimator.outliers > outliers
         self._recent.append(outlier)
         if outlier:
