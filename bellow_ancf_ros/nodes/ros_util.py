@@ -50,7 +50,7 @@ __all__ = [
     'StartupParameterError', 'Topic', 'allowed_values', 'asks_for_help', 'command_qos',
     'declare', 'declare_all', 'descriptor', 'diagnostics_qos', 'executor_choice',
     'guard_parameters', 'init_rclpy', 'main_for', 'make_executor', 'control_clock',
-    'control_now', 'control_time_of', 'node_help', 'pose_message', 'pressure_message',
+    'control_now', 'node_help', 'pose_message', 'pressure_message',
     'publish_and_wait_acked', 'request_stop', 'run_node', 'watch_parent',
 ]
 
@@ -185,20 +185,6 @@ def control_now(node) -> float:
     return time.monotonic()
 
 
-def control_time_of(node, stamp, future: bool = False) -> float:
-    """A message stamp as control time (:func:`control_now`), by its age on ``node``'s clock.
-
-    A zero stamp (or none) is now; a stamp in the future is now unless
-    ``future`` (a target wanted later, e.g. a previewed trajectory).
-    """
-    now = control_now(node)
-    if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0):
-        return now
-    age = 1e-9 * (node.get_clock().now().nanoseconds
-                  - (stamp.sec * 1_000_000_000 + stamp.nanosec))
-    return now - age if (age >= 0.0 or future) else now
-
-
 class ControlClock:
     """A node's control time (:func:`control_now`) that never runs backwards.
 
@@ -208,7 +194,7 @@ class ControlClock:
     timeout, a keepalive's spacing, a path's clock, the creep's lead) counts
     nothing for the jump instead of going negative or waiting for the clock
     to come back.  Message stamps map onto it by their age (:meth:`time_of`,
-    as :func:`control_time_of`).  Off simulation time it is
+    as a message's age on the ROS clock).  Off simulation time it is
     ``time.monotonic()`` itself, as it is for a stand-in node without a clock.
     Under ``use_sim_time`` the ROS clock reads 0 until the first ``/clock``:
     0 is a time like any other here (never "no time yet"), and the first
