@@ -625,10 +625,10 @@ def _parse(argv):
                     help='skip the step-target phase (10 mm step, unshaped and ZVD-shaped)')
     ap.add_argument('--no-goals', action='store_true',
                     help='exit 0 without checking the closed-loop goals (short test runs)')
-    ap.add_argument('--wall-clock', dest='sim_time', action='store_false',
-                    help='run the nodes on the wall clock, as with a real robot, instead of on '
-                         "the simulated robot's clock in lockstep (the default: a busy "
-                         'computer slows the run, not its figures)')
+    ap.add_argument('--sim-time', action='store_true',
+                    help="run every node on the simulated robot's clock (/clock, use_sim_time) "
+                         'in lockstep with the controller\'s commands, instead of on the wall '
+                         'clock as with a real robot (the default)')
     return ap.parse_args(argv)
 
 

@@ -381,6 +381,7 @@ class SimulatedRobotNode(Node):
                                                self._mocap) if self.clock is None else None)
         self._diag_timer = self.create_timer(1.0, self._status)
         self._factor_since = (time.monotonic(), 0.0)   # (wall, simulated) of the last status
+        self._started = time.monotonic()
         self._stop = threading.Event()
         self._state_stamp = self.get_clock().now()   # when the robot reached its state
         self._physics_period = 1.0 / rate
@@ -678,8 +679,15 @@ class SimulatedRobotNode(Node):
     def destroy_node(self):
         """Stop the physics thread, then destroy the node."""
         self._stop.set()
-        if self.clock is not None:
-            self.clock.stop()
+        c = self.clock
+        if c is not None:
+            c.stop()
+            wall = time.monotonic() - self._started
+            self.get_logger().info(
+                f'simulated {c.time_s:.3f} s in {wall:.3f} s of wall time ('
+                f'{c.time_s / wall if wall > 0 else float("nan"):.3g}x real time); lockstep: '
+                f'{c.lockstep_waits} waits for a command, {c.lockstep_wait_s:.3f} s waited, '
+                f'{c.lockstep_timeouts} timeouts')
         self._thread.join(5.0)
         return super().destroy_node()
 

@@ -22,7 +22,8 @@ def test_main_demo_short_run_one_segment(tmp_path):
     res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.closed_loop',
                           '--cases', 'one_segment', '--speeds', '4',
                           '--period-scale', '0.5', '--lead-in', '1', '--hold', '1.5',
-                          '--no-goals', '--no-step', '--side-by-side', '--plot', str(plot)],
+                          '--no-goals', '--no-step', '--side-by-side', '--sim-time',
+                          '--plot', str(plot)],
                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=200,
                          stdin=subprocess.DEVNULL)
     out = res.stdout + res.stderr
@@ -43,6 +44,7 @@ def test_main_demo_short_run_one_segment(tmp_path):
     data = json.loads((tmp_path / 'demo_results.json').read_text())
     assert data['machine']['cpus'] >= 1 and len(data['machine']['load_start']) == 3
     assert data['options']['speeds'] == [4.0] and not data['options']['goals_checked']
+    assert data['options']['simulation_time']   # every node on the simulated robot's clock
     (col,) = data['cases']
     assert col['key'] == 'one_segment@4x' and set(col['runs']) == {'none', 'dynamic', 'integral'}
     assert [(g['goal'], g['unit'], g['limit']) for g in col['goals']][:2] == [

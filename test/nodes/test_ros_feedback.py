@@ -158,16 +158,25 @@ def test_bad_feedback_parameter_refused(h):
         h.add(InverseKinetostaticNode, feedback='pid')
 
 
-def test_closed_loop_in_process_reaches_held_target(h, one):
-    """Inverse (feedback integral) -> simulated mismatched robot -> measured_pose -> inverse."""
+@pytest.mark.parametrize('clock', ['wall', 'simulation'])
+def test_closed_loop_in_process_reaches_held_target(h, one, clock):
+    """Inverse (feedback integral) -> simulated mismatched robot -> measured_pose -> inverse.
+
+    On the wall clock, and on the simulated robot's clock in lockstep (both
+    nodes with ``use_sim_time``, as ``sim:=true`` launches them).
+    """
+    sim_time = {} if clock == 'wall' else {'use_sim_time': True}
     h.record(Float64MultiArray, 'pressure_command')
     h.record(PoseStamped, 'true_pose')
     h.record(DiagnosticArray, '/diagnostics', command_qos())
     # the realistic robot (lag, dead time, hysteresis, creep, latency, outliers), no dropout
     # in this short run (a dropout's WARN is tested below)
     sim = h.add(SimulatedRobotNode, seed=9, mocap_dropout_every_s=0.0,
-                mocap_dropout_duration_s=0.0)
-    node = h.add(InverseKinetostaticNode, feedback='integral')
+                mocap_dropout_duration_s=0.0, **sim_time,
+                **({} if clock == 'wall' else {'publish_clock': True, 'lockstep': True}))
+    # (lockstep: the keepalive is what a held target's simulation runs on)
+    node = h.add(InverseKinetostaticNode, feedback='integral', **sim_time,
+                 **({} if clock == 'wall' else {'command_rate_hz': 20.0}))
     assert node._feedback.enabled
     pub = h.publisher(PoseStamped, 'target_pose')
     wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
@@ -200,6 +209,10 @@ def test_closed_loop_in_process_reaches_held_target(h, one):
     with h.lock:
         for _, m in h.msgs['pressure_command']:
             assert_safe(m.data, cfg)
+    if clock == 'simulation':   # the loop's stamps are the simulation's; the clock ran
+        stamp = h.last('true_pose').header.stamp
+        assert sim.clock.time_s > 1.0 and sim.clock.lockstep_timeouts == 0
+        assert 0.0 < stamp.sec + 1e-9 * stamp.nanosec <= sim.clock.time_s + 1e-9
 
 
 def test_feedback_refuses_bad_poses_ignores_outliers_and_holds_through_a_dropout(h, one):
