@@ -44,7 +44,7 @@ from std_msgs.msg import Float64MultiArray
 from ..core import ConfigError, InverseStatus, RobotModel, payload_problem, solve_inverse
 from ..core import geometry
 from ..core.control import CommandOutput
-from . import contract, diagnostics, worker
+from . import contract, diagnostics, lockstep, worker
 from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FeedbackLink
 from .mode_watch import ModeWatch
@@ -102,11 +102,10 @@ class InverseKinetostaticNode(LifecycleNode):
         self._configure_error = ''
         self._model: RobotModel | None = None
         self._cfg = self._warm = self._start_pose = None
-        # made on configure: the solver thread, topics, external_force input (ExternalForce),
-        # one owner of pressure_command (TopicOwner), timers
+        # made on configure: solver thread, topics, ExternalForce, TopicOwner, timers, lockstep
         self._worker: worker.LatestWorker | None = None
         self._pub_cmd = self._pub_pose = self._sub = self._force = self._owner = None
-        self._owner_timer = self._republish_timer = None
+        self._owner_timer = self._republish_timer = self._lockstep = None
         self._yield_requested = False
         self._said_orientation_ignored = False
         self._refusals = Refusals(self, 'targets', self._publish_diag)
@@ -240,7 +239,8 @@ class InverseKinetostaticNode(LifecycleNode):
             self.get_parameter('external_force_timeout_s').value,
             self.get_parameter('use_estimated_force').value, self._refuse, self._resolve_held)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
-                                           name='inverse-solver')
+                                           'inverse-solver', lambda: self._lockstep.work_done())
+        self._lockstep = lockstep.LockstepReport(self, self._worker.idle)   # use_sim_time
         rate = float(self.get_parameter('command_rate_hz').value)
         self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
                                  if rate > 0 else None)
@@ -329,7 +329,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._owner = None
         for attr, end in (('_modes', 'stop'), ('_worker', 'stop'), ('_force', 'destroy'),
                           ('_republish_timer', self.destroy_timer),
-                          ('_owner_timer', self.destroy_timer),
+                          ('_owner_timer', self.destroy_timer), ('_lockstep', 'destroy'),
                           ('_sub', self.destroy_subscription),
                           ('_pub_cmd', self.destroy_publisher),
                           ('_pub_pose', self.destroy_publisher)):

@@ -50,12 +50,16 @@ time, publishes ``/clock`` (rosgraph_msgs/Clock) after every step, and
 stamps everything with simulation time, which starts at 0; nodes started
 with ``use_sim_time:=true`` (the simulated robot itself too: its
 ``/diagnostics``) run on it.  ``real_time_factor`` paces it against the wall
-clock (1: real time, 0: as fast as it can).  With ``lockstep`` the
-simulation runs at most ``lockstep_period_s`` ahead of the newest
-``pressure_command`` (the inverse node republishes every 0.05 s), so a
-controller slowed by a busy computer slows the simulation instead of
-changing its result; after ``lockstep_timeout_s`` (wall) without a command
-it runs free until the next one (counted on ``/diagnostics``).  The motion
+clock (1: real time, 0: as fast as it can).  With ``lockstep``, a
+controller that reports the time up to which it has done its work on
+``lockstep_clock`` (the inverse node does, under ``use_sim_time``) holds
+the simulation to it step by step: its computation takes no simulated time,
+and a controller slowed by a busy computer slows the simulation instead of
+changing its result.  A controller that reports nothing (a lab's own) is
+followed by its commands: the simulation runs at most ``lockstep_period_s``
+ahead of the newest ``pressure_command`` (the inverse node republishes
+every 0.05 s).  After ``lockstep_timeout_s`` (wall) without either it runs
+free until the next one (counted on ``/diagnostics``).  The motion
 capture, the regulators, creep, dropouts and outliers and the command
 timeout run on simulation time; the motion capture delivers at exact
 multiples of its period.
@@ -98,6 +102,7 @@ from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
+from .lockstep import TOPIC as LOCKSTEP_TOPIC
 from .ros_util import (
     Param,
     StartupParameterError,
@@ -306,6 +311,8 @@ TOPICS = (
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz status'),
     Topic('publishes', '/clock', 'rosgraph_msgs/Clock',
           'simulation time, after every physics step (publish_clock)'),
+    Topic('subscribes', 'lockstep_clock', 'rosgraph_msgs/Clock',
+          "lockstep: the controller's work done until then"),
     Topic('services', '~/pause', 'std_srvs/Trigger', 'stop the simulation (publish_clock)'),
     Topic('services', '~/unpause', 'std_srvs/Trigger', 'run it again'),
     Topic('services', '~/step', 'std_srvs/Trigger', 'take step_count physics steps, paused'),
@@ -374,6 +381,10 @@ class SimulatedRobotNode(Node):
         self._refusals = Refusals(self, 'pressures', self._publish_diag)
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_command, qos)
+        if self.clock is not None and self.clock.lockstep_period_s is not None:
+            self._sub_done = self.create_subscription(
+                Clock, LOCKSTEP_TOPIC,
+                lambda m: self.clock.done_until(m.clock.sec + 1e-9 * m.clock.nanosec), 10)
         for name, handler in (('pause', self._on_pause), ('unpause', self._on_unpause),
                               ('step', self._on_step), ('reset', self._on_reset)):
             self.create_service(Trigger, f'~/{name}', handler)

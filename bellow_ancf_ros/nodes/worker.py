@@ -79,8 +79,9 @@ class LatestWorker:
     def __init__(self, process: Callable[[Any], None],
                  min_period: Callable[[], float] = lambda: 0.0,
                  on_error: Callable[[BaseException], None] | None = None,
-                 name: str = 'latest-worker') -> None:
+                 name: str = 'latest-worker', on_done: Callable[[], None] | None = None) -> None:
         self._process = process
+        self._on_done = on_done   # after each item, once idle or not (e.g. a lockstep report)
         self._min_period = min_period
         self._on_error = on_error
         self._cond = threading.Condition()
@@ -194,6 +195,8 @@ class LatestWorker:
                     self._busy = False
                     self.processed += 1
                     self._cond.notify_all()
+                if self._on_done is not None:
+                    self._on_done()
 
     def stop(self, timeout: float = 5.0) -> None:
         """Stop the worker (a running ``process`` call is waited for up to ``timeout``)."""

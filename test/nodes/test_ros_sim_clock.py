@@ -22,9 +22,11 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bellow_ancf_ros.core import solve_forward  # noqa: E402
+from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 import test_ros_nodes as _rn  # noqa: E402
-from test_ros_nodes import pressure_msg, wait_for  # noqa: E402
+from test_ros_nodes import pressure_msg, target_msg, wait_for  # noqa: E402
 
 pytestmark = pytest.mark.ros
 h = _rn.h
@@ -153,6 +155,27 @@ def test_lockstep_holds_the_simulation_to_the_newest_command_and_lets_go_of_a_de
     wait_for(lambda: sim.clock.lockstep_timeouts == 1, timeout=5.0,
              what='the lockstep to give up on a controller that stopped')
     wait_for(lambda: last_clock(h) > held + advanced + 2.0, what='running free again')
+
+
+def test_a_reporting_controller_holds_the_simulation_step_by_step(h, one):
+    """The inverse node on simulation time reports its work done; the lockstep follows it."""
+    sim = clock_sim(h, real_time_factor=0.0, lockstep=True)
+    node = h.add(InverseKinetostaticNode, feedback='integral', command_rate_hz=20.0,
+                 use_sim_time=True)
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
+    wait_for(lambda: sim.clock._done_t is not None, what="the controller's first report")
+    ahead = []
+    t_end = time.monotonic() + 3.0
+    while time.monotonic() < t_end:
+        with sim.clock._cond:   # the time reached against the newest report, at one instant
+            ahead.append(sim.clock.time_s - sim.clock._done_t)
+        time.sleep(0.003)
+    # never more than one physics step beyond what the controller has done
+    assert max(ahead) <= 1.0 / RATE_HZ + 1e-9, max(ahead)
+    assert sim.clock.time_s > 1.0 and sim.clock.lockstep_timeouts == 0
+    assert node.stats['published'] > 10
 
 
 def test_without_the_clock_its_settings_do_nothing_and_its_services_say_why(h, capfd):

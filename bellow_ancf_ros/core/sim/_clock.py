@@ -12,10 +12,14 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
   :data:`MAX_LATE_S` re-anchors the pacing (no catch-up burst).
 * ``lockstep_period_s`` (lockstep on when set): the simulation runs at most
   this far ahead of the newest command (:meth:`command_arrived`), so a
-  controller that falls behind holds the simulation back.  Until the first
-  command arrives, and after a wait of ``lockstep_timeout_s`` wall seconds
-  (a controller stopped or dead: counted in :attr:`lockstep_timeouts`) until
-  the next one, it runs free.
+  controller that stops commanding holds the simulation back.  A command
+  does not say which time it answers, so a controller that lags behind at
+  its usual cadence is not seen: a controller that reports the time up to
+  which it has done its work (:meth:`done_until`, the inverse node's
+  ``lockstep_clock``) makes the lockstep strict: no step beyond that time.
+  Until the first command or report, and after a wait of
+  ``lockstep_timeout_s`` wall seconds (a controller stopped or dead: counted
+  in :attr:`lockstep_timeouts`) until the next one, it runs free.
 * :meth:`pause`, :meth:`unpause`, :meth:`step`: no step while paused except
   the ones asked for, which are taken at once (neither paced nor locked).
 
@@ -65,6 +69,7 @@ class SimulationClock:
         self._pending = 0              # steps asked for while paused
         self._anchor: tuple[float, float] | None = None   # (wall, simulated) of the pacing
         self._command_t: float | None = None   # simulated time of the newest command
+        self._done_t: float | None = None      # the controller's report: its work done until
         self._free = True              # lockstep released (no command yet, or timed out)
         self._wait_since: float | None = None  # wall time a lockstep wait began
         self.lockstep_waits = 0        # steps that waited for a command
@@ -131,6 +136,17 @@ class SimulationClock:
             self._command_t, self._free = self.time_s, False
             self._cond.notify_all()
 
+    def done_until(self, t: float) -> None:
+        """The controller has done its work up to simulated time ``t``: the strict lockstep.
+
+        From the first report on, no step goes beyond the newest reported
+        time (the controller's computation takes no simulated time).
+        """
+        with self._cond:
+            self._done_t = float(t) if self._done_t is None else max(self._done_t, float(t))
+            self._free = False
+            self._cond.notify_all()
+
     def stop(self) -> None:
         """End :meth:`wait_for_step` (it returns False)."""
         with self._cond:
@@ -140,7 +156,11 @@ class SimulationClock:
     # ------------------------------------------------------------ stepping
     def _locked(self) -> bool:
         """True while lockstep holds the next step back (called with the lock held)."""
-        if self.lockstep_period_s is None or self._free or self._command_t is None:
+        if self.lockstep_period_s is None or self._free:
+            return False
+        if self._done_t is not None:   # strict: the controller has seen the time reached
+            return self.time_s > self._done_t + 1e-9
+        if self._command_t is None:
             return False
         return self.time_s + self.step_s - self._command_t > self.lockstep_period_s + 1e-12
 

@@ -115,3 +115,21 @@ def test_bad_settings_named():
         SimulationClock(0.01, lockstep_period_s=0)
     with pytest.raises(ValueError, match="step_s = 0 is not allowed"):
         SimulationClock(0)
+
+
+def test_a_controller_that_reports_its_time_holds_the_simulation_to_it_step_by_step():
+    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=5.0)
+    clock.pause()
+    clock.done_until(0.0)
+    r = Runner(clock)
+    clock.unpause()
+    assert steps_after(clock, 0.2) == 1   # one step past the report, no further
+    for k in range(1, 6):
+        clock.done_until(clock.time_s)    # the controller caught up with the time reached
+        assert steps_after(clock, 0.05) == k + 1
+    clock.command_arrived()               # commands no longer move it on
+    assert steps_after(clock, 0.1) == 6
+    clock.done_until(0.02)                # an old report never moves it back
+    assert steps_after(clock, 0.1) == 6
+    r.stop()
