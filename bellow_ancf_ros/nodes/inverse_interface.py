@@ -91,6 +91,8 @@ TOPICS = (
           "the model's pose for the command"),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
           'per-solve status and 1 Hz heartbeat'),
+    Topic('publishes', 'lockstep_clock', 'rosgraph_msgs/Clock',
+          'use_sim_time: the simulation time its work is done until (a lockstep)'),
     Topic('services', '~/change_state, ~/get_state, ...', 'lifecycle_msgs',
           'the standard lifecycle services (autostart: configure + activate at start-up)'),
 )
