@@ -34,6 +34,13 @@ period, and for the quasi-static feedforward their time constant too
 (targets stamped when they are sent, as a lab's planner streams them: the
 node's dynamic feedforward inverts the lag and the mode from the stream).
 
+Every node runs on the simulated robot's clock (``/clock``, ``use_sim_time``)
+in lockstep with the inverse node (``lockstep_clock``): the simulation waits
+for the controller's solves, so their computation takes no simulated time
+and a busy computer slows the run instead of changing its figures (the
+step phase too; the loads phase stays on the wall clock).
+``--wall-clock``: as with a real robot, the computation's delay included.
+
 Each run: the nodes come up; this process holds the path's first point
 (lead-in) until the trajectory publisher, started with ``start_delay_s`` =
 ``--lead-in`` (default 2 s), sends its first target; the path's speed rises
@@ -625,10 +632,11 @@ def _parse(argv):
                     help='skip the step-target phase (10 mm step, unshaped and ZVD-shaped)')
     ap.add_argument('--no-goals', action='store_true',
                     help='exit 0 without checking the closed-loop goals (short test runs)')
-    ap.add_argument('--sim-time', action='store_true',
-                    help="run every node on the simulated robot's clock (/clock, use_sim_time) "
-                         'in lockstep with the controller\'s commands, instead of on the wall '
-                         'clock as with a real robot (the default)')
+    ap.add_argument('--wall-clock', dest='sim_time', action='store_false',
+                    help='run the nodes on the wall clock, as with a real robot (the '
+                         "controller's computation then takes time in the run, and a busy "
+                         "computer changes the figures), instead of on the simulated robot's "
+                         'clock in lockstep with the controller (the default)')
     return ap.parse_args(argv)
 
 

@@ -7,7 +7,7 @@ own session, on an isolated ``ROS_DOMAIN_ID`` with
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; :class:`Recorder` subscribes in
 this process with rclpy and stores every message with its arrival time.
 
-Simulation time (``--sim-time`` of the main job): the simulated robot is the
+Simulation time (the main job's default): the simulated robot is the
 clock (``publish_clock``, in ``lockstep`` with the controller's commands,
 :func:`clock_parameters`), every node and the recorder run on it
 (``use_sim_time``), and the demos' phases are measured on it

@@ -22,8 +22,7 @@ def test_main_demo_short_run_one_segment(tmp_path):
     res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.closed_loop',
                           '--cases', 'one_segment', '--speeds', '4',
                           '--period-scale', '0.5', '--lead-in', '1', '--hold', '1.5',
-                          '--no-goals', '--no-step', '--side-by-side', '--sim-time',
-                          '--plot', str(plot)],
+                          '--no-goals', '--no-step', '--side-by-side', '--plot', str(plot)],
                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=200,
                          stdin=subprocess.DEVNULL)
     out = res.stdout + res.stderr
