@@ -178,6 +178,29 @@ def test_a_reporting_controller_holds_the_simulation_step_by_step(h, one):
     assert node.stats['published'] > 10
 
 
+def test_pause_freezes_the_controller_too_no_command_no_dropout_after_it(h, one):
+    """Paused 1.5 s of wall time (six times the pose timeout): the loop just resumes."""
+    sim = clock_sim(h, lockstep=True)
+    node = h.add(InverseKinetostaticNode, feedback='integral', command_rate_hz=20.0,
+                 use_sim_time=True)
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
+    pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
+    wait_for(lambda: sim.clock.time_s > 2.0, timeout=20.0, what='2 s of simulation')
+    pause = h.service(Trigger, 'simulated_robot_node/pause')
+    unpause = h.service(Trigger, 'simulated_robot_node/unpause')
+    assert h.call(pause, Trigger.Request()).success
+    time.sleep(0.3)   # what was in flight
+    commands, t_paused = node.stats['published'], sim.clock.time_s
+    time.sleep(1.5)
+    assert node.stats['published'] == commands   # no keepalive, no re-solve while paused
+    assert sim.clock.time_s == t_paused
+    assert h.call(unpause, Trigger.Request()).success
+    wait_for(lambda: sim.clock.time_s > t_paused + 1.0, timeout=20.0, what='1 s more')
+    assert node.stats['published'] > commands
+    assert node._feedback.dropouts == 0 and node._feedback.trips() == 0
+
+
 def test_without_the_clock_its_settings_do_nothing_and_its_services_say_why(h, capfd):
     sim = h.add(SimulatedRobotNode, seed=2, real_time_factor=2.0, lockstep=True)
     assert sim.clock is None
