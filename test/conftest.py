@@ -2,7 +2,6 @@
 
 import os
 from pathlib import Path
-import random
 import shutil
 import subprocess
 import sys
@@ -16,6 +15,7 @@ REPO = TEST_DIR.parent
 PKG = 'bellow_ancf_ros'
 # shared test helpers (reference_beams, calibration_data) import by name from any folder
 sys.path.insert(0, str(TEST_DIR / 'support'))
+from ros_domains import fresh_domain  # noqa: E402
 
 # Small dense matrices: single-threaded BLAS is faster, and much faster on a loaded 2-core machine.
 limit_blas_threads()
@@ -94,7 +94,7 @@ def ros_context():
     rclpy = pytest.importorskip('rclpy')
     from rclpy.context import Context
 
-    domain = random.randint(0, 101)
+    domain = fresh_domain()
     saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
     os.environ['ROS_DOMAIN_ID'] = str(domain)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

@@ -16,7 +16,7 @@ and an installed executable must start.
 
 import os
 import py_compile
-import random
+from ros_domains import fresh_domain  # noqa: E402
 import stat
 import subprocess
 import sys
@@ -187,7 +187,7 @@ def test_installed_executable_starts_and_stops_cleanly(colcon_install, tmp_path)
             [str(exe), '--ros-args', '--params-file',
              str(colcon_install / 'share' / PKG / 'config' / 'nodes.yaml'),
              '-p', 'trajectory_publisher:rate_hz:=20.0'],
-            env=_ros_env(colcon_install, random.randint(0, 101)), cwd=tmp_path, stdout=log,
+            env=_ros_env(colcon_install, fresh_domain()), cwd=tmp_path, stdout=log,
             stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 30.0

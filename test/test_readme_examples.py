@@ -33,6 +33,7 @@ Commands are collected from the code blocks of ``README.md`` and of every
 
 import os
 import random
+from ros_domains import fresh_domain  # noqa: E402
 import re
 from concurrent.futures import ThreadPoolExecutor
 import shlex
@@ -250,7 +251,7 @@ def _default_sigint():
 
 def test_venv_node_commands_start_and_stop(tmp_path):
     env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(random.randint(0, 101))
+    env['ROS_DOMAIN_ID'] = str(fresh_domain())
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
     env['PYTHONUNBUFFERED'] = '1'
@@ -301,7 +302,7 @@ def _ros2_run_lines(share=None):
 
 def _start(cls, ros_args):
     ctx = Context()
-    rclpy.init(args=['node', *ros_args], context=ctx, domain_id=random.randint(0, 101))
+    rclpy.init(args=['node', *ros_args], context=ctx, domain_id=fresh_domain())
     try:
         return cls(context=ctx), ctx
     except BaseException:

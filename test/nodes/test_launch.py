@@ -19,7 +19,7 @@ decides which entry wins (node-specific over ``/**:``, later over earlier).
 """
 
 import importlib.util
-import random
+from ros_domains import fresh_domain  # noqa: E402
 import re
 import shlex
 import sys
@@ -234,7 +234,7 @@ def launch_argument_parameters(node, context):
 
 @pytest.fixture(scope='module')
 def domain_id():
-    return random.randint(0, 101)
+    return fresh_domain()
 
 
 def start_node(cls, ros_args, domain):

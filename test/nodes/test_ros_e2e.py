@@ -11,6 +11,7 @@ deadlines.
 import math
 import os
 import random
+from ros_domains import fresh_domain  # noqa: E402
 import signal
 import subprocess
 import sys
@@ -194,7 +195,7 @@ def position(msg):
 # ------------------------------------------------------------------ fixtures
 @pytest.fixture(scope='module')
 def stack(tmp_path_factory):
-    domain = random.randint(0, 101)
+    domain = fresh_domain()
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

@@ -5,7 +5,7 @@ Imports rclpy: only for tests that already skipped without it.
 
 import os
 from pathlib import Path
-import random
+from ros_domains import fresh_domain  # noqa: E402
 import signal
 import subprocess
 import threading
@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parents[2]
 def node_process_env() -> dict:
     """The environment of a node process: an isolated domain, this checkout, unbuffered."""
     e = dict(os.environ)
-    e['ROS_DOMAIN_ID'] = str(random.randint(0, 101))
+    e['ROS_DOMAIN_ID'] = str(fresh_domain())
     e['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     e['PYTHONPATH'] = str(REPO) + os.pathsep + e.get('PYTHONPATH', '')
     e['PYTHONUNBUFFERED'] = '1'
