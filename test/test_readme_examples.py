@@ -32,7 +32,6 @@ Commands are collected from the code blocks of ``README.md`` and of every
 """
 
 import os
-import random
 from ros_domains import fresh_domain  # noqa: E402
 import re
 from concurrent.futures import ThreadPoolExecutor
@@ -381,7 +380,7 @@ def test_documented_ros2_run_node_lines_start_on_a_colcon_install(colcon_install
     lines = [line for _, line in code_lines()
              if line.startswith('ros2 run bellow_ancf_ros ') and not line.startswith(ROS2_RUN_CLI)]
     assert len(lines) >= 8 and any(SHARE in line for line in lines)
-    domains = random.sample(range(0, 102), len(lines))
+    domains = [fresh_domain() for _ in lines]
     procs = []
     for k, (line, domain) in enumerate(zip(lines, domains)):
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',

@@ -10,7 +10,6 @@ deadlines.
 
 import math
 import os
-import random
 from ros_domains import fresh_domain  # noqa: E402
 import signal
 import subprocess
@@ -451,8 +450,7 @@ def test_ros_wiring_check_short_run_two_segments(tmp_path):
     """The wiring check (three processes, the model against itself), shortened to seconds."""
     plot = tmp_path / 'tracking.png'
     # a domain of its own: the module's node stack (another random domain) is still running
-    busy = int(os.environ.get('ROS_DOMAIN_ID', '-1'))
-    domain = random.choice([d for d in range(102) if d != busy])
+    domain = fresh_domain()
     env = dict(os.environ)
     env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
     res = subprocess.run([sys.executable, '-m', 'bellow_ancf_ros.demos.wiring_check',
@@ -480,8 +478,7 @@ def test_two_segment_launch_leads_in_from_the_robot_at_rest(tmp_path, monkeypatc
     ``ramp_in_s`` (2 s): its first targets are at the robot, not at the
     path's start 26.9 mm away.
     """
-    domain = random.choice([d for d in range(102)
-                            if d != int(os.environ.get('ROS_DOMAIN_ID', '-1'))])
+    domain = fresh_domain()   # (none a recent test used: no stale participant of a killed node)
     monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env = dict(os.environ)
