@@ -181,7 +181,9 @@ def loads_markdown(runs: list) -> str:
     n = len(runs)
     head = (f'{"One run" if n == 1 else f"{n} runs"} of the loads phase ('
             + '; '.join(f'`{d["file"]}`: {d["date"][:16].replace("T", " ")} UTC, '
-                        f'{d["wall_s"]:.0f} s, {"PASS" if d["passed"] else "FAIL"}'
+                        f'{d["wall_s"]:.0f} s, load {d["machine"]["load_start"][0]:.1f} at the '
+                        f'start, {"simulation time" if d.get("simulation_time") else "wall clock"}'
+                        f', {"PASS" if d["passed"] else "FAIL"}'
                         for d in runs)
             + (').' if n == 1 else '): each figure as its range over the runs.'))
     tol = runs[0]['tolerance_n']

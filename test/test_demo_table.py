@@ -92,6 +92,7 @@ def _loads(file, alone, compensated, passed=True):
                                        'truth_n': [0.1, 0.0, -0.2943],
                                        'within': abs(x - 0.1) <= 0.03}}}
     return {'file': file, 'date': '2026-12-04T07:40:00+00:00', 'wall_s': 40.0,
+            'machine': {'cpus': 2, 'load_start': [2.43, 1.0, 1.0]}, 'simulation_time': True,
             'passed': passed, 'tolerance_n': {'lateral': 0.03, 'vertical': 0.1},
             'runs': [run(False, *alone), run(True, *compensated)]}
 
@@ -100,7 +101,8 @@ def test_the_loads_table_gives_each_runs_figures_and_their_range():
     one = demo_table.loads_markdown([_loads('loads_results_1.json', (0.4, 0.099),
                                             (0.41, 0.1))])
     assert one.startswith('One run of the loads phase (`loads_results_1.json`: '
-                          '2026-12-04 07:40 UTC, 40 s, PASS).')
+                          '2026-12-04 07:40 UTC, 40 s, load 2.4 at the start, simulation time, '
+                          'PASS).')
     assert ('| integral feedback alone | 0.40 mm (1.60) | 0.001, 0.000, -0.296 N | '
             '0.099, 0.000, -0.294 N | 1/1 |') in one
     assert 'estimator, payload + push (truth 0.100, 0.000, -0.294 N)' in one
