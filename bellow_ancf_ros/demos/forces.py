@@ -130,7 +130,7 @@ class LoadRun:
             tag=self.tag)
 
     def first_target(self) -> float | None:
-        """Arrival time of the trajectory publisher's first target (None before; the recorder's clock)."""
+        """Arrival time of the first target (None before; on the recorder's clock)."""
         with self.rec.lock:
             for t, m in self.rec.msgs['target_pose']:
                 if m.header.stamp.sec or m.header.stamp.nanosec:

@@ -60,7 +60,7 @@ def test_main_demo_short_run_one_segment(tmp_path):
 
 @pytest.mark.slow
 def test_loads_phase(tmp_path):
-    """The loads phase of make demo (its 20 s circle, on simulation time): the estimator reads the loads.
+    """The loads phase of make demo (20 s circle, simulation time): the estimator reads the loads.
 
     On a 12 s circle the compensated run's push reading missed the 0.03 N
     tolerance on a loaded CI machine (0.128 N, -0.035 N sideways): the
