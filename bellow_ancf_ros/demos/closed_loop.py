@@ -102,6 +102,7 @@ import random
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -233,7 +234,8 @@ class Run:
         self.procs['robot'] = NodeProcess('simulated_robot_node', {
             'robot_config': case.plant, 'seed': args.seed, 'plant': args.plant,
             'physics_rate_hz': args.physics_rate, 'payload_kg': case.payload_kg,
-            **clock_parameters(args.sim_time, robot=True)}, self.env, log_dir, tag=self.tag)
+            **clock_parameters(args.sim_time, robot=True, real_time_factor=args.real_time_factor)},
+            self.env, log_dir, tag=self.tag)
         self.procs['inverse'] = NodeProcess('inverse_kinetostatic_node', {
             'robot_config': case.robot, 'feedback': 'integral' if mode == 'integral' else 'none',
             'dynamic_feedforward': mode != 'none', 'payload_kg': case.payload_kg,
@@ -399,6 +401,19 @@ class Run:
         self.rec.wait_for(self.times['end'], self._check)
         self._hold_timer.cancel()
 
+    def play(self) -> dict:
+        """The run from start-up to the end of its hold; the recording (:meth:`finish`)."""
+        try:
+            self.wait_up()
+            self.start_trajectory()
+            self.wait_flowing()
+            self.run_until_stop()
+            self.stop_trajectory()
+            self.hold()
+        except Exception as exc:  # noqa: BLE001 - report, clean up, fail
+            self.fail(exc)
+        return self.finish()
+
     def fail(self, exc: Exception) -> None:
         """Report a failed run with the nodes' last log lines."""
         print(f'FAILED ({self.name}): {exc}')
@@ -436,16 +451,19 @@ def preview_s(plant: str, mode: str = 'none') -> float:
 
 
 def run_column(col: Column, args, domains: list, log_dir: Path) -> dict:
-    """Feedforward and closed loop of one case at one speed, on two domains.
+    """Feedforward and closed loop of one case at one speed, on their own domains.
 
-    ``args.sequential`` (the default): one after the other, each pipeline
-    with the cores to itself.  Side by side, eight node processes, the
-    dynamic robot's physics and the recorder share two cores: the
-    two-segment closed loop's solves then waited past their budget, its
-    commands gapped and the robot rang at its first mode (4x: 4.2 mm
-    against 0.42 mm one after the other).
+    On simulation time (the default) side by side, each run in its own
+    thread on its own clock: the lockstep makes the sharing of the cores
+    slow the runs down, never change their figures.  ``args.sequential``
+    (the default on the wall clock): one after the other, each pipeline with
+    the cores to itself; side by side on the wall clock, eight node
+    processes, the dynamic robot's physics and the recorder share two cores:
+    the two-segment closed loop's solves then waited past their budget, its
+    commands gapped and the robot rang at its first mode (4x: 4.2 mm against
+    0.42 mm one after the other).
     """
-    if getattr(args, 'sequential', True):
+    if args.sequential:
         out = {}
         for mode in col.case.modes:
             out.update(_run_modes(col, args, domains, log_dir, (mode,)))
@@ -455,26 +473,8 @@ def run_column(col: Column, args, domains: list, log_dir: Path) -> dict:
 
 def _run_modes(col: Column, args, domains: list, log_dir: Path, modes) -> dict:
     runs = [Run(col, mode, args, domains.pop(), log_dir) for mode in modes]
-    out = {}
-    try:
-        for r in runs:
-            r.wait_up()
-        for r in runs:
-            r.start_trajectory()
-        for r in runs:
-            r.wait_flowing()
-        for r in runs:
-            r.run_until_stop()
-        for r in runs:
-            r.stop_trajectory()
-        for r in runs:
-            r.hold()
-    except Exception as exc:  # noqa: BLE001 - report, clean up, fail
-        for r in runs:
-            r.fail(exc)
-    for r in runs:
-        out[r.mode] = r.finish()
-    return out
+    with ThreadPoolExecutor(len(runs)) as pool:   # each on its own clock
+        return dict(zip(modes, pool.map(lambda r: r.play(), runs)))
 
 
 # ---------------------------------------------------------------- analysis
@@ -621,10 +621,15 @@ def _parse(argv):
     ap.add_argument('--startup-timeout', type=float, default=40.0, help='[s]')
     ap.add_argument('--cases', default='one_segment,two_segment',
                     help='comma-separated robots to run (default: %(default)s)')
-    ap.add_argument('--side-by-side', dest='sequential', action='store_false',
-                    help='run feedforward and closed loop at the same time (half as long; the '
-                         'two pipelines share the cores, and on two cores the two-segment '
-                         "closed loop's solves wait, its commands gap and the robot rings)")
+    order = ap.add_mutually_exclusive_group()
+    order.add_argument('--side-by-side', dest='sequential', action='store_false', default=None,
+                       help='run feedforward and closed loop at the same time (the default on '
+                            'simulation time; on the wall clock the two pipelines share the '
+                            "cores, and on two cores the two-segment closed loop's solves wait, "
+                            'its commands gap and the robot rings)')
+    order.add_argument('--one-at-a-time', dest='sequential', action='store_true',
+                       help='run feedforward and closed loop one after the other (the default '
+                            'on the wall clock)')
     ap.add_argument('--spin-up', type=float, default=SPIN_UP_S,
                     help="[s] the path's speed rises from zero over min(period, this) "
                          '(trajectory_publisher spin_up_s; default: %(default)s)')
@@ -637,7 +642,14 @@ def _parse(argv):
                          "controller's computation then takes time in the run, and a busy "
                          "computer changes the figures), instead of on the simulated robot's "
                          'clock in lockstep with the controller (the default)')
-    return ap.parse_args(argv)
+    ap.add_argument('--real-time-factor', type=float, default=1.0,
+                    help="the simulated robot's pacing on simulation time (simulated seconds "
+                         'per wall second; 0: as fast as the lockstep with the controller '
+                         'allows; default: %(default)s)')
+    args = ap.parse_args(argv)
+    if args.sequential is None:
+        args.sequential = not args.sim_time
+    return args
 
 
 # ---------------------------------------------------------------- results

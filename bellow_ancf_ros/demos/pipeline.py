@@ -37,17 +37,19 @@ class SimulationStalled(RuntimeError):
     """The simulation's clock did not move for :data:`STALL_S` wall seconds."""
 
 
-def clock_parameters(sim_time: bool, robot: bool = False) -> dict:
+def clock_parameters(sim_time: bool, robot: bool = False, real_time_factor: float = 1.0) -> dict:
     """The parameters that put a node on simulation time (``robot``: the one that is the clock).
 
     The simulated robot publishes ``/clock`` in lockstep with the
-    controller's commands at real time; every node uses it.  Nothing without
+    controller's commands, paced at ``real_time_factor`` (0: as fast as the
+    controller's reports allow); every node uses it.  Nothing without
     ``sim_time`` (the wall clock).
     """
     if not sim_time:
         return {}
     return dict({'use_sim_time': True},
-                **({'publish_clock': True, 'lockstep': True} if robot else {}))
+                **({'publish_clock': True, 'lockstep': True,
+                    'real_time_factor': float(real_time_factor)} if robot else {}))
 
 
 class NodeProcess:

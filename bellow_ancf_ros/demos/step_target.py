@@ -21,6 +21,7 @@ overshoot of at most :data:`OVERSHOOT_GOAL_M` and an error of at most
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +83,8 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
         'robot': NodeProcess('simulated_robot_node', {
             'robot_config': ROBOT + '_mismatched', 'seed': args.seed, 'plant': args.plant,
             'physics_rate_hz': args.physics_rate,
-            **clock_parameters(args.sim_time, robot=True)}, env, log_dir, tag=tag),
+            **clock_parameters(args.sim_time, robot=True,
+                               real_time_factor=args.real_time_factor)}, env, log_dir, tag=tag),
         'inverse': NodeProcess('inverse_kinetostatic_node', {
             'robot_config': ROBOT, 'feedback': feedback, 'target_shaping': shaping,
             **hardware_parameters(args.plant), **clock_parameters(args.sim_time)}, env,
@@ -150,7 +152,12 @@ def step_phase(args, domains: list, log_dir: Path) -> dict:
           'published once: feedforward unshaped and ZVD-shaped, and the closed loop at its '
           'defaults (true pose; residual swing 1-2 s after the step with a quadratic drift '
           'taken out)')
-    res = {k: _run(k, args, domains.pop(), log_dir, poses) for k in RUNS}
+    todo = [(k, domains.pop()) for k in RUNS]
+    # on simulation time side by side (each on its own clock, in lockstep: the cores'
+    # sharing slows the runs, never changes them), else one after the other
+    with ThreadPoolExecutor(1 if args.sequential else len(todo)) as pool:
+        res = dict(zip(RUNS, pool.map(lambda kd: _run(kd[0], args, kd[1], log_dir, poses),
+                                      todo)))
     runs = {}
     for k, r in res.items():
         runs[k] = None

@@ -9,7 +9,9 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
 
 * ``real_time_factor``: simulated seconds per wall second (1: real time;
   0: as fast as the steps can be taken).  A step that is late by more than
-  :data:`MAX_LATE_S` re-anchors the pacing (no catch-up burst).
+  :data:`MAX_LATE_S` re-anchors the pacing (no long catch-up burst); a
+  shorter delay, such as a lockstep wait for the controller, is caught up,
+  so that a controller that keeps up on average keeps the factor.
 * ``lockstep_period_s`` (lockstep on when set): the simulation runs at most
   this far ahead of the newest command (:meth:`command_arrived`), so a
   controller that stops commanding holds the simulation back.  A command
@@ -185,9 +187,9 @@ class SimulationClock:
                     else:
                         self._cond.wait(min(left, _POLL_S))
                     continue
-                if self._wait_since is not None:   # a wait ended: pace from now
+                if self._wait_since is not None:   # a wait ended: catch up (MAX_LATE_S at most)
                     self.lockstep_wait_s += now - self._wait_since
-                    self._wait_since, self._anchor = None, None
+                    self._wait_since = None
                 if self.real_time_factor > 0:
                     if self._anchor is None:
                         self._anchor = (now, self.time_s)

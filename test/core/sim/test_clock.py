@@ -133,3 +133,35 @@ def test_a_controller_that_reports_its_time_holds_the_simulation_to_it_step_by_s
     clock.done_until(0.02)                # an old report never moves it back
     assert steps_after(clock, 0.1) == 6
     r.stop()
+
+
+def test_short_lockstep_waits_are_caught_up_so_the_factor_holds():
+    """A controller that takes 35 ms for every 50 ms still gets the simulation at 1x.
+
+    Re-anchoring the pacing after every wait ran the main job at 0.7x real time.
+    """
+    clock = SimulationClock(0.01, real_time_factor=1.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=5.0)
+    clock.done_until(0.05)
+    stop = threading.Event()
+
+    def controller():
+        reported = 0.05
+        while not stop.is_set():
+            if clock.time_s >= reported - 1e-9:
+                time.sleep(0.035)                   # its work on the newest period
+                reported += 0.05
+                clock.done_until(reported)
+            time.sleep(0.001)
+    worker = threading.Thread(target=controller, daemon=True)
+    t0 = time.monotonic()
+    r = Runner(clock)
+    worker.start()
+    assert clock.wait_until(100, 30.0)              # 1 simulated second
+    wall = time.monotonic() - t0
+    stop.set()
+    r.stop()
+    worker.join(2.0)
+    assert clock.lockstep_waits >= 10 and clock.lockstep_timeouts == 0
+    # paced from each wait's end instead: 1 s + 20 waits of 25 ms = 1.5 s
+    assert 0.98 <= wall < 1.25
