@@ -91,7 +91,7 @@ TOPICS = (
           "the model's pose for the command"),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
           'per-solve status and 1 Hz heartbeat'),
-    Topic('publishes', 'lockstep_clock', 'rosgraph_msgs/Clock',
+    Topic('publishes', 'lockstep_clock', 'std_msgs/Header',
           'use_sim_time: the simulation time its work is done until (a lockstep)'),
     Topic('services', '~/change_state, ~/get_state, ...', 'lifecycle_msgs',
           'the standard lifecycle services (autostart: configure + activate at start-up)'),

@@ -1,13 +1,23 @@
-"""The controller's side of a simulation's lockstep: the time up to which it has done its work.
+"""A participant's side of a simulation's lockstep: the time up to which it has done its work.
 
-Under ``use_sim_time`` the inverse node publishes ``lockstep_clock``
-(rosgraph_msgs/Clock): each ``/clock`` tick it has received, once no solve
-is pending or running (at once when idle, else when the solve ends).  A
-``simulated_robot_node`` in ``lockstep`` then takes no step beyond that time
-(:meth:`~bellow_ancf_ros.core.sim.SimulationClock.done_until`): the
-controller's computation takes no simulated time, and a busy computer slows
-the simulation instead of delaying the commands in it.  Nothing is published
-on the wall clock.
+Under ``use_sim_time`` a participant publishes ``lockstep_clock``
+(std_msgs/Header: ``stamp`` the simulation time its work is done until,
+``frame_id`` its fully qualified node name).  A ``simulated_robot_node`` in
+``lockstep`` takes no step beyond the oldest of the participants' newest
+reports (:meth:`~bellow_ancf_ros.core.sim.SimulationClock.done_until`): their
+computation takes no simulated time, and a busy computer slows the
+simulation instead of delaying what they publish in it.  Two kinds:
+
+* a controller (``follow_clock``: the inverse node) reports each ``/clock``
+  tick it has received, once no work is pending or running (at once when
+  idle, else when the work ends: :meth:`LockstepReport.work_done`);
+* a publisher on a timer (the trajectory publisher) reports, after each
+  tick, the time just before its next one (:meth:`LockstepReport.report`),
+  so that no step passes a tick before it is published.
+
+A participant that stops says so (``stamp`` :data:`LEAVE_SEC` s,
+:meth:`LockstepReport.destroy`), and the simulation no longer waits for it.
+Nothing is published on the wall clock.
 """
 
 from __future__ import annotations
@@ -15,38 +25,74 @@ from __future__ import annotations
 import threading
 from typing import Callable
 
+from builtin_interfaces.msg import Time
+from rclpy.duration import Duration
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
 
-__all__ = ['TOPIC', 'LockstepReport']
+__all__ = ['LEAVE_SEC', 'TOPIC', 'LockstepReport', 'report_of']
 
 #: The topic (in the node's namespace) a simulated robot's lockstep listens to.
 TOPIC = 'lockstep_clock'
+#: A report stamped this many seconds: the participant no longer holds the simulation.
+LEAVE_SEC = 2 ** 31 - 1
+
+
+def report_of(msg: Header) -> tuple[str, float | None]:
+    """(participant, done until [s]) of a report; None: the participant leaves."""
+    if msg.stamp.sec >= LEAVE_SEC:
+        return msg.frame_id, None
+    return msg.frame_id, msg.stamp.sec + 1e-9 * msg.stamp.nanosec
+
+
+def _time(t: float) -> Time:
+    ns = max(int(round(t * 1e9)), 0)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 class LockstepReport:
     """Publish ``lockstep_clock`` for ``node`` while it runs on simulation time.
 
-    ``idle()``: no work pending or running.  :meth:`work_done` (any thread):
-    a piece of work ended; the newest tick held back goes out if now idle.
+    ``follow_clock``: report each ``/clock`` tick once ``idle()`` (no work
+    pending or running); :meth:`work_done` (any thread): a piece of work
+    ended, the newest tick held back goes out if now idle.  Without it the
+    node reports its own times with :meth:`report`.
     """
 
-    def __init__(self, node, idle: Callable[[], bool]) -> None:
+    def __init__(self, node, idle: Callable[[], bool] = lambda: True,
+                 follow_clock: bool = True) -> None:
         self._node, self._idle = node, idle
         self._lock = threading.Lock()
         self._held: Clock | None = None   # the newest tick received while busy
         self._pub = self._sub = None
+        self._name = node.get_fully_qualified_name()
         if node.get_parameter('use_sim_time').value:
-            self._pub = node.create_publisher(Clock, TOPIC, 10)
-            self._sub = node.create_subscription(
-                Clock, '/clock', self._on_clock,
-                QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
-                           history=HistoryPolicy.KEEP_LAST))
+            self._pub = node.create_publisher(Header, TOPIC, 10)
+            if follow_clock:
+                self._sub = node.create_subscription(
+                    Clock, '/clock', self._on_clock,
+                    QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                               history=HistoryPolicy.KEEP_LAST))
+
+    @property
+    def active(self) -> bool:
+        """True while reporting (the node is on simulation time)."""
+        return self._pub is not None
 
     def _on_clock(self, msg: Clock) -> None:
         with self._lock:
             self._held = msg
         self.work_done()
+
+    def _publish(self, stamp: Time) -> None:
+        pub = self._pub
+        if pub is None:
+            return
+        try:
+            pub.publish(Header(stamp=stamp, frame_id=self._name))
+        except Exception:  # noqa: BLE001 - publisher gone at shutdown
+            pass
 
     def work_done(self) -> None:
         """Report the newest tick received, unless work is still pending or running."""
@@ -55,14 +101,21 @@ class LockstepReport:
         with self._lock:
             msg, self._held = self._held, None
         if msg is not None:
-            try:
-                self._pub.publish(msg)
-            except Exception:  # noqa: BLE001 - publisher gone at shutdown
-                pass
+            self._publish(msg.clock)
+
+    def report(self, t: float) -> None:
+        """Report the work done until simulation time ``t`` [s]."""
+        self._publish(_time(t))
 
     def destroy(self) -> None:
-        """Stop reporting (on cleanup): the publisher and the subscription go."""
+        """Stop reporting (on cleanup): a last report that this node leaves, then the topics go."""
+        self._publish(Time(sec=LEAVE_SEC, nanosec=0))
         pub, sub, self._pub, self._sub = self._pub, self._sub, None, None
+        if pub is not None:   # the leave must arrive, or the simulation waits its timeout
+            try:
+                pub.wait_for_all_acked(Duration(seconds=0.5))
+            except Exception:  # noqa: BLE001 - context gone at shutdown
+                pass
         if sub is not None:
             self._node.destroy_subscription(sub)
         if pub is not None:

@@ -51,15 +51,18 @@ stamps everything with simulation time, which starts at 0; nodes started
 with ``use_sim_time:=true`` (the simulated robot itself too: its
 ``/diagnostics``) run on it.  ``real_time_factor`` paces it against the wall
 clock (1: real time, 0: as fast as it can).  With ``lockstep``, a
-controller that reports the time up to which it has done its work on
-``lockstep_clock`` (the inverse node does, under ``use_sim_time``) holds
-the simulation to it step by step: its computation takes no simulated time,
-and a controller slowed by a busy computer slows the simulation instead of
-changing its result.  A controller that reports nothing (a lab's own) is
+participant that reports the time up to which it has done its work on
+``lockstep_clock`` (under ``use_sim_time`` the inverse node does after each
+``/clock`` tick, the trajectory publisher before each of its ticks) holds
+the simulation to it step by step, the slowest of them: their computation
+takes no simulated time, and a participant slowed by a busy computer slows
+the simulation instead of changing its result; one that stops says so and
+holds it no longer.  A controller that reports nothing (a lab's own) is
 followed by its commands: the simulation runs at most ``lockstep_period_s``
 ahead of the newest ``pressure_command`` (the inverse node republishes
-every 0.05 s).  After ``lockstep_timeout_s`` (wall) without either it runs
-free until the next one (counted on ``/diagnostics``).  The motion
+every 0.05 s).  After ``lockstep_timeout_s`` (wall) without either it
+forgets the participants that held it back until they report again, and
+runs free if none is left (counted on ``/diagnostics``).  The motion
 capture, the regulators, creep, dropouts and outliers and the command
 timeout run on simulation time; the motion capture delivers at exact
 multiples of its period.
@@ -93,7 +96,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import Trigger
 
 from ..core import load_robot
@@ -102,7 +105,7 @@ from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract
 from .diagnostics import Refusals, publish_diagnostic
-from .lockstep import TOPIC as LOCKSTEP_TOPIC
+from .lockstep import TOPIC as LOCKSTEP_TOPIC, report_of
 from .ros_util import (
     Param,
     StartupParameterError,
@@ -311,8 +314,8 @@ TOPICS = (
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz status'),
     Topic('publishes', '/clock', 'rosgraph_msgs/Clock',
           'simulation time, after every physics step (publish_clock)'),
-    Topic('subscribes', 'lockstep_clock', 'rosgraph_msgs/Clock',
-          "lockstep: the controller's work done until then"),
+    Topic('subscribes', 'lockstep_clock', 'std_msgs/Header',
+          "lockstep: a participant's work done until stamp (frame_id: its node)"),
     Topic('services', '~/pause', 'std_srvs/Trigger', 'stop the simulation (publish_clock)'),
     Topic('services', '~/unpause', 'std_srvs/Trigger', 'run it again'),
     Topic('services', '~/step', 'std_srvs/Trigger', 'take step_count physics steps, paused'),
@@ -382,9 +385,8 @@ class SimulatedRobotNode(Node):
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_command, qos)
         if self.clock is not None and self.clock.lockstep_period_s is not None:
-            self._sub_done = self.create_subscription(
-                Clock, LOCKSTEP_TOPIC,
-                lambda m: self.clock.done_until(m.clock.sec + 1e-9 * m.clock.nanosec), 10)
+            self._sub_done = self.create_subscription(Header, LOCKSTEP_TOPIC,
+                                                      self._on_lockstep, 10)
         for name, handler in (('pause', self._on_pause), ('unpause', self._on_unpause),
                               ('step', self._on_step), ('reset', self._on_reset)):
             self.create_service(Trigger, f'~/{name}', handler)
@@ -453,6 +455,13 @@ class SimulatedRobotNode(Node):
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ input
+    def _on_lockstep(self, msg) -> None:
+        who, t = report_of(msg)
+        if t is None:
+            self.clock.leave(who)
+        else:
+            self.clock.done_until(t, who)
+
     def _on_command(self, msg: Float64MultiArray) -> None:
         self.stats['received'] += 1
         label = msg.layout.dim[0].label if len(msg.layout.dim) else None

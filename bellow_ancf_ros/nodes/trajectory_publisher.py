@@ -68,6 +68,7 @@ from ..core.experiments import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
 from ..core import geometry
 from . import contract
 from .diagnostics import Heartbeat
+from .lockstep import LockstepReport
 from .measured_feedback import measured_pose_qos
 from .ros_util import (
     Param,
@@ -158,6 +159,8 @@ TOPICS = (
           'geometry_msgs/PoseStamped', 'where the robot is, for the lead-in (ramp_in_s)'),
     Topic('calls', '<controller_node>/get_state', 'lifecycle_msgs/GetState',
           'the lead-in waits for the controller to be active'),
+    Topic('publishes', 'lockstep_clock', 'std_msgs/Header',
+          'use_sim_time: the simulation time just before its next target (a lockstep)'),
 )
 
 
@@ -231,6 +234,8 @@ class TrajectoryPublisher(Node):
         self.finished = False
         rate = float(self.get_parameter('rate_hz').value)
         self._timer = self.create_timer(1.0 / rate, self._tick)
+        # on simulation time: no simulated step passes a tick before its target is out
+        self._lockstep = LockstepReport(self, follow_clock=False)
         self.get_logger().info(
             f"publishing {self.get_parameter('trajectory').value!r} for robot {self.cfg.name!r} "
             f'at {rate:g} Hz: {self._describe()}')
@@ -481,6 +486,24 @@ class TrajectoryPublisher(Node):
         return False
 
     def _tick(self) -> None:
+        try:
+            self._publish_target()
+        finally:
+            if self._lockstep.active:
+                if self.finished:
+                    self._lockstep.destroy()   # no more targets: the simulation waits no longer
+                elif (left := self._timer.time_until_next_call()) is not None:
+                    # done until just before the next tick
+                    self._lockstep.report(1e-9 * (self.get_clock().now().nanoseconds + left)
+                                          - 1e-6)
+
+    def destroy_node(self):
+        """Leave the simulation's lockstep, then destroy the node."""
+        if getattr(self, '_lockstep', None) is not None:
+            self._lockstep.destroy()
+        return super().destroy_node()
+
+    def _publish_target(self) -> None:
         # one instant for the path's clock and the stamp: the pose is the one wanted at it
         now = self.get_clock().now()
         if self._t0 is None:

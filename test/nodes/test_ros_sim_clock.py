@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bellow_ancf_ros.core import solve_forward  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
+from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
 import test_ros_nodes as _rn  # noqa: E402
 from test_ros_nodes import pressure_msg, target_msg, wait_for  # noqa: E402
 
@@ -165,17 +166,46 @@ def test_a_reporting_controller_holds_the_simulation_step_by_step(h, one):
     pub = h.publisher(PoseStamped, 'target_pose')
     wait_for(lambda: sim._sub.get_publisher_count() >= 1, what='inverse -> robot')
     pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
-    wait_for(lambda: sim.clock._done_t is not None, what="the controller's first report")
+    wait_for(lambda: sim.clock.done_s is not None, what="the controller's first report")
+    assert sim.clock.participants == [node.get_fully_qualified_name()]
     ahead = []
     t_end = time.monotonic() + 3.0
     while time.monotonic() < t_end:
         with sim.clock._cond:   # the time reached against the newest report, at one instant
-            ahead.append(sim.clock.time_s - sim.clock._done_t)
+            ahead.append(sim.clock.time_s - sim.clock.done_s)
         time.sleep(0.003)
     # never more than one physics step beyond what the controller has done
     assert max(ahead) <= 1.0 / RATE_HZ + 1e-9, max(ahead)
     assert sim.clock.time_s > 1.0 and sim.clock.lockstep_timeouts == 0
     assert node.stats['published'] > 10
+
+
+def test_the_trajectory_publisher_holds_the_simulation_to_its_ticks_and_leaves_when_gone(h, one):
+    """As fast as the controller allows, no 50 Hz target is skipped; a publisher that stops leaves."""
+    sim = clock_sim(h, real_time_factor=0.0, lockstep=True)
+    targets = h.record(PoseStamped, 'target_pose', DEEP)
+    node = h.add(InverseKinetostaticNode, feedback='integral', command_rate_hz=20.0,
+                 use_sim_time=True)
+    traj = h.add(TrajectoryPublisher, trajectory='planar_circle', rate_hz=50.0, period_s=2.0,
+                 start_delay_s=0.0, ramp_in_s=0.0, controller_node='', use_sim_time=True)
+    wait_for(lambda: len(sim.clock.participants) == 2, what='both reports')
+    assert sim.clock.participants == sorted([node.get_fully_qualified_name(),
+                                             traj.get_fully_qualified_name()])
+    wait_for(lambda: sim.clock.time_s > 3.0, timeout=30.0, what='3 s of simulation')
+    with h.lock:
+        stamps = np.array([seconds(m.header.stamp) for _, m in targets])
+    gaps = np.diff(stamps[stamps > 1.0])   # the path under way
+    # a tick comes at most one physics step after it is due: never skipped, never doubled
+    assert gaps.size > 90 and gaps.max() <= 0.02 + 1.0 / RATE_HZ + 1e-6, gaps.max()
+    assert gaps.min() >= 0.02 - 1.0 / RATE_HZ - 1e-6, gaps.min()
+    h.executor.remove_node(traj)
+    h.nodes.remove(traj)
+    traj.destroy_node()
+    wait_for(lambda: sim.clock.participants == [node.get_fully_qualified_name()],
+             what='the publisher leaving')
+    t_left = sim.clock.time_s
+    wait_for(lambda: sim.clock.time_s > t_left + 1.0, timeout=20.0, what='1 s more')
+    assert sim.clock.lockstep_timeouts == 0
 
 
 def test_pause_freezes_the_controller_too_no_command_no_dropout_after_it(h, one):

@@ -19,9 +19,13 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
   its usual cadence is not seen: a controller that reports the time up to
   which it has done its work (:meth:`done_until`, the inverse node's
   ``lockstep_clock``) makes the lockstep strict: no step beyond that time.
-  Until the first command or report, and after a wait of
-  ``lockstep_timeout_s`` wall seconds (a controller stopped or dead: counted
-  in :attr:`lockstep_timeouts`) until the next one, it runs free.
+  Several participants may report, each under its own name (a controller,
+  a trajectory publisher that reports its next tick's time): the simulation
+  waits for the slowest, and one that :meth:`leave` s holds it no longer.
+  Until the first command or report, it runs free; after a wait of
+  ``lockstep_timeout_s`` wall seconds (counted in :attr:`lockstep_timeouts`)
+  the participants that held it back are forgotten until they report again
+  (a participant stopped or dead), and it runs free if none is left.
 * :meth:`pause`, :meth:`unpause`, :meth:`step`: no step while paused except
   the ones asked for, which are taken at once (neither paced nor locked).
 
@@ -71,7 +75,7 @@ class SimulationClock:
         self._pending = 0              # steps asked for while paused
         self._anchor: tuple[float, float] | None = None   # (wall, simulated) of the pacing
         self._command_t: float | None = None   # simulated time of the newest command
-        self._done_t: float | None = None      # the controller's report: its work done until
+        self._done: dict[str, float] = {}      # participant -> its work done until [s]
         self._free = True              # lockstep released (no command yet, or timed out)
         self._wait_since: float | None = None  # wall time a lockstep wait began
         self.lockstep_waits = 0        # steps that waited for a command
@@ -138,16 +142,35 @@ class SimulationClock:
             self._command_t, self._free = self.time_s, False
             self._cond.notify_all()
 
-    def done_until(self, t: float) -> None:
-        """The controller has done its work up to simulated time ``t``: the strict lockstep.
+    def done_until(self, t: float, who: str = '') -> None:
+        """Participant ``who`` has done its work up to simulated time ``t``: the strict lockstep.
 
-        From the first report on, no step goes beyond the newest reported
-        time (the controller's computation takes no simulated time).
+        From the first report on, no step goes beyond the oldest of the
+        participants' newest reports (their computation takes no simulated
+        time); an older report than one already given changes nothing.
         """
         with self._cond:
-            self._done_t = float(t) if self._done_t is None else max(self._done_t, float(t))
+            self._done[who] = max(self._done.get(who, float(t)), float(t))
             self._free = False
             self._cond.notify_all()
+
+    def leave(self, who: str = '') -> None:
+        """Participant ``who`` no longer holds the simulation back (it stopped)."""
+        with self._cond:
+            self._done.pop(who, None)
+            self._cond.notify_all()
+
+    @property
+    def done_s(self) -> float | None:
+        """The time the strict lockstep holds the simulation to (None: no report)."""
+        with self._cond:
+            return min(self._done.values()) if self._done else None
+
+    @property
+    def participants(self) -> list[str]:
+        """The names of the participants the strict lockstep waits for."""
+        with self._cond:
+            return sorted(self._done)
 
     def stop(self) -> None:
         """End :meth:`wait_for_step` (it returns False)."""
@@ -160,8 +183,8 @@ class SimulationClock:
         """True while lockstep holds the next step back (called with the lock held)."""
         if self.lockstep_period_s is None or self._free:
             return False
-        if self._done_t is not None:   # strict: the controller has seen the time reached
-            return self.time_s > self._done_t + 1e-9
+        if self._done:   # strict: every participant has done its work until the time reached
+            return self.time_s > min(self._done.values()) + 1e-9
         if self._command_t is None:
             return False
         return self.time_s + self.step_s - self._command_t > self.lockstep_period_s + 1e-12
@@ -181,9 +204,12 @@ class SimulationClock:
                         self._wait_since = now
                         self.lockstep_waits += 1
                     left = self._wait_since + self.lockstep_timeout_s - now
-                    if left <= 0:   # the controller stopped answering: run free until it does
+                    if left <= 0:   # stopped answering: forget who holds it back, until it does
                         self.lockstep_timeouts += 1
-                        self._free = True
+                        for who in [w for w, t in self._done.items()
+                                    if self.time_s > t + 1e-9]:
+                            del self._done[who]
+                        self._free = not self._done
                     else:
                         self._cond.wait(min(left, _POLL_S))
                     continue

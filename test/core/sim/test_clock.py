@@ -165,3 +165,39 @@ def test_short_lockstep_waits_are_caught_up_so_the_factor_holds():
     assert clock.lockstep_waits >= 10 and clock.lockstep_timeouts == 0
     # paced from each wait's end instead: 1 s + 20 waits of 25 ms = 1.5 s
     assert 0.98 <= wall < 1.25
+
+
+def test_the_slowest_participant_holds_the_simulation_and_one_that_leaves_no_longer():
+    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=5.0)
+    clock.pause()
+    clock.done_until(0.05, 'controller')
+    clock.done_until(0.02, 'trajectory')
+    r = Runner(clock)
+    clock.unpause()
+    assert steps_after(clock, 0.2) == 3          # 0.02 reached: the trajectory holds it
+    assert clock.participants == ['controller', 'trajectory']
+    clock.done_until(0.07, 'trajectory')
+    assert steps_after(clock, 0.2) == 6          # now the controller (0.05) holds it
+    clock.done_until(0.01, 'controller')         # an old report never moves it back
+    clock.leave('controller')
+    assert steps_after(clock, 0.2) == 8          # the trajectory alone: 0.07
+    clock.leave('trajectory')                    # nobody left: free
+    assert steps_after(clock, 0.2) > 20
+    r.stop()
+
+
+def test_a_participant_that_stops_reporting_is_forgotten_after_the_timeout():
+    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=0.3)
+    clock.pause()
+    clock.done_until(0.02, 'dead')
+    clock.done_until(10.0, 'alive')
+    r = Runner(clock)
+    clock.unpause()
+    assert steps_after(clock, 0.15) == 3
+    time.sleep(0.4)                              # the timeout: 'dead' is forgotten
+    assert clock.lockstep_timeouts == 1 and clock.participants == ['alive']
+    assert clock.wait_until(500, 5.0)            # held by 'alive' alone (10 s)
+    assert clock.steps <= 1001
+    r.stop()
