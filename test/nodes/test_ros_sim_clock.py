@@ -181,7 +181,7 @@ def test_a_reporting_controller_holds_the_simulation_step_by_step(h, one):
 
 
 def test_the_trajectory_publisher_holds_the_simulation_to_its_ticks_and_leaves_when_gone(h, one):
-    """As fast as the controller allows, no 50 Hz target is skipped; a publisher that stops leaves."""
+    """As fast as the controller allows, no 50 Hz target is skipped; one that stops leaves."""
     sim = clock_sim(h, real_time_factor=0.0, lockstep=True)
     targets = h.record(PoseStamped, 'target_pose', DEEP)
     node = h.add(InverseKinetostaticNode, feedback='integral', command_rate_hz=20.0,
