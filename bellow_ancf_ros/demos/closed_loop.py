@@ -111,7 +111,7 @@ from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
 from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, hardware_parameters,
-                       machine_state, plant_effects, tidy, wait_until, wait_up)
+                       machine_state, plant_effects, start_clock, tidy, wait_until, wait_up)
 from .step_target import LATE_GOAL_M, OVERSHOOT_GOAL_M, STEP_GOAL_M, step_phase
 from .step_target import RUNS as STEP_RUNS
 
@@ -124,6 +124,10 @@ GOALS = {(1, 1.0, 0.0): (0.5, None), (1, 4.0, 0.0): (1.0, None), (1, 10.0, 0.0):
          (2, 1.0, 0.05): (0.5, 0.5), (2, 10.0, 0.05): (1.5, 0.75)}
 STEADY_GOALS = {1: (0.3, None), 2: (0.5, 0.5)}   # segments -> held target (mm, deg)
 SPIN_UP_S = 5.0                # the path's speed rises over min(period, this) [s]
+#: On simulation time the path starts at this time [s]: the robot, vented at 0, has settled on
+#: the path's first point (the lead-in from 0.1 s; the two-segment robot with 50 g was still
+#: 3 mm off 4.4 s into it).
+SIM_START_S = 8.0
 OUTLIER_EXCESS_GOAL_KPA = 2.0  # a command step after an outlier, beyond the normal steps
 OUTLIER_MIN_M = 5e-3           # a measured pose this far from the true one is an outlier
 DROPOUT_GAP_S = 0.25           # measured poses this far apart: a dropout
@@ -252,8 +256,22 @@ class Run:
             raise RuntimeError(f'node(s) died: {dead}')
 
     def wait_up(self) -> None:
-        """Wait until the robot measures, the forward node predicts, the inverse commands."""
+        """Wait until the robot measures, the forward node predicts, the inverse commands.
+
+        On simulation time the lead-in and the trajectory publisher come up
+        first, and the simulated robot (started paused) runs once every node
+        is on its clock: every run starts from the same state at the same time.
+        """
         rec = self.rec
+        if self.args.sim_time:
+            self._lead_in_publisher()
+            self._trajectory_process(max(self.args.lead_in, SIM_START_S))
+            start_clock(rec, self.procs.values(),
+                        lambda: rec.publishers('pressure_command') >= 1
+                        and rec.publishers('predicted_pose') >= 1
+                        and rec.publishers('target_pose') >= 2   # the lead-in's, the path's
+                        and self._target_pub.get_subscription_count() >= 1,
+                        len(self.procs) + 1, self.args.startup_timeout)
         if not wait_up(self.procs.values(),
                        lambda: rec.count('measured_pose') > 0
                        and rec.count('predicted_pose') > 0
@@ -268,8 +286,15 @@ class Run:
         The lead-in targets come from this process (stamp zero) at 10 Hz until the
         trajectory publisher's first target (a real stamp) arrives (checked on
         every lead-in tick, so that no lead-in target follows it); it waits
-        ``--lead-in`` seconds after its start-up (``start_delay_s``).
+        ``--lead-in`` seconds after its start-up (``start_delay_s``).  On
+        simulation time both are already up (:meth:`wait_up`): the path starts
+        at :data:`SIM_START_S` of simulation time (or ``--lead-in``, if later).
         """
+        if not self.args.sim_time:
+            self._lead_in_publisher()
+            self._trajectory_process(self.args.lead_in)
+
+    def _lead_in_publisher(self) -> None:
         from geometry_msgs.msg import PoseStamped
 
         from ..core.experiments import trajectory
@@ -292,9 +317,12 @@ class Run:
             else:
                 pub.publish(first)
         self._lead_in = self.rec.node.create_timer(0.1, lead_in)
+
+    def _trajectory_process(self, start_delay_s: float) -> None:
+        case = self.case
         traj = {'robot_config': case.robot, 'trajectory': case.trajectory,
                 'rate_hz': TARGET_RATE_HZ, 'period_s': self.col.period_s,
-                'start_delay_s': self.args.lead_in, 'spin_up_s': self.spin_up_s,
+                'start_delay_s': start_delay_s, 'spin_up_s': self.spin_up_s,
                 'ramp_in_s': 0.0,   # this process holds the path's first point (lead-in)
                 'preview_s': preview_s(self.args.plant, self.mode),
                 **clock_parameters(self.args.sim_time)}

@@ -59,8 +59,8 @@ from pathlib import Path
 import numpy as np
 
 from ..cli.output import numbers
-from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, machine_state, tidy,
-                       wait_until, wait_up)
+from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, machine_state,
+                       start_clock, tidy, wait_until, wait_up)
 
 PLANT, MODEL = 'one_segment_mismatched', 'one_segment'
 PAYLOAD_KG, PUSH_N = 0.03, (0.1, 0.0, 0.0)
@@ -117,12 +117,28 @@ class LoadRun:
         self.t_start = None
 
     def start(self) -> None:
-        """Wait for the nodes, then start the trajectory publisher."""
+        """Wait for the nodes, then start the trajectory publisher.
+
+        On simulation time the trajectory publisher comes up with the others
+        and the simulated robot (started paused) runs once every node is on
+        its clock.
+        """
         rec = self.rec
+        if self.args.sim_time:
+            self._trajectory()
+            start_clock(rec, self.procs.values(),
+                        lambda: rec.publishers('pressure_command') >= 1
+                        and rec.publishers('estimated_wrench') >= 1
+                        and rec.publishers('target_pose') >= 1,
+                        len(self.procs) + 1, self.args.startup_timeout)
         if not wait_up(self.procs.values(), lambda: rec.count('measured_pose') > 0
                        and rec.count('estimated_wrench') > 0
                        and rec.publishers('pressure_command') >= 1, self.args.startup_timeout):
             raise RuntimeError(f'{self.name}: nodes did not come up')
+        if not self.args.sim_time:
+            self._trajectory()
+
+    def _trajectory(self) -> None:
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', {
             'robot_config': MODEL, 'trajectory': 'planar_circle', 'rate_hz': 10.0,
             'period_s': self.args.period, 'start_delay_s': 1.0,

@@ -26,8 +26,8 @@ import time
 from pathlib import Path
 
 __all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'child_env', 'clock_parameters',
-           'hardware_parameters', 'machine_state', 'plant_effects', 'tidy', 'wait_until',
-           'wait_up']
+           'hardware_parameters', 'machine_state', 'plant_effects', 'start_clock', 'tidy',
+           'wait_until', 'wait_up']
 
 #: Wall seconds without the simulation's clock moving before a wait gives up.
 STALL_S = 30.0
@@ -42,14 +42,29 @@ def clock_parameters(sim_time: bool, robot: bool = False, real_time_factor: floa
 
     The simulated robot publishes ``/clock`` in lockstep with the
     controller's commands, paced at ``real_time_factor`` (0: as fast as the
-    controller's reports allow); every node uses it.  Nothing without
+    controller's reports allow), and starts paused (:func:`start_clock`);
+    every node uses it.  Nothing without
     ``sim_time`` (the wall clock).
     """
     if not sim_time:
         return {}
     return dict({'use_sim_time': True},
-                **({'publish_clock': True, 'lockstep': True,
+                **({'publish_clock': True, 'lockstep': True, 'start_paused': True,
                     'real_time_factor': float(real_time_factor)} if robot else {}))
+
+
+def start_clock(rec: 'SpunNode', procs, ready, clock_users: int, timeout: float) -> None:
+    """Simulation time: once every node is up, unpause the simulated robot (it starts paused).
+
+    Waits until ``ready()`` and ``clock_users`` nodes (the recorder and the
+    simulated robot among them) subscribe ``/clock``, so that every node
+    sees the first step and the runs start from the same state at the same
+    time whatever the machine's load.  Raises when they do not come up.
+    """
+    if not wait_up(procs, lambda: ready() and rec.node.count_subscribers('/clock') >= clock_users,
+                   timeout):
+        raise RuntimeError('nodes did not come up')
+    rec.trigger('/simulated_robot_node/unpause')
 
 
 class NodeProcess:
@@ -243,7 +258,7 @@ class SpunNode:
         return control_now(self.node)
 
     def wait_for(self, until: float, check=None) -> None:
-        """Wait until :meth:`now` reaches ``until``, calling ``check()`` every 50 ms.
+        """Wait until :meth:`now` reaches ``until``, calling ``check()`` every 10 ms.
 
         Raises :class:`SimulationStalled` when the clock did not move for
         :data:`STALL_S` wall seconds (a simulation that stopped).
@@ -256,7 +271,22 @@ class SpunNode:
                 last, moved = now, time.monotonic()
             elif time.monotonic() - moved > STALL_S:
                 raise SimulationStalled(f'the clock stood at {now:.3f} s for {STALL_S:g} s')
-            time.sleep(0.05)
+            time.sleep(0.01)
+
+    def trigger(self, service: str, timeout: float = 10.0) -> None:
+        """Call the std_srvs/Trigger ``service`` (the robot's unpause...); raise if refused."""
+        from std_srvs.srv import Trigger
+        cli = self.node.create_client(Trigger, service)
+        try:
+            if not cli.wait_for_service(timeout_sec=timeout):
+                raise RuntimeError(f'no service {service}')
+            future = cli.call_async(Trigger.Request())
+            if not wait_until(future.done, timeout):
+                raise RuntimeError(f'{service} did not answer in {timeout:g} s')
+            if not future.result().success:
+                raise RuntimeError(f'{service} refused: {future.result().message}')
+        finally:
+            self.node.destroy_client(cli)
 
     def _spin(self) -> None:
         try:

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..cli.output import number
 from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, hardware_parameters,
-                       wait_up)
+                       start_clock, wait_up)
 
 __all__ = ['LATE_GOAL_M', 'OVERSHOOT_GOAL_M', 'RUNS', 'STEP_GOAL_M', 'STEP_M',
            'residual_swing', 'step_phase']
@@ -92,6 +92,9 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
     out = {'ok': False}
     try:
         pub = rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
+        if args.sim_time:   # robot, inverse node and this recorder on the clock, then it runs
+            start_clock(rec, procs.values(), lambda: pub.get_subscription_count() >= 1, 3,
+                        args.startup_timeout)
         if not wait_up(procs.values(), lambda: rec.count('true_pose') > 0
                        and pub.get_subscription_count() >= 1, args.startup_timeout):
             raise RuntimeError('nodes did not come up')

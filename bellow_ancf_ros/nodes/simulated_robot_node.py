@@ -214,15 +214,18 @@ def _simulation_clock(get, rate_hz: float, log) -> SimulationClock | None:
     """
     if not get('publish_clock').value:
         ignored = [f'{name} = {get(name).value}' for name, default in
-                   (('real_time_factor', 1.0), ('lockstep', False))
+                   (('real_time_factor', 1.0), ('lockstep', False), ('start_paused', False))
                    if get(name).value != default]
         if ignored:
             log(f'{", ".join(ignored)} ignored: without publish_clock the simulation runs on '
                 'the wall clock')
         return None
-    return SimulationClock(1.0 / rate_hz, float(get('real_time_factor').value),
-                           float(get('lockstep_period_s').value) if get('lockstep').value
-                           else None, float(get('lockstep_timeout_s').value))
+    clock = SimulationClock(1.0 / rate_hz, float(get('real_time_factor').value),
+                            float(get('lockstep_period_s').value) if get('lockstep').value
+                            else None, float(get('lockstep_timeout_s').value))
+    if get('start_paused').value:
+        clock.pause()
+    return clock
 
 
 def _stamp(t: float):
@@ -299,6 +302,9 @@ PARAMETERS = (
     Param('lockstep_timeout_s', 1.0, descriptor(
         'Wall seconds lockstep waits for a command before it runs free until the next one '
         '(a stopped controller; counted on /diagnostics).', D, lo=0.01, hi=60.0, **_RO)),
+    Param('start_paused', False, descriptor(
+        'With publish_clock: start paused at time 0 (~/unpause starts it), so that every '
+        'node is up before the first step (as Gazebo started paused).', B, **_RO)),
     Param('step_count', 1, descriptor(
         'Physics steps one ~/step call takes (settable at run time).', INT, lo=1,
         hi=1_000_000)),
@@ -422,7 +428,8 @@ class SimulatedRobotNode(Node):
             + f'physics {rate:g} Hz; commands in {unit}; '
             + ('wall clock' if c is None else
                f'publishing /clock, real-time factor {c.real_time_factor:g}'
-               + (f', lockstep {c.lockstep_period_s:g} s' if c.lockstep_period_s else '')))
+               + (f', lockstep {c.lockstep_period_s:g} s' if c.lockstep_period_s else '')
+               + (', paused until ~/unpause' if c.paused else '')))
 
     def _new_robot(self) -> SimulatedRobot:
         """The simulated robot at its start state: vented, at rest, the parameters' loads."""
