@@ -35,15 +35,18 @@ period, and for the quasi-static feedforward their time constant too
 node's dynamic feedforward inverts the lag and the mode from the stream).
 
 Every node runs on the simulated robot's clock (``/clock``, ``use_sim_time``)
-in lockstep with the inverse node (``lockstep_clock``): the simulation waits
-for the controller's solves, so their computation takes no simulated time
-and a busy computer slows the run instead of changing its figures (the
-step phase too; the loads phase stays on the wall clock).
+in lockstep with the inverse node and the trajectory publisher
+(``lockstep_clock``): the simulation waits for the controller's solves and
+for each target, so their computation takes no simulated time and a busy
+computer slows the run instead of changing its figures (the step and loads
+phases too).  The simulated robot starts paused and runs once every node
+is up, so every run starts from the same state at the same time.
 ``--wall-clock``: as with a real robot, the computation's delay included.
 
 Each run: the nodes come up; this process holds the path's first point
 (lead-in) until the trajectory publisher, started with ``start_delay_s`` =
-``--lead-in`` (default 2 s), sends its first target; the path's speed rises
+``--lead-in`` (default 2 s; on simulation time the path starts at
+:data:`SIM_START_S`, 8 s), sends its first target; the path's speed rises
 from zero over min(period, ``--spin-up``) (``spin_up_s``, default 5 s); the
 first period at full speed lets the integrator learn, the second is
 evaluated; then the trajectory publisher stops, this process brings the
