@@ -217,13 +217,13 @@ class InverseKinetostaticNode(LifecycleNode):
             self.heartbeat.publish()
             return TransitionCallbackReturn.FAILURE
         self._configure_error = ''
-        g = self.get_parameter
         with self._lock:
             self._cfg, self._model = cfg, model
             self._warm = fw0 if fw0.success else None
             # the first target after activate moves from here (the robot vented)
             self._start_pose = None if not start.success else (
                 start.position, start.z_axis if cfg.n_segments >= 2 else None)
+            g = self.get_parameter
             self._output = CommandOutput(model, 1e3 * float(g('regulator_play_kpa').value), (
                 float(g('creep_fraction').value), float(g('creep_time_constant_s').value)))
         qos = command_qos()
@@ -235,13 +235,14 @@ class InverseKinetostaticNode(LifecycleNode):
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
         self._force = ExternalForce(
-            self, g('base_frame').value, g('external_force_timeout_s').value,
-            g('use_estimated_force').value, self._refuse, self._resolve_held)
+            self, self.get_parameter('base_frame').value,
+            self.get_parameter('external_force_timeout_s').value,
+            self.get_parameter('use_estimated_force').value, self._refuse, self._resolve_held)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            'inverse-solver', lambda: self._lockstep.work_done())
-        self._lockstep = lockstep.LockstepReport(  # use_sim_time; the commands acked first
-            self, self._worker.idle, True, lambda: [self._pub_cmd])
-        rate = float(g('command_rate_hz').value)
+        self._lockstep = lockstep.LockstepReport(self, self._worker.idle,   # use_sim_time
+                                                 flush=lambda: [self._pub_cmd])
+        rate = float(self.get_parameter('command_rate_hz').value)
         self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
                                  if rate > 0 else None)
         if self._feedback.wanted or self._targets.wanted:
