@@ -240,8 +240,7 @@ class InverseKinetostaticNode(LifecycleNode):
             self.get_parameter('use_estimated_force').value, self._refuse, self._resolve_held)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
                                            'inverse-solver', lambda: self._lockstep.work_done())
-        self._lockstep = lockstep.LockstepReport(self, self._worker.idle,   # use_sim_time
-                                                 flush=lambda: [self._pub_cmd])
+        self._lockstep = lockstep.LockstepReport(self, self._worker.idle)   # use_sim_time
         rate = float(self.get_parameter('command_rate_hz').value)
         self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
                                  if rate > 0 else None)

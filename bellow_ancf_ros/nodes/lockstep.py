@@ -15,13 +15,6 @@ simulation instead of delaying what they publish in it.  Two kinds:
   tick, the time just before its next one (:meth:`LockstepReport.report`),
   so that no step passes a tick before it is published.
 
-Before each report a participant waits until its subscribers have received
-what it published (``flush``: the reliable acknowledgements of its commands
-or targets, at most :data:`FLUSH_S` of wall time): without it a report could
-overtake them, the simulation would step on, and a target would reach the
-controller a few steps late (a 10x circle's stream then looked stopped to
-the inverse node, which braked and cut the circle: 12.7 mm).
-
 A participant that stops says so (``stamp`` :data:`LEAVE_SEC` s,
 :meth:`LockstepReport.destroy`), and the simulation no longer waits for it.
 Nothing is published on the wall clock.
@@ -38,14 +31,12 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Header
 
-__all__ = ['FLUSH_S', 'LEAVE_SEC', 'TOPIC', 'LockstepReport', 'report_of']
+__all__ = ['LEAVE_SEC', 'TOPIC', 'LockstepReport', 'report_of']
 
 #: The topic (in the node's namespace) a simulated robot's lockstep listens to.
 TOPIC = 'lockstep_clock'
 #: A report stamped this many seconds: the participant no longer holds the simulation.
 LEAVE_SEC = 2 ** 31 - 1
-#: Longest wait [wall s] for the subscribers' acknowledgements before a report.
-FLUSH_S = 0.5
 
 
 def report_of(msg: Header) -> tuple[str, float | None]:
@@ -66,13 +57,12 @@ class LockstepReport:
     ``follow_clock``: report each ``/clock`` tick once ``idle()`` (no work
     pending or running); :meth:`work_done` (any thread): a piece of work
     ended, the newest tick held back goes out if now idle.  Without it the
-    node reports its own times with :meth:`report`.  ``flush()``: the
-    publishers whose messages must have arrived before a report.
+    node reports its own times with :meth:`report`.
     """
 
     def __init__(self, node, idle: Callable[[], bool] = lambda: True,
-                 follow_clock: bool = True, flush: Callable[[], list] = list) -> None:
-        self._node, self._idle, self._flush = node, idle, flush
+                 follow_clock: bool = True) -> None:
+        self._node, self._idle = node, idle
         self._lock = threading.Lock()
         self._held: Clock | None = None   # the newest tick received while busy
         self._pub = self._sub = None
@@ -100,9 +90,6 @@ class LockstepReport:
         if pub is None:
             return
         try:
-            for p in self._flush():
-                if p is not None:
-                    p.wait_for_all_acked(Duration(seconds=FLUSH_S))
             pub.publish(Header(stamp=stamp, frame_id=self._name))
         except Exception:  # noqa: BLE001 - publisher gone at shutdown
             pass

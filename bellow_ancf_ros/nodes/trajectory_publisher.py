@@ -235,7 +235,7 @@ class TrajectoryPublisher(Node):
         rate = float(self.get_parameter('rate_hz').value)
         self._timer = self.create_timer(1.0 / rate, self._tick)
         # on simulation time: no simulated step passes a tick before its target is out
-        self._lockstep = LockstepReport(self, follow_clock=False, flush=lambda: [self._pub])
+        self._lockstep = LockstepReport(self, follow_clock=False)
         self.get_logger().info(
             f"publishing {self.get_parameter('trajectory').value!r} for robot {self.cfg.name!r} "
             f'at {rate:g} Hz: {self._describe()}')
