@@ -10,8 +10,9 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
 * ``real_time_factor``: simulated seconds per wall second (1: real time;
   0: as fast as the steps can be taken).  A step that is late by more than
   :data:`MAX_LATE_S` re-anchors the pacing (no long catch-up burst); a
-  shorter delay, such as a lockstep wait for the controller, is caught up,
-  so that a controller that keeps up on average keeps the factor.
+  shorter delay, such as a lockstep wait for the controller, is caught up
+  at up to :data:`CATCH_UP` times the factor, so that a controller that
+  keeps up on average keeps the factor.
 * ``lockstep_period_s`` (lockstep on when set): the simulation runs at most
   this far ahead of the newest command (:meth:`command_arrived`), so a
   controller that stops commanding holds the simulation back.  A command
@@ -39,10 +40,13 @@ import threading
 import time
 from typing import Callable
 
-__all__ = ['MAX_LATE_S', 'SimulationClock']
+__all__ = ['CATCH_UP', 'MAX_LATE_S', 'SimulationClock']
 
 #: A step later than this against the pacing [wall s] re-anchors it (no catch-up burst).
 MAX_LATE_S = 0.1
+#: A delay is caught up at most this many times the real-time factor (a burst at the computer's
+#: speed outran the nodes that are not in the lockstep: the recorder lost 16 % of the poses).
+CATCH_UP = 2.0
 #: Longest single wait [wall s] before the conditions are looked at again.
 _POLL_S = 0.1
 
@@ -74,6 +78,7 @@ class SimulationClock:
         self.paused = False
         self._pending = 0              # steps asked for while paused
         self._anchor: tuple[float, float] | None = None   # (wall, simulated) of the pacing
+        self._last_wall = -float('inf')   # wall time of the newest step
         self._command_t: float | None = None   # simulated time of the newest command
         self._done: dict[str, float] = {}      # participant -> its work done until [s]
         self._free = True              # lockstep released (no command yet, or timed out)
@@ -219,8 +224,9 @@ class SimulationClock:
                 if self.real_time_factor > 0:
                     if self._anchor is None:
                         self._anchor = (now, self.time_s)
-                    due = (self._anchor[0]
-                           + (self.time_s + self.step_s - self._anchor[1]) / self.real_time_factor)
+                    due = max(self._anchor[0] + (self.time_s + self.step_s - self._anchor[1])
+                              / self.real_time_factor,
+                              self._last_wall + self.step_s / (CATCH_UP * self.real_time_factor))
                     if due - now > 0:
                         self._cond.wait(min(due - now, _POLL_S))
                         continue
@@ -233,6 +239,7 @@ class SimulationClock:
         """The caller took the step: the simulated time moves on by one step."""
         with self._cond:
             self.steps += 1
+            self._last_wall = self._wall()
             if self._pending > 0:
                 self._pending -= 1
             self._cond.notify_all()

@@ -136,7 +136,7 @@ def test_a_controller_that_reports_its_time_holds_the_simulation_to_it_step_by_s
 
 
 def test_short_lockstep_waits_are_caught_up_so_the_factor_holds():
-    """A controller that takes 35 ms for every 50 ms still gets the simulation at 1x.
+    """A controller that takes 25 ms for every 50 ms still gets the simulation at 1x.
 
     Re-anchoring the pacing after every wait ran the main job at 0.7x real time.
     """
@@ -149,7 +149,7 @@ def test_short_lockstep_waits_are_caught_up_so_the_factor_holds():
         reported = 0.05
         while not stop.is_set():
             if clock.time_s >= reported - 1e-9:
-                time.sleep(0.035)                   # its work on the newest period
+                time.sleep(0.025)                   # its work on the newest period
                 reported += 0.05
                 clock.done_until(reported)
             time.sleep(0.001)
@@ -163,7 +163,8 @@ def test_short_lockstep_waits_are_caught_up_so_the_factor_holds():
     r.stop()
     worker.join(2.0)
     assert clock.lockstep_waits >= 10 and clock.lockstep_timeouts == 0
-    # paced from each wait's end instead: 1 s + 20 waits of 25 ms = 1.5 s
+    # 25 ms of work, 25 ms of steps caught up at 2x; paced from each wait's end instead:
+    # 20 x (25 ms + 50 ms) = 1.5 s
     assert 0.98 <= wall < 1.25
 
 
