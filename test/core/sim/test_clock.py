@@ -31,6 +31,22 @@ def steps_after(clock, wall_s):
     return clock.steps
 
 
+def reported_and_running(timeout_s=5.0, **reports):
+    """A strict lockstep stepping in a :class:`Runner`: (clock, runner).
+
+    10 ms steps, as fast as allowed; ``reports`` (who -> done until) given
+    before its first step.
+    """
+    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
+                            lockstep_timeout_s=timeout_s)
+    clock.pause()
+    for who, t in reports.items():
+        clock.done_until(t, who)
+    r = Runner(clock)
+    clock.unpause()
+    return clock, r
+
+
 @pytest.mark.parametrize("factor", [0.5, 2.0])
 def test_real_time_factor_paces_the_steps(factor):
     clock = SimulationClock(0.01, real_time_factor=factor)
@@ -118,12 +134,7 @@ def test_bad_settings_named():
 
 
 def test_a_controller_that_reports_its_time_holds_the_simulation_to_it_step_by_step():
-    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
-                            lockstep_timeout_s=5.0)
-    clock.pause()
-    clock.done_until(0.0)
-    r = Runner(clock)
-    clock.unpause()
+    clock, r = reported_and_running(**{'': 0.0})
     assert steps_after(clock, 0.2) == 1   # one step past the report, no further
     for k in range(1, 6):
         clock.done_until(clock.time_s)    # the controller caught up with the time reached
@@ -169,13 +180,7 @@ def test_short_lockstep_waits_are_caught_up_so_the_factor_holds():
 
 
 def test_the_slowest_participant_holds_the_simulation_and_one_that_leaves_no_longer():
-    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
-                            lockstep_timeout_s=5.0)
-    clock.pause()
-    clock.done_until(0.05, 'controller')
-    clock.done_until(0.02, 'trajectory')
-    r = Runner(clock)
-    clock.unpause()
+    clock, r = reported_and_running(controller=0.05, trajectory=0.02)
     assert steps_after(clock, 0.2) == 3          # 0.02 reached: the trajectory holds it
     assert clock.participants == ['controller', 'trajectory']
     clock.done_until(0.07, 'trajectory')
@@ -189,13 +194,7 @@ def test_the_slowest_participant_holds_the_simulation_and_one_that_leaves_no_lon
 
 
 def test_a_participant_that_stops_reporting_is_forgotten_after_the_timeout():
-    clock = SimulationClock(0.01, real_time_factor=0.0, lockstep_period_s=0.05,
-                            lockstep_timeout_s=0.3)
-    clock.pause()
-    clock.done_until(0.02, 'dead')
-    clock.done_until(10.0, 'alive')
-    r = Runner(clock)
-    clock.unpause()
+    clock, r = reported_and_running(0.3, dead=0.02, alive=10.0)
     assert steps_after(clock, 0.15) == 3
     time.sleep(0.4)                              # the timeout: 'dead' is forgotten
     assert clock.lockstep_timeouts == 1 and clock.participants == ['alive']
