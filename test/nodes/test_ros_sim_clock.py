@@ -70,6 +70,10 @@ def test_it_publishes_the_clock_and_stamps_everything_in_simulation_time(h):
     time.sleep(2.0)
     factor = (last_clock(h) - t0_sim) / (time.monotonic() - t0_wall)
     assert 1.0 < factor < 2.1, factor   # paced at 2x (slower only on a busy machine)
+    # paused, so that no pose or clock arrives between the snapshots below (on a busy
+    # machine the statements between them can take longer than a physics step)
+    h.call(h.service(Trigger, 'simulated_robot_node/pause'), Trigger.Request())
+    time.sleep(0.3)   # what was in flight arrives
     clocks = [ns(m.clock) for _, m in h.msgs['/clock']]
     # every step exactly 5 ms of simulation time, in order, from 0
     assert clocks[0] % 5_000_000 == 0 and np.all(np.diff(clocks) == 5_000_000)
