@@ -267,8 +267,10 @@ class Run:
         """
         rec = self.rec
         if self.args.sim_time:
+            self._path_start = max(self.args.lead_in, SIM_START_S)
+            self._hold_at = self._path_start + 0.5   # until the path flows (its first target)
             self._lead_in_publisher()
-            self._trajectory_process(max(self.args.lead_in, SIM_START_S))
+            self._trajectory_process(self._path_start)
             start_clock(rec, self.procs.values(),
                         lambda: rec.publishers('pressure_command') >= 1
                         and rec.publishers('predicted_pose') >= 1
@@ -302,6 +304,7 @@ class Run:
 
         from ..core.experiments import trajectory
         from ..core.geometry import quaternion_from_z_axis
+        from ..nodes.lockstep import LockstepReport
         from ..nodes.ros_util import command_qos, pose_message
         case = self.case
         pos, z = trajectory(case.trajectory, 0.0, case.robot, **self.col.path_kw)
@@ -309,6 +312,9 @@ class Run:
         first = pose_message(pos[0], q, 'base', self._zero_stamp())
         pub = self.rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
         self._target_pub = pub
+        # on simulation time this process is in the lockstep: its targets count in the
+        # messages owed, and it holds the simulation where it takes over from the publisher
+        self._counts = LockstepReport(self.rec.node, follow_clock=False)
         if not wait_until(lambda: pub.get_subscription_count() >= 1, self.args.startup_timeout):
             raise RuntimeError('the inverse node does not subscribe target_pose')
 
@@ -317,6 +323,9 @@ class Run:
             # pull the robot back to the path's first point (latest target wins)
             if self._first_trajectory_target() is not None:
                 self._lead_in.cancel()
+            elif self.args.sim_time:   # at fixed times: the path's first target comes after
+                if self._inverse_matched() and self.rec.now() < self._path_start - 0.1:
+                    self._send(first)
             else:
                 pub.publish(first)
         self._lead_in = self.rec.node.create_timer(0.1, lead_in)
@@ -333,6 +342,30 @@ class Run:
             traj['bending_angle_deg'] = case.bending_angle_deg
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', traj, self.env,
                                                self.log_dir, tag=self.tag)
+
+    def _send(self, msg) -> None:
+        """Publish a target and count it (the lockstep waits until the inverse node has it)."""
+        self._target_pub.publish(msg)
+        self._counts.sent(self._target_pub.topic_name)
+        self._report()
+
+    def _report(self) -> None:
+        """This process's lockstep report: its counts, and the time it holds the simulation to."""
+        if getattr(self, '_hold_at', None) is None:
+            self._counts.report_counts()
+        else:
+            self._counts.report(self._hold_at)
+
+    def _inverse_matched(self) -> bool:
+        """The inverse node subscribes the targets and every subscriber is matched.
+
+        A target sent before its reader matched would never arrive, and the
+        lockstep would wait for it until its timeout.
+        """
+        pub = self._target_pub
+        subs = self.rec.node.get_subscriptions_info_by_topic(pub.topic_name)
+        return (any(i.node_name == 'inverse_kinetostatic_node' for i in subs)
+                and pub.get_subscription_count() >= len(subs))
 
     @staticmethod
     def _zero_stamp():
@@ -360,6 +393,9 @@ class Run:
         period = self.col.period_s
         self.times['eval'] = self._first_trajectory_target() + self.spin_up_s + period
         self.times['stop'] = self.times['eval'] + period
+        if self.args.sim_time:   # held there: the hand-over is at the same time in every run
+            self._hold_at = self.times['stop']
+            self._report()
         print(f'  {self.name}: trajectory started {time.monotonic() - self.t0:.1f} s after '
               f'the nodes; spin-up {self.spin_up_s:g} s, the second {period:g} s period at '
               f'full speed evaluated, then {self.hold_s:g} s hold', flush=True)
@@ -397,6 +433,8 @@ class Run:
         proc = self.procs['trajectory']
         proc.interrupt()   # Ctrl-C; the slow-down starts now, not after its exit (a dead stop)
         self.stopped.add('trajectory')
+        if self.args.sim_time:   # held at 'stop': its last targets arrive, no new one comes
+            self._settle(lambda: self.rec.count('target_pose'))
         with self.rec.lock:
             stamped = [m for _, m in self.rec.msgs['target_pose'] if _stamp(m) > 0]
         first, last = _stamp(stamped[0]), _stamp(stamped[-1])
@@ -408,7 +446,7 @@ class Run:
 
         def tick() -> None:
             if final:
-                self._target_pub.publish(final[0])
+                self._send(final[0])
                 return
             now = clock.now()
             stamp_s = now.nanoseconds * 1e-9 + preview
@@ -417,7 +455,7 @@ class Run:
             q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
             msg = pose_message(pos[0], q, 'base', Time(sec=int(stamp_s),
                                                        nanosec=int(stamp_s % 1.0 * 1e9)))
-            self._target_pub.publish(msg)
+            self._send(msg)
             if s >= d:
                 final.append(msg)   # at rest: held from now on (10 Hz)
                 self._hold_timer.cancel()
@@ -426,6 +464,18 @@ class Run:
         proc.stop()
         self.times['hold'] = self.rec.now() + d
         self.times['end'] = self.times['hold'] + self.hold_s
+        if self.args.sim_time:
+            self._hold_at = None   # this process takes over: the simulation runs on
+            self._report()
+
+    @staticmethod
+    def _settle(count, quiet_s: float = 0.3, timeout_s: float = 5.0) -> None:
+        """Wait until ``count()`` has not changed for ``quiet_s`` (wall; at most ``timeout_s``)."""
+        deadline, last, since = time.monotonic() + timeout_s, count(), time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - since < quiet_s:
+            time.sleep(0.02)
+            if (n := count()) != last:
+                last, since = n, time.monotonic()
 
     def hold(self) -> None:
         """Wait until the end of the hold phase (a dead node raises)."""
@@ -454,6 +504,8 @@ class Run:
 
     def finish(self) -> dict:
         """Stop the nodes (SIGINT, the inverse vents), close the recorder; the recording."""
+        if getattr(self, '_counts', None) is not None:
+            self._counts.destroy()   # its targets are owed no more
         for p in self.procs.values():
             p.interrupt()                   # all at once: they shut down in parallel
         codes = {k: p.stop() for k, p in reversed(list(self.procs.items()))}

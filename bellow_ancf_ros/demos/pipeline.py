@@ -43,13 +43,15 @@ def clock_parameters(sim_time: bool, robot: bool = False, real_time_factor: floa
     The simulated robot publishes ``/clock`` in lockstep with the
     controller's commands, paced at ``real_time_factor`` (0: as fast as the
     controller's reports allow), and starts paused (:func:`start_clock`);
-    every node uses it.  Nothing without
-    ``sim_time`` (the wall clock).
+    every node uses it.  Its lockstep waits up to 5 s (wall) for a report
+    or a message owed: a demo holds it while a node process exits.  Nothing
+    without ``sim_time`` (the wall clock).
     """
     if not sim_time:
         return {}
     return dict({'use_sim_time': True},
                 **({'publish_clock': True, 'lockstep': True, 'start_paused': True,
+                    'lockstep_timeout_s': 5.0,
                     'real_time_factor': float(real_time_factor)} if robot else {}))
 
 

@@ -52,19 +52,9 @@ from .target_link import TARGET_PARAMETER_TABLE, TargetLink
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .inverse_interface import CONFIGURE_PARAMETERS, PARAMETERS, TOPICS
-from .ros_util import (
-    VENT_ACK_TIMEOUT_S,
-    WARN_THROTTLE_S,
-    command_qos,
-    declare_all,
-    diagnostics_qos,
-    guard_parameters,
-    control_clock,
-    main_for,
-    pose_message,
-    pressure_message,
-    publish_and_wait_acked,
-)
+from .ros_util import (VENT_ACK_TIMEOUT_S, WARN_THROTTLE_S, command_qos, control_clock,
+                       declare_all, diagnostics_qos, guard_parameters, main_for, pose_message,
+                       pressure_message, publish_and_wait_acked)
 
 __all__ = ['CONFIGURE_PARAMETERS', 'InverseKinetostaticNode', 'VENT_ACK_TIMEOUT_S', 'main']
 
@@ -393,6 +383,10 @@ class InverseKinetostaticNode(LifecycleNode):
 
     # ---------------------------------------------------------- input
     def _on_target(self, msg: PoseStamped) -> None:
+        self._take_target(msg)   # then counted: on simulation time, after its solve is queued
+        self._lockstep.received(self._sub.topic_name)
+
+    def _take_target(self, msg: PoseStamped) -> None:
         with self._lock:
             active, cfg = self._active, self._cfg
         if not active or cfg is None:
@@ -446,6 +440,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 p = self.last_command_pa = contract.safe_pressures(
                     self._output.again(now), self._cfg.p_min, self._cfg.p_max, self._model.A)
             self._pub_cmd.publish(pressure_message(p, self._unit()))
+            self._lockstep.sent(self._pub_cmd.topic_name)
             if self._last_pose is not None:   # the model's pose for it (stamp: its target's)
                 self._pub_pose.publish(self._last_pose)
             self._last_publish_t = self._now()
@@ -539,6 +534,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 p = contract.safe_pressures(self._output.command(p, self._now()), cfg.p_min,
                                             cfg.p_max, model.A)
                 self._pub_cmd.publish(pressure_message(p, unit))
+                self._lockstep.sent(self._pub_cmd.topic_name)   # (on simulation time)
                 self._last_publish_t = self._now()
                 self._last_pose = pose_message(
                     fw.position, geometry.quaternion_from_rotation(fw.rotation),

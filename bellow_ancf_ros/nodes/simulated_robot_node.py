@@ -393,6 +393,7 @@ class SimulatedRobotNode(Node):
         if self.clock is not None and self.clock.lockstep_period_s is not None:
             self._sub_done = self.create_subscription(Header, LOCKSTEP_TOPIC,
                                                       self._on_lockstep, 10)
+            self.clock.received_here(self._sub.topic_name, 0)   # commands are owed to it
         for name, handler in (('pause', self._on_pause), ('unpause', self._on_unpause),
                               ('step', self._on_step), ('reset', self._on_reset)):
             self.create_service(Trigger, f'~/{name}', handler)
@@ -463,14 +464,16 @@ class SimulatedRobotNode(Node):
 
     # ------------------------------------------------------------ input
     def _on_lockstep(self, msg) -> None:
-        who, t = report_of(msg)
+        who, t, sent, received = report_of(msg)
         if t is None:
             self.clock.leave(who)
         else:
-            self.clock.done_until(t, who)
+            self.clock.done_until(t, who, sent, received)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         self.stats['received'] += 1
+        if self.clock is not None:   # (the lockstep's count of the commands owed to it)
+            self.clock.received_here(self._sub.topic_name)
         label = msg.layout.dim[0].label if len(msg.layout.dim) else None
         try:
             p = contract.validate_pressure_input(msg.data, self._unit, self.robot.model.A,
@@ -697,6 +700,14 @@ class SimulatedRobotNode(Node):
             message = ('paused' if c.paused else
                        f'simulating at {factor:.3g}x real time' if math.isfinite(factor)
                        else message)
+            if c.lockstep_timeouts > getattr(self, '_timeouts_said', 0):
+                self._timeouts_said = c.lockstep_timeouts
+                t, behind, owing = c.last_timeout
+                self.get_logger().warn(
+                    f'lockstep: waited {c.lockstep_timeout_s:g} s (wall) at {t:.3f} s for '
+                    + ', '.join([f'{w} (its report)' for w in behind]
+                                + [f'{w or "this node"} (a message owed)' for w in owing])
+                    + f'; ran on without it ({c.lockstep_timeouts} timeouts so far)')
         self._publish_diag(level, message, values)
 
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:

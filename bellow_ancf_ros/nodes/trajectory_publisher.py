@@ -59,6 +59,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from lifecycle_msgs.srv import GetState
 from rcl_interfaces.msg import ParameterType, SetParametersResult
+from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
 
@@ -233,7 +234,19 @@ class TrajectoryPublisher(Node):
         self.published = 0
         self.finished = False
         rate = float(self.get_parameter('rate_hz').value)
-        self._timer = self.create_timer(1.0 / rate, self._tick)
+        self._period_ns = int(round(1e9 / rate))
+        self._due_ns = None   # on simulation time: the next tick [ns]
+        if self._control.simulated:
+            # a tick at the first clock update at or after it is due (rcl's timers on /clock
+            # can fire twice at one time and skip the next tick: a target stamped twice, the
+            # next one missing, and the dynamic feedforward took a new stream for a jump)
+            self._timer = None
+            self._time_hook = self.get_clock().create_jump_callback(
+                JumpThreshold(min_forward=Duration(nanoseconds=1),
+                              min_backward=Duration(nanoseconds=-1), on_clock_change=False),
+                post_callback=self._on_time)
+        else:
+            self._timer = self.create_timer(1.0 / rate, self._tick)
         # on simulation time: no simulated step passes a tick before its target is out
         self._lockstep = LockstepReport(self, follow_clock=False)
         self.get_logger().info(
@@ -459,6 +472,7 @@ class TrajectoryPublisher(Node):
                          geometry.z_axis_from_quaternion(q_end) if multi else None, fraction)
         q = geometry.quaternion_from_z_axis(z) if multi else np.array([0, 0, 0, 1.0])
         self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value, stamp))
+        self._lockstep.sent(self._pub.topic_name)
 
     def _hold_first_point(self, now, preview: float) -> bool:
         """Publish the lead-in's first point until the controller answers one (True: held).
@@ -485,6 +499,16 @@ class TrajectoryPublisher(Node):
         self._hold_since = None
         return False
 
+    def _on_time(self, jump) -> None:
+        """Simulation time moved: a tick if due (the first a period after start or reset)."""
+        now = self.get_clock().now().nanoseconds
+        if self._due_ns is None or jump.delta.nanoseconds < 0:   # (back: a reset, a looped bag)
+            self._due_ns = now + self._period_ns
+        if now < self._due_ns:
+            return
+        self._due_ns += self._period_ns * (1 + (now - self._due_ns) // self._period_ns)
+        self._tick()
+
     def _tick(self) -> None:
         try:
             self._publish_target()
@@ -492,10 +516,8 @@ class TrajectoryPublisher(Node):
             if self._lockstep.active:
                 if self.finished:
                     self._lockstep.destroy()   # no more targets: the simulation waits no longer
-                elif (left := self._timer.time_until_next_call()) is not None:
-                    # done until just before the next tick
-                    self._lockstep.report(1e-9 * (self.get_clock().now().nanoseconds + left)
-                                          - 1e-6)
+                elif self._due_ns is not None:   # done until just before the next tick
+                    self._lockstep.report(1e-9 * self._due_ns - 1e-6)
 
     def destroy_node(self):
         """Leave the simulation's lockstep, then destroy the node."""
@@ -540,6 +562,7 @@ class TrajectoryPublisher(Node):
         pos, q = self.pose_at(t)
         self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
                                        self._stamp(now, preview)))
+        self._lockstep.sent(self._pub.topic_name)
         self.published += 1
 
 

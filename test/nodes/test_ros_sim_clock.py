@@ -23,6 +23,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bellow_ancf_ros.core import solve_forward  # noqa: E402
+from bellow_ancf_ros.core.sim import CATCH_UP  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
@@ -69,7 +70,7 @@ def test_it_publishes_the_clock_and_stamps_everything_in_simulation_time(h):
     t0_wall, t0_sim = time.monotonic(), last_clock(h)
     time.sleep(2.0)
     factor = (last_clock(h) - t0_sim) / (time.monotonic() - t0_wall)
-    assert 1.0 < factor < 2.1, factor   # paced at 2x (slower only on a busy machine)
+    assert 1.0 < factor < 2.25, factor   # paced at 2x (a delay caught up; slower when busy)
     # paused, so that no pose or clock arrives between the snapshots below (on a busy
     # machine the statements between them can take longer than a physics step)
     h.call(h.service(Trigger, 'simulated_robot_node/pause'), Trigger.Request())
@@ -96,7 +97,8 @@ def test_it_publishes_the_clock_and_stamps_everything_in_simulation_time(h):
               if s.name.endswith('simulated robot')][-1]
     values = {kv.key: kv.value for kv in status.values}
     assert values['real_time_factor'] == '2.0' and values['paused'] == 'False'
-    assert 0.9 < float(values['achieved_real_time_factor']) < 2.2
+    # (over the newest second: a delay is caught up at up to CATCH_UP times the factor)
+    assert 0.9 < float(values['achieved_real_time_factor']) < 2.0 * CATCH_UP + 0.1
     assert 0 <= sim.stats['published_poses'] - len(h.msgs['measured_pose']) <= 3   # in flight
 
 
@@ -185,23 +187,46 @@ def test_a_reporting_controller_holds_the_simulation_step_by_step(h, one):
 
 
 def test_the_trajectory_publisher_holds_the_simulation_to_its_ticks_and_leaves_when_gone(h, one):
-    """As fast as the controller allows, no 50 Hz target is skipped; one that stops leaves."""
+    """As fast as the controller allows, no 50 Hz target is skipped; one that stops leaves.
+
+    And every target reaches the inverse node at the simulated time it was
+    published (the messages owed: the simulation waits for it however long
+    delivery takes), every command reaches the simulated robot.
+    """
     sim = clock_sim(h, real_time_factor=0.0, lockstep=True)
     targets = h.record(PoseStamped, 'target_pose', DEEP)
     node = h.add(InverseKinetostaticNode, feedback='integral', command_rate_hz=20.0,
                  use_sim_time=True)
+    late, take = [], node._take_target
+
+    def timed(msg):   # the clock the node sees when it takes a target, against its stamp
+        late.append(node.get_clock().now().nanoseconds * 1e-9 - seconds(msg.header.stamp))
+        take(msg)
+    node._take_target = timed
     traj = h.add(TrajectoryPublisher, trajectory='planar_circle', rate_hz=50.0, period_s=2.0,
                  start_delay_s=0.0, ramp_in_s=0.0, controller_node='', use_sim_time=True)
     wait_for(lambda: len(sim.clock.participants) == 2, what='both reports')
     assert sim.clock.participants == sorted([node.get_fully_qualified_name(),
                                              traj.get_fully_qualified_name()])
-    wait_for(lambda: sim.clock.time_s > 3.0, timeout=30.0, what='3 s of simulation')
+    wait_for(lambda: h.count('target_pose') > 0, timeout=30.0, what='the first target')
+    first = seconds(targets[0][1].header.stamp)
+    wait_for(lambda: seconds(h.last('target_pose').header.stamp) > first + 2.0, timeout=30.0,
+             what='2 s of targets recorded')
     with h.lock:
         stamps = np.array([seconds(m.header.stamp) for _, m in targets])
-    gaps = np.diff(stamps[stamps > 1.0])   # the path under way
+    gaps = np.diff(stamps[1:])   # (the first tick comes when the timer was created)
     # a tick comes at most one physics step after it is due: never skipped, never doubled
     assert gaps.size > 90 and gaps.max() <= 0.02 + 1.0 / RATE_HZ + 1e-6, gaps.max()
     assert gaps.min() >= 0.02 - 1.0 / RATE_HZ - 1e-6, gaps.min()
+    assert len(late) > 90 and max(np.abs(late)) <= 1.0 / RATE_HZ + 1e-6, max(np.abs(late))
+    cmd, target = node._pub_cmd.topic_name, traj._pub.topic_name
+    me = node.get_fully_qualified_name()
+
+    def balanced():   # what was sent on each topic was received (the newest may be in flight)
+        sent, received = sim.clock.ledger()
+        return (received[''][cmd] >= sent[cmd] >= node.stats['published']
+                and received[me][target] >= sent[target] >= len(stamps))
+    wait_for(balanced, what='the messages counted sent and received')
     h.executor.remove_node(traj)
     h.nodes.remove(traj)
     traj.destroy_node()
@@ -244,3 +269,19 @@ def test_without_the_clock_its_settings_do_nothing_and_its_services_say_why(h, c
     assert not res.success and 'needs publish_clock: true' in res.message
     res = h.call(h.service(Trigger, 'simulated_robot_node/reset'), Trigger.Request())
     assert res.success and sim.stats['resets'] == 1
+
+
+def test_a_report_says_who_until_when_and_the_messages_counted():
+    from std_msgs.msg import Header
+
+    from bellow_ancf_ros.nodes.lockstep import LEAVE_SEC, UNBOUNDED_SEC, report_of
+    msg = Header(frame_id='/ns/inverse_kinetostatic_node received:/ns/target_pose=12 '
+                          'sent:/ns/pressure_command=30')
+    msg.stamp.sec, msg.stamp.nanosec = 3, 500_000_000
+    assert report_of(msg) == ('/ns/inverse_kinetostatic_node', 3.5,
+                              {'/ns/pressure_command': 30}, {'/ns/target_pose': 12})
+    msg = Header(frame_id='/trajectory_publisher')   # a report without counts (older nodes)
+    msg.stamp.sec = LEAVE_SEC
+    assert report_of(msg) == ('/trajectory_publisher', None, {}, {})
+    msg.stamp.sec = UNBOUNDED_SEC   # counts only: holds no time
+    assert report_of(msg)[1] == UNBOUNDED_SEC

@@ -20,7 +20,7 @@
 Nothing here knows the controller: :mod:`..loop` closes the two.
 """
 
-from ._clock import SimulationClock
+from ._clock import CATCH_UP, SimulationClock
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
@@ -28,7 +28,7 @@ from ._robot_family import FAMILY_RANGES, RobotDraw, draw_robot, first_mode
 from ._simulated_robot import SimulatedRobot
 
 __all__ = [
-    "BellowCreep", "EFFECTS", "FAMILY_RANGES", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
+    "BellowCreep", "CATCH_UP", "EFFECTS", "FAMILY_RANGES", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
     "MotionCapture", "PlantEffects", "PressureRegulators", "RobotDraw", "SimulatedRobot",
     "SimulationClock",
     "draw_robot", "first_mode",

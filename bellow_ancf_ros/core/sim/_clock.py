@@ -27,6 +27,16 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
   ``lockstep_timeout_s`` wall seconds (counted in :attr:`lockstep_timeouts`)
   the participants that held it back are forgotten until they report again
   (a participant stopped or dead), and it runs free if none is left.
+* Messages owed: a report may also count the messages its participant has
+  sent and received on named topics (``sent``, ``received``; cumulative),
+  and the simulation counts what it receives itself
+  (:meth:`received_here`).  No step is taken while a receiver has counted
+  fewer messages on a topic than the participants have sent on it: a
+  message in flight (a target, a command) is seen at the same simulated
+  time however long the computer takes to deliver it.  Only reliable
+  topics should be counted (a lost best-effort message would be owed until
+  the timeout); a wait for a message ends, as any lockstep wait, after
+  ``lockstep_timeout_s``, and what was sent until then counts as received.
 * :meth:`pause`, :meth:`unpause`, :meth:`step`: no step while paused except
   the ones asked for, which are taken at once (neither paced nor locked).
 
@@ -81,11 +91,16 @@ class SimulationClock:
         self._last_wall = -float('inf')   # wall time of the newest step
         self._command_t: float | None = None   # simulated time of the newest command
         self._done: dict[str, float] = {}      # participant -> its work done until [s]
+        self._sent: dict[str, dict[str, int]] = {}       # participant -> topic -> messages
+        self._received: dict[str, dict[str, int]] = {}   # receiver ('' : here) -> topic -> n
+        self._forgiven: dict[str, dict[str, int]] = {}   # receiver -> topic -> lost messages
         self._free = True              # lockstep released (no command yet, or timed out)
         self._wait_since: float | None = None  # wall time a lockstep wait began
         self.lockstep_waits = 0        # steps that waited for a command
         self.lockstep_timeouts = 0     # waits given up after lockstep_timeout_s
         self.lockstep_wait_s = 0.0     # wall time spent waiting for commands
+        #: the newest timeout: (simulated time, participants behind, receivers owing messages)
+        self.last_timeout: tuple[float, list, list] | None = None
 
     # ------------------------------------------------------------ reading
     @property
@@ -147,22 +162,80 @@ class SimulationClock:
             self._command_t, self._free = self.time_s, False
             self._cond.notify_all()
 
-    def done_until(self, t: float, who: str = '') -> None:
+    def done_until(self, t: float, who: str = '', sent: dict | None = None,
+                   received: dict | None = None) -> None:
         """Participant ``who`` has done its work up to simulated time ``t``: the strict lockstep.
 
         From the first report on, no step goes beyond the oldest of the
         participants' newest reports (their computation takes no simulated
         time); an older report than one already given changes nothing.
+        ``sent`` / ``received``: the messages ``who`` has sent / received so
+        far per topic (cumulative counts; see the module's text).
         """
         with self._cond:
             self._done[who] = max(self._done.get(who, float(t)), float(t))
+            for book, counts in ((self._sent, sent), (self._received, received)):
+                if counts:
+                    mine = book.setdefault(who, {})
+                    for topic, n in counts.items():
+                        mine[topic] = max(mine.get(topic, 0), int(n))
             self._free = False
             self._cond.notify_all()
+
+    def received_here(self, topic: str, n: int = 1) -> None:
+        """The simulation itself received ``n`` more messages on ``topic`` (e.g. commands)."""
+        with self._cond:
+            mine = self._received.setdefault('', {})
+            mine[topic] = mine.get(topic, 0) + int(n)
+            self._cond.notify_all()
+
+    def ledger(self) -> tuple[dict[str, int], dict[str, dict[str, int]]]:
+        """The messages counted so far: (sent per topic, received per receiver and topic).
+
+        The simulation's own receiver is named ``''``.
+        """
+        with self._cond:
+            return self._sent_totals(), {who: self._counted(who) for who in self._received}
+
+    def _counted(self, who: str) -> dict[str, int]:
+        """What ``who`` received per topic, the messages forgiven included (lock held)."""
+        lost = self._forgiven.get(who, {})
+        return {topic: n + lost.get(topic, 0) for topic, n in self._received[who].items()}
+
+    def _sent_totals(self) -> dict[str, int]:
+        sent: dict[str, int] = {}
+        for counts in self._sent.values():
+            for topic, n in counts.items():
+                sent[topic] = sent.get(topic, 0) + n
+        return sent
+
+    def _forgive(self) -> None:
+        """Count every message sent so far as received (lock held): a lost one is owed no more.
+
+        Kept apart from the receiver's own counts, which go on counting what
+        it really received (one lost message must not be owed again after
+        every message that follows it).
+        """
+        sent = self._sent_totals()
+        for who in self._received:
+            lost = self._forgiven.setdefault(who, {})
+            for topic, n in self._counted(who).items():
+                lost[topic] = lost.get(topic, 0) + max(sent.get(topic, 0) - n, 0)
+
+    def _owed(self) -> list[str]:
+        """The receivers that have not yet received every message sent to them (lock held)."""
+        sent = self._sent_totals()
+        return [who for who in self._received
+                if any(counts.get(topic, n) < n for counts in (self._counted(who),)
+                       for topic, n in sent.items() if topic in counts)]
 
     def leave(self, who: str = '') -> None:
         """Participant ``who`` no longer holds the simulation back (it stopped)."""
         with self._cond:
             self._done.pop(who, None)
+            self._sent.pop(who, None)
+            self._received.pop(who, None)
+            self._forgiven.pop(who, None)
             self._cond.notify_all()
 
     @property
@@ -189,7 +262,7 @@ class SimulationClock:
         if self.lockstep_period_s is None or self._free:
             return False
         if self._done:   # strict: every participant has done its work until the time reached
-            return self.time_s > min(self._done.values()) + 1e-9
+            return self.time_s > min(self._done.values()) + 1e-9 or bool(self._owed())
         if self._command_t is None:
             return False
         return self.time_s + self.step_s - self._command_t > self.lockstep_period_s + 1e-12
@@ -211,9 +284,11 @@ class SimulationClock:
                     left = self._wait_since + self.lockstep_timeout_s - now
                     if left <= 0:   # stopped answering: forget who holds it back, until it does
                         self.lockstep_timeouts += 1
-                        for who in [w for w, t in self._done.items()
-                                    if self.time_s > t + 1e-9]:
+                        behind = [w for w, t in self._done.items() if self.time_s > t + 1e-9]
+                        self.last_timeout = (self.time_s, behind, self._owed())
+                        for who in behind:
                             del self._done[who]
+                        self._forgive()   # a message lost: owed no longer
                         self._free = not self._done
                     else:
                         self._cond.wait(min(left, _POLL_S))

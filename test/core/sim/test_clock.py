@@ -201,3 +201,57 @@ def test_a_participant_that_stops_reporting_is_forgotten_after_the_timeout():
     assert clock.wait_until(500, 5.0)            # held by 'alive' alone (10 s)
     assert clock.steps <= 1001
     r.stop()
+
+
+def test_a_message_in_flight_holds_the_step_until_its_receiver_has_counted_it():
+    clock, r = reported_and_running(publisher=1e6, controller=1e6)
+    clock.received_here('/cmd', 0)                  # the simulation receives the commands
+    clock.done_until(1e6, 'controller', received={'/target': 0})
+    assert clock.wait_until(5, 5.0)
+    clock.done_until(1e6, 'publisher', sent={'/target': 1})   # a target in flight
+    held = steps_after(clock, 0.05)
+    assert steps_after(clock, 0.2) == held           # no step while it is owed
+    clock.done_until(1e6, 'controller', received={'/target': 1}, sent={'/cmd': 2})
+    assert steps_after(clock, 0.2) == held           # now the commands it sent are owed here
+    clock.received_here('/cmd')
+    assert steps_after(clock, 0.2) == held
+    clock.received_here('/cmd')                      # both arrived: it runs on
+    assert clock.wait_until(held + 20, 5.0)
+    assert clock.ledger() == ({'/target': 1, '/cmd': 2},
+                              {'': {'/cmd': 2}, 'controller': {'/target': 1}})
+    # a receiver with more than was counted as sent (a publisher outside the lockstep) holds
+    # nothing; a sender that leaves is owed nothing
+    clock.done_until(1e6, 'controller', received={'/target': 5})
+    clock.done_until(1e6, 'publisher', sent={'/target': 7})
+    held = steps_after(clock, 0.05)
+    assert steps_after(clock, 0.2) == held
+    clock.leave('publisher')
+    assert clock.wait_until(held + 20, 5.0)
+    assert clock.lockstep_timeouts == 0
+    r.stop()
+
+
+def test_a_message_lost_is_owed_no_more_after_the_timeout():
+    clock, r = reported_and_running(0.3, publisher=1e6, controller=1e6)
+    clock.done_until(1e6, 'controller', received={'/target': 0})
+    clock.done_until(1e6, 'publisher', sent={'/target': 1})
+    held = steps_after(clock, 0.1)
+    time.sleep(0.4)
+    assert clock.lockstep_timeouts == 1 and clock.wait_until(held + 20, 5.0)
+    assert clock.participants == ['controller', 'publisher']   # both still in the lockstep
+    r.stop()
+
+
+def test_a_message_lost_is_forgiven_once_and_those_after_it_are_owed_again():
+    clock, r = reported_and_running(0.3, publisher=1e6, controller=1e6)
+    clock.done_until(1e6, 'controller', received={'/target': 0})
+    clock.done_until(1e6, 'publisher', sent={'/target': 1})   # lost: never received
+    time.sleep(0.5)
+    assert clock.lockstep_timeouts == 1
+    clock.done_until(1e6, 'publisher', sent={'/target': 2})   # the next one, in flight
+    held = steps_after(clock, 0.05)
+    assert steps_after(clock, 0.15) == held                   # owed (within the timeout)
+    clock.done_until(1e6, 'controller', received={'/target': 1})   # it arrives: 1 of 2
+    assert clock.wait_until(held + 20, 5.0) and clock.lockstep_timeouts == 1
+    assert clock.ledger() == ({'/target': 2}, {'controller': {'/target': 2}})
+    r.stop()
