@@ -125,7 +125,10 @@ PARAMETERS = (
     Param('loop', True, descriptor(
         'Repeat the trajectory; false: stop publishing after one period.', B)),
     Param('start_delay_s', 0.0, descriptor(
-        'Wait this long after start-up before publishing [s].', D, lo=0.0, hi=3600.0)),
+        'Wait this long after start-up before publishing [s]. On simulation time a publisher '
+        'that starts earlier than this much simulated time starts its path at exactly this '
+        'simulated time (every run of a simulation started paused starts alike).', D,
+        lo=0.0, hi=3600.0)),
     Param('preview_s', 0.0, descriptor(
         'Publish the pose wanted this far ahead, stamped with the time it is wanted at [s] '
         '(compensates the regulators\' known lag: their dead time + time constant + half '
@@ -503,10 +506,12 @@ class TrajectoryPublisher(Node):
         """Simulation time moved: a tick if due (the first a period after start or reset)."""
         now = self.get_clock().now().nanoseconds
         if self._due_ns is None or jump.delta.nanoseconds < 0:   # (back: a reset, a looped bag)
-            self._due_ns = now + self._period_ns
+            self._due_ns = now
         if now < self._due_ns:
             return
-        self._due_ns += self._period_ns * (1 + (now - self._due_ns) // self._period_ns)
+        # the next tick: on the path's grid once it has a start (the same stamps in every run)
+        base = self._due_ns if self._t0 is None else int(round(self._t0 * 1e9))
+        self._due_ns = base + self._period_ns * (1 + (now - base) // self._period_ns)
         self._tick()
 
     def _tick(self) -> None:
@@ -529,7 +534,8 @@ class TrajectoryPublisher(Node):
         # one instant for the path's clock and the stamp: the pose is the one wanted at it
         now = self.get_clock().now()
         if self._t0 is None:
-            self._t0 = self._control.now() + float(self.get_parameter('start_delay_s').value)
+            start, delay = self._control.now(), float(self.get_parameter('start_delay_s').value)
+            self._t0 = delay if self._control.simulated and start < delay else start + delay
         t = self._control.now() - self._t0
         if t < 0 or self.finished:
             return
