@@ -113,8 +113,9 @@ from ..cli.output import count, number, numbers
 from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
-from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, hardware_parameters,
-                       machine_state, plant_effects, start_clock, tidy, wait_until, wait_up)
+from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
+                       hardware_parameters, machine_state, plant_effects, start_clock, tidy,
+                       wait_until, wait_up)
 from .step_target import LATE_GOAL_M, OVERSHOOT_GOAL_M, STEP_GOAL_M, step_phase
 from .step_target import RUNS as STEP_RUNS
 
@@ -268,7 +269,6 @@ class Run:
         rec = self.rec
         if self.args.sim_time:
             self._path_start = max(self.args.lead_in, SIM_START_S)
-            self._hold_at = self._path_start + 0.5   # until the path flows (its first target)
             self._lead_in_publisher()
             self._trajectory_process(self._path_start)
             start_clock(rec, self.procs.values(),
@@ -300,21 +300,19 @@ class Run:
             self._trajectory_process(self.args.lead_in)
 
     def _lead_in_publisher(self) -> None:
-        from geometry_msgs.msg import PoseStamped
-
         from ..core.experiments import trajectory
         from ..core.geometry import quaternion_from_z_axis
-        from ..nodes.lockstep import LockstepReport
-        from ..nodes.ros_util import command_qos, pose_message
+        from ..nodes.ros_util import pose_message
         case = self.case
         pos, z = trajectory(case.trajectory, 0.0, case.robot, **self.col.path_kw)
         q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
         first = pose_message(pos[0], q, 'base', self._zero_stamp())
-        pub = self.rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
-        self._target_pub = pub
         # on simulation time this process is in the lockstep: its targets count in the
         # messages owed, and it holds the simulation where it takes over from the publisher
-        self._counts = LockstepReport(self.rec.node, follow_clock=False)
+        self._targets = TargetSender(self.rec.node)
+        if self.args.sim_time:   # held until the path flows (then: :meth:`wait_flowing`)
+            self._targets.hold(self._path_start + 0.5)
+        pub = self._target_pub = self._targets.pub
         if not wait_until(lambda: pub.get_subscription_count() >= 1, self.args.startup_timeout):
             raise RuntimeError('the inverse node does not subscribe target_pose')
 
@@ -324,8 +322,8 @@ class Run:
             if self._first_trajectory_target() is not None:
                 self._lead_in.cancel()
             elif self.args.sim_time:   # at fixed times: the path's first target comes after
-                if self._inverse_matched() and self.rec.now() < self._path_start - 0.1:
-                    self._send(first)
+                if self._targets.inverse_matched() and self.rec.now() < self._path_start - 0.1:
+                    self._targets.send(first)
             else:
                 pub.publish(first)
         self._lead_in = self.rec.node.create_timer(0.1, lead_in)
@@ -342,30 +340,6 @@ class Run:
             traj['bending_angle_deg'] = case.bending_angle_deg
         self.procs['trajectory'] = NodeProcess('trajectory_publisher', traj, self.env,
                                                self.log_dir, tag=self.tag)
-
-    def _send(self, msg) -> None:
-        """Publish a target and count it (the lockstep waits until the inverse node has it)."""
-        self._target_pub.publish(msg)
-        self._counts.sent(self._target_pub.topic_name)
-        self._report()
-
-    def _report(self) -> None:
-        """This process's lockstep report: its counts, and the time it holds the simulation to."""
-        if getattr(self, '_hold_at', None) is None:
-            self._counts.report_counts()
-        else:
-            self._counts.report(self._hold_at)
-
-    def _inverse_matched(self) -> bool:
-        """The inverse node subscribes the targets and every subscriber is matched.
-
-        A target sent before its reader matched would never arrive, and the
-        lockstep would wait for it until its timeout.
-        """
-        pub = self._target_pub
-        subs = self.rec.node.get_subscriptions_info_by_topic(pub.topic_name)
-        return (any(i.node_name == 'inverse_kinetostatic_node' for i in subs)
-                and pub.get_subscription_count() >= len(subs))
 
     @staticmethod
     def _zero_stamp():
@@ -394,8 +368,7 @@ class Run:
         self.times['eval'] = self._first_trajectory_target() + self.spin_up_s + period
         self.times['stop'] = self.times['eval'] + period
         if self.args.sim_time:   # held there: the hand-over is at the same time in every run
-            self._hold_at = self.times['stop']
-            self._report()
+            self._targets.hold(self.times['stop'])
         print(f'  {self.name}: trajectory started {time.monotonic() - self.t0:.1f} s after '
               f'the nodes; spin-up {self.spin_up_s:g} s, the second {period:g} s period at '
               f'full speed evaluated, then {self.hold_s:g} s hold', flush=True)
@@ -442,20 +415,23 @@ class Run:
         tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
         case, kw = self.case, self.col.path_kw
         clock = self.rec.node.get_clock()
-        final = []
+        final, ticked = [], [-1]
 
         def tick() -> None:
             if final:
-                self._send(final[0])
+                self._targets.send(final[0])
                 return
             now = clock.now()
+            if now.nanoseconds <= ticked[0]:   # (rcl's timer on /clock can fire twice at once)
+                return
+            ticked[0] = now.nanoseconds
             stamp_s = now.nanoseconds * 1e-9 + preview
             s = stamp_s - last
             pos, z = trajectory(case.trajectory, tau_last + spin_down(s, d), case.robot, **kw)
             q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
             msg = pose_message(pos[0], q, 'base', Time(sec=int(stamp_s),
                                                        nanosec=int(stamp_s % 1.0 * 1e9)))
-            self._send(msg)
+            self._targets.send(msg)
             if s >= d:
                 final.append(msg)   # at rest: held from now on (10 Hz)
                 self._hold_timer.cancel()
@@ -465,8 +441,7 @@ class Run:
         self.times['hold'] = self.rec.now() + d
         self.times['end'] = self.times['hold'] + self.hold_s
         if self.args.sim_time:
-            self._hold_at = None   # this process takes over: the simulation runs on
-            self._report()
+            self._targets.hold(None)   # this process takes over: the simulation runs on
 
     @staticmethod
     def _settle(count, quiet_s: float = 0.3, timeout_s: float = 5.0) -> None:
@@ -504,8 +479,8 @@ class Run:
 
     def finish(self) -> dict:
         """Stop the nodes (SIGINT, the inverse vents), close the recorder; the recording."""
-        if getattr(self, '_counts', None) is not None:
-            self._counts.destroy()   # its targets are owed no more
+        if getattr(self, '_targets', None) is not None:
+            self._targets.close()   # its targets are owed no more
         for p in self.procs.values():
             p.interrupt()                   # all at once: they shut down in parallel
         codes = {k: p.stop() for k, p in reversed(list(self.procs.items()))}

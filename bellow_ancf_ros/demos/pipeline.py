@@ -25,9 +25,9 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'child_env', 'clock_parameters',
-           'hardware_parameters', 'machine_state', 'plant_effects', 'start_clock', 'tidy',
-           'wait_until', 'wait_up']
+__all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'TargetSender', 'child_env',
+           'clock_parameters', 'hardware_parameters', 'machine_state', 'plant_effects',
+           'start_clock', 'tidy', 'wait_until', 'wait_up']
 
 #: Wall seconds without the simulation's clock moving before a wait gives up.
 STALL_S = 30.0
@@ -346,6 +346,59 @@ class Recorder(SpunNode):
         with self.lock:
             for v in self.msgs.values():
                 v.clear()
+
+
+class TargetSender:
+    """A demo's own ``target_pose`` publisher, in the simulation's lockstep on simulation time.
+
+    Each target it sends is counted in its lockstep report (the simulated
+    robot takes no step until the inverse node has it), and it may hold the
+    simulation at a time (:meth:`hold`): there the demo acts (a step target,
+    the hand-over from the trajectory publisher) at the same simulated time in
+    every run, however long the computer takes.  On the wall clock it only
+    publishes.
+    """
+
+    def __init__(self, node) -> None:
+        from geometry_msgs.msg import PoseStamped
+
+        from ..nodes.lockstep import LockstepReport
+        from ..nodes.ros_util import command_qos
+        self.node = node
+        self.pub = node.create_publisher(PoseStamped, 'target_pose', command_qos())
+        self._lockstep = LockstepReport(node, follow_clock=False)
+        self._hold_at: float | None = None
+
+    def inverse_matched(self) -> bool:
+        """The inverse node subscribes and every subscriber is matched.
+
+        A target sent before its reader matched never arrives: the lockstep
+        would wait for it until its timeout.
+        """
+        subs = self.node.get_subscriptions_info_by_topic(self.pub.topic_name)
+        return (any(i.node_name == 'inverse_kinetostatic_node' for i in subs)
+                and self.pub.get_subscription_count() >= len(subs))
+
+    def send(self, msg) -> None:
+        """Publish a target and count it."""
+        self.pub.publish(msg)
+        self._lockstep.sent(self.pub.topic_name)
+        self._report()
+
+    def hold(self, t: float | None) -> None:
+        """Hold the simulation at simulated time ``t`` [s] (None: let it run)."""
+        self._hold_at = t
+        self._report()
+
+    def _report(self) -> None:
+        if self._hold_at is None:
+            self._lockstep.report_counts()
+        else:
+            self._lockstep.report(self._hold_at)
+
+    def close(self) -> None:
+        """Leave the lockstep: its targets are owed no more."""
+        self._lockstep.destroy()
 
 
 def wait_up(procs, pred, timeout: float) -> bool:

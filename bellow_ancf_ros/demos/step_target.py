@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from ..cli.output import number
-from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, hardware_parameters,
-                       start_clock, wait_up)
+from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
+                       hardware_parameters, start_clock, wait_up)
 
 __all__ = ['LATE_GOAL_M', 'OVERSHOOT_GOAL_M', 'RUNS', 'STEP_GOAL_M', 'STEP_M',
            'residual_swing', 'step_phase']
@@ -72,7 +72,7 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
     from geometry_msgs.msg import PoseStamped
 
     from ..core.geometry import quaternion_from_z_axis
-    from ..nodes.ros_util import command_qos, pose_message
+    from ..nodes.ros_util import pose_message
     from builtin_interfaces.msg import Time
     env = child_env(domain)
     feedback, shaping = RUNS[kind]
@@ -90,9 +90,11 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
             **hardware_parameters(args.plant), **clock_parameters(args.sim_time)}, env,
             log_dir, tag=tag)}
     out = {'ok': False}
+    targets = TargetSender(rec.node)
     try:
-        pub = rec.node.create_publisher(PoseStamped, 'target_pose', command_qos())
+        pub = targets.pub
         if args.sim_time:   # robot, inverse node and this recorder on the clock, then it runs
+            targets.hold(SETTLE_S)   # the step at the same simulated time in every run
             start_clock(rec, procs.values(), lambda: pub.get_subscription_count() >= 1, 3,
                         args.startup_timeout)
         if not wait_up(procs.values(), lambda: rec.count('true_pose') > 0
@@ -100,14 +102,21 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
             raise RuntimeError('nodes did not come up')
         msgs = [pose_message(p, quaternion_from_z_axis(z), 'base', Time(sec=0, nanosec=0))
                 for p, z in poses]
-        timer = rec.node.create_timer(0.1, lambda: pub.publish(msgs[0]))
-        rec.wait_for(rec.now() + SETTLE_S)
+
+        def hold_first() -> None:   # (on simulation time: once the inverse node has matched)
+            if not args.sim_time or targets.inverse_matched():
+                targets.send(msgs[0])
+        timer = rec.node.create_timer(0.1, hold_first)
+        rec.wait_for(SETTLE_S if args.sim_time else rec.now() + SETTLE_S)
         timer.cancel()   # the step target once (the node holds it): no re-solve of the same
-        pub.publish(msgs[1])   # target between the shaper's levels
-        t_step = rec.now()
+        targets.send(msgs[1])   # target between the shaper's levels
+        t_step = SETTLE_S if args.sim_time else rec.now()
+        targets.hold(None)
         rec.wait_for(t_step + AFTER_S)
         snap = rec.snapshot()['true_pose']
-        t = np.array([a for a, _ in snap]) - t_step
+        # on simulation time the poses' own stamps (the time each was taken), else arrival
+        t = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec if args.sim_time
+                      else a for a, m in snap]) - t_step
         pos = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
                         for _, m in snap])
         goal = poses[1][0]
@@ -120,6 +129,7 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
         print(f'FAILED (step, {kind}): {exc}')
         for p in procs.values():
             print(f'--- {p.module} log (last lines):\n{p.tail()}')
+    targets.close()
     for p in procs.values():
         p.interrupt()
     codes = {k: p.stop() for k, p in procs.items()}

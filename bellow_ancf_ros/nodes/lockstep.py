@@ -9,8 +9,11 @@ computation takes no simulated time, and a busy computer slows the
 simulation instead of delaying what they publish in it.  Two kinds:
 
 * a controller (``follow_clock``: the inverse node) reports each ``/clock``
-  tick it has received, once no work is pending or running (at once when
-  idle, else when the work ends: :meth:`LockstepReport.work_done`);
+  tick it has received, once no work is pending or running and none of its
+  timers is due (at once when idle, else when the work ends,
+  :meth:`LockstepReport.work_done`, or at the next look every
+  :data:`RETRY_S` of wall time): a re-solve or a shaper's level due at a
+  tick goes out before the simulation passes it;
 * a publisher on a timer (the trajectory publisher) reports, after each
   tick, the time just before its next one (:meth:`LockstepReport.report`),
   so that no step passes a tick before it is published.
@@ -39,6 +42,7 @@ import threading
 from typing import Callable
 
 from builtin_interfaces.msg import Time
+from rclpy.clock import Clock as RosClock, ClockType
 from rclpy.duration import Duration
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -50,6 +54,8 @@ __all__ = ['LEAVE_SEC', 'TOPIC', 'UNBOUNDED_SEC', 'LockstepReport', 'report_of']
 TOPIC = 'lockstep_clock'
 #: A report stamped this many seconds: the participant no longer holds the simulation.
 LEAVE_SEC = 2 ** 31 - 1
+#: How often [wall s] a controller looks again whether a held-back tick may be reported.
+RETRY_S = 0.005
 #: A report stamped this many seconds holds no time, only counts messages
 #: (:meth:`LockstepReport.report_counts`: a publisher without a cadence of its own).
 UNBOUNDED_SEC = LEAVE_SEC - 1
@@ -94,7 +100,7 @@ class LockstepReport:
         self._tick: Time | None = None   # the newest /clock tick received
         self._counts: dict[str, dict[str, int]] = {'sent': {}, 'received': {}}
         self._last = None   # what the newest report said (frame_id, stamp)
-        self._pub = self._sub = None
+        self._pub = self._sub = self._retry = None
         self._name = node.get_fully_qualified_name()
         if node.get_parameter('use_sim_time').value:
             self._pub = node.create_publisher(Header, TOPIC, 10)
@@ -103,6 +109,8 @@ class LockstepReport:
                     Clock, '/clock', self._on_clock,
                     QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                                history=HistoryPolicy.KEEP_LAST))
+                self._retry = node.create_timer(RETRY_S, self.work_done,
+                                                clock=RosClock(clock_type=ClockType.STEADY_TIME))
 
     @property
     def active(self) -> bool:
@@ -156,10 +164,23 @@ class LockstepReport:
             pass
 
     def work_done(self) -> None:
-        """Report the newest tick received, unless work is still pending or running."""
-        if self._pub is None or not self._idle():
+        """Report the newest tick received, unless work is pending or running or a timer due."""
+        if self._pub is None or not self._idle() or self._timer_due():
             return
         self._publish(None)
+
+    def _timer_due(self) -> bool:
+        """One of the node's timers is due and has not run yet (its callback will)."""
+        for timer in list(self._node.timers):
+            if timer is self._retry or timer.is_canceled():
+                continue
+            try:
+                left = timer.time_until_next_call()
+            except Exception:  # noqa: BLE001 - a timer destroyed meanwhile
+                continue
+            if left is not None and left <= 0:
+                return True
+        return False
 
     def report(self, t: float) -> None:
         """Report the work done until simulation time ``t`` [s]."""
@@ -173,6 +194,9 @@ class LockstepReport:
         """Stop reporting (on cleanup): a last report that this node leaves, then the topics go."""
         self._publish(Time(sec=LEAVE_SEC, nanosec=0))   # (its counts: owed no more)
         pub, sub, self._pub, self._sub = self._pub, self._sub, None, None
+        if self._retry is not None:
+            self._node.destroy_timer(self._retry)
+            self._retry = None
         if pub is not None:   # the leave must arrive, or the simulation waits its timeout
             try:
                 pub.wait_for_all_acked(Duration(seconds=0.5))
