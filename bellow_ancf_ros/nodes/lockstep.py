@@ -170,15 +170,26 @@ class LockstepReport:
         self._publish(None)
 
     def _timer_due(self) -> bool:
-        """One of the node's timers is due and has not run yet (its callback will)."""
+        """One of the node's timers is due by the newest tick and has not run yet.
+
+        Due by the tick, not by the node's clock: the node's time source may
+        not have taken the same ``/clock`` message yet, and its timers would
+        then look not due.  If one is, :data:`RETRY_S` later it looks again.
+        """
+        tick = self._tick
+        ahead = 0
+        if tick is not None:
+            now = self._node.get_clock().now().nanoseconds
+            ahead = max(tick.sec * 1_000_000_000 + tick.nanosec - now, 0)
         for timer in list(self._node.timers):
             if timer is self._retry or timer.is_canceled():
                 continue
             try:
                 left = timer.time_until_next_call()
+                ros = timer.clock.clock_type == ClockType.ROS_TIME
             except Exception:  # noqa: BLE001 - a timer destroyed meanwhile
                 continue
-            if left is not None and left <= 0:
+            if left is not None and left <= (ahead if ros else 0):
                 return True
         return False
 

@@ -285,3 +285,22 @@ def test_a_report_says_who_until_when_and_the_messages_counted():
     assert report_of(msg) == ('/trajectory_publisher', None, {}, {})
     msg.stamp.sec = UNBOUNDED_SEC   # counts only: holds no time
     assert report_of(msg)[1] == UNBOUNDED_SEC
+
+
+def test_a_path_that_starts_before_its_delay_starts_at_exactly_that_simulated_time(h, one):
+    """Every run of a simulation started paused starts its path alike (the same stamps)."""
+    sim = clock_sim(h, real_time_factor=0.0, lockstep=True, start_paused=True)
+    targets = h.record(PoseStamped, 'target_pose', DEEP)
+    h.add(InverseKinetostaticNode, feedback='none', use_sim_time=True)
+    h.add(TrajectoryPublisher, trajectory='planar_circle', rate_hz=50.0, period_s=2.0,
+          start_delay_s=0.5, ramp_in_s=0.0, controller_node='', use_sim_time=True)
+    time.sleep(1.0)   # every node up and on the clock
+    h.call(h.service(Trigger, 'simulated_robot_node/unpause'), Trigger.Request())
+    wait_for(lambda: h.count('target_pose') > 20, timeout=30.0, what='20 targets')
+    with h.lock:
+        stamps = np.array([seconds(m.header.stamp) for _, m in targets])
+    # the first at the first physics step at or after 0.5 s, then on the path's 20 ms grid
+    assert 0.5 <= stamps[0] < 0.5 + 1.0 / RATE_HZ + 1e-9, stamps[:3]
+    grid = 0.5 + 0.02 * np.round((stamps - 0.5) / 0.02)
+    assert np.all((stamps >= grid - 1e-9) & (stamps < grid + 1.0 / RATE_HZ)), stamps[:10]
+    assert sim.clock.lockstep_timeouts == 0
