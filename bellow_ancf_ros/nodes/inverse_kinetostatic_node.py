@@ -257,6 +257,7 @@ class InverseKinetostaticNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         if owner is not None:
             owner.clear()
+        self._worker.clear()   # re-solves queued while inactive: not after this (the old target)
         with self._lock:
             self._active = True
         self._feedback.reset()

@@ -71,6 +71,12 @@ def test_it_publishes_the_clock_and_stamps_everything_in_simulation_time(h):
     time.sleep(2.0)
     factor = (last_clock(h) - t0_sim) / (time.monotonic() - t0_wall)
     assert 1.0 < factor < 2.25, factor   # paced at 2x (a delay caught up; slower when busy)
+    # the node's own /diagnostics run on the clock it publishes (use_sim_time)
+    wait_for(lambda: any(s.name.endswith('simulated robot') for _, a in h.msgs['/diagnostics']
+                         for s in a.status), what='a status')
+    with h.lock:   # (taken while it runs: a status after the pause below says paused)
+        statuses = [(seconds(a.header.stamp), s) for _, a in h.msgs['/diagnostics']
+                    for s in a.status if s.name.endswith('simulated robot')]
     # paused, so that no pose or clock arrives between the snapshots below (on a busy
     # machine the statements between them can take longer than a physics step)
     h.call(h.service(Trigger, 'simulated_robot_node/pause'), Trigger.Request())
@@ -87,14 +93,9 @@ def test_it_publishes_the_clock_and_stamps_everything_in_simulation_time(h):
     np.testing.assert_allclose(np.diff(true), 1 / 120.0, atol=1e-8)
     np.testing.assert_allclose((measured + LATENCY_S) * 120.0,
                                np.round((measured + LATENCY_S) * 120.0), atol=1e-6)
-    # the node's own /diagnostics run on the clock it publishes (use_sim_time)
-    wait_for(lambda: any(s.name.endswith('simulated robot') for _, a in h.msgs['/diagnostics']
-                         for s in a.status), what='a status')
-    stamps = [seconds(a.header.stamp) for _, a in h.msgs['/diagnostics']
-              if any(s.name.endswith('simulated robot') for s in a.status)]
+    stamps = [t for t, _ in statuses]
     assert all(0.0 < s <= last_clock(h) + 1e-9 for s in stamps), (stamps, last_clock(h))
-    status = [s for _, a in h.msgs['/diagnostics'] for s in a.status
-              if s.name.endswith('simulated robot')][-1]
+    status = statuses[-1][1]
     values = {kv.key: kv.value for kv in status.values}
     assert values['real_time_factor'] == '2.0' and values['paused'] == 'False'
     # (over the newest second: a delay is caught up at up to CATCH_UP times the factor)
