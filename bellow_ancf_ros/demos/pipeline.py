@@ -387,8 +387,7 @@ class TargetSender:
 
     def send(self, msg) -> None:
         """Publish a target and count it."""
-        self.pub.publish(msg)
-        self._lockstep.sent(self.pub.topic_name)
+        self._lockstep.publish(self.pub, msg)
         self._report()
 
     def hold(self, t: float | None) -> None:

@@ -440,8 +440,7 @@ class InverseKinetostaticNode(LifecycleNode):
             if self._output.timed and self._output.wanted is not None:   # (the creep's lead)
                 p = self.last_command_pa = contract.safe_pressures(
                     self._output.again(now), self._cfg.p_min, self._cfg.p_max, self._model.A)
-            self._pub_cmd.publish(pressure_message(p, self._unit()))
-            self._lockstep.sent(self._pub_cmd.topic_name)
+            self._lockstep.publish(self._pub_cmd, pressure_message(p, self._unit()))
             if self._last_pose is not None:   # the model's pose for it (stamp: its target's)
                 self._pub_pose.publish(self._last_pose)
             self._last_publish_t = self._now()
@@ -534,8 +533,7 @@ class InverseKinetostaticNode(LifecycleNode):
                 # past the regulators' play, ahead of the creep (as configured)
                 p = contract.safe_pressures(self._output.command(p, self._now()), cfg.p_min,
                                             cfg.p_max, model.A)
-                self._pub_cmd.publish(pressure_message(p, unit))
-                self._lockstep.sent(self._pub_cmd.topic_name)   # (on simulation time)
+                self._lockstep.publish(self._pub_cmd, pressure_message(p, unit))   # (counted)
                 self._last_publish_t = self._now()
                 self._last_pose = pose_message(
                     fw.position, geometry.quaternion_from_rotation(fw.rotation),

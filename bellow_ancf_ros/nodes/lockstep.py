@@ -122,6 +122,11 @@ class LockstepReport:
             self._tick = msg.clock
         self.work_done()
 
+    def publish(self, pub, msg) -> None:
+        """Publish ``msg`` on ``pub`` and count it as sent (said in the next report)."""
+        pub.publish(msg)
+        self.sent(pub.topic_name)
+
     def sent(self, topic: str, n: int = 1) -> None:
         """``n`` more messages were published on ``topic`` (resolved; in the next report)."""
         self._count('sent', topic, n)

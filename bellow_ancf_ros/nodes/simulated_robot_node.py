@@ -373,6 +373,7 @@ class SimulatedRobotNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
                       'timeouts': 0, 'dropped_poses': 0, 'outliers': 0, 'resets': 0}
+        self._timeouts_said = 0   # lockstep timeouts logged so far
         self._timeout_s = float(g('command_timeout_s').value)
         self._last_cmd_t: float | None = None
         self._commands: deque = deque()   # (pressures, arrival time): for the physics thread
@@ -700,7 +701,7 @@ class SimulatedRobotNode(Node):
             message = ('paused' if c.paused else
                        f'simulating at {factor:.3g}x real time' if math.isfinite(factor)
                        else message)
-            if c.lockstep_timeouts > getattr(self, '_timeouts_said', 0):
+            if c.lockstep_timeouts > self._timeouts_said:
                 self._timeouts_said = c.lockstep_timeouts
                 t, behind, owing = c.last_timeout
                 self.get_logger().warn(

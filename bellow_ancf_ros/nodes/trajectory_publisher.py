@@ -474,8 +474,8 @@ class TrajectoryPublisher(Node):
         pos, z = lead_in(p0, z0 if multi else None, end,
                          geometry.z_axis_from_quaternion(q_end) if multi else None, fraction)
         q = geometry.quaternion_from_z_axis(z) if multi else np.array([0, 0, 0, 1.0])
-        self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value, stamp))
-        self._lockstep.sent(self._pub.topic_name)
+        self._lockstep.publish(self._pub, pose_message(
+            pos, q, self.get_parameter('base_frame').value, stamp))
 
     def _hold_first_point(self, now, preview: float) -> bool:
         """Publish the lead-in's first point until the controller answers one (True: held).
@@ -566,9 +566,8 @@ class TrajectoryPublisher(Node):
             self.get_logger().info('trajectory finished (loop is false)')
             return
         pos, q = self.pose_at(t)
-        self._pub.publish(pose_message(pos, q, self.get_parameter('base_frame').value,
-                                       self._stamp(now, preview)))
-        self._lockstep.sent(self._pub.topic_name)
+        self._lockstep.publish(self._pub, pose_message(
+            pos, q, self.get_parameter('base_frame').value, self._stamp(now, preview)))
         self.published += 1
 
 

@@ -224,10 +224,12 @@ class SimulationClock:
 
     def _owed(self) -> list[str]:
         """The receivers that have not yet received every message sent to them (lock held)."""
-        sent = self._sent_totals()
-        return [who for who in self._received
-                if any(counts.get(topic, n) < n for counts in (self._counted(who),)
-                       for topic, n in sent.items() if topic in counts)]
+        sent, owed = self._sent_totals(), []
+        for who in self._received:
+            counts = self._counted(who)
+            if any(counts[topic] < n for topic, n in sent.items() if topic in counts):
+                owed.append(who)
+        return owed
 
     def leave(self, who: str = '') -> None:
         """Participant ``who`` no longer holds the simulation back (it stopped)."""
