@@ -59,7 +59,8 @@ STDLIB_OR_OWN = {'bellow_ancf_ros'}
 LOCAL_TEST_HELPERS = {'conftest', 'reference_beams', 'calibration_data', 'make_solver_baseline',
                       'update_readme', 'remedies_bench', 'family_bench', 'busy_bench',
                       'demo_table', 'demo_results', 'effects_bench', 'ros_processes',
-                      'redundant_bench', 'stream_latency', 'ros_domains', 'integrator_checks'}
+                      'redundant_bench', 'stream_latency', 'ros_domains', 'integrator_checks',
+                      'dynamics_bench'}
 
 
 def dependencies():

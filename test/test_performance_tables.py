@@ -6,6 +6,7 @@ import sys
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 sys.path.insert(0, os.path.join(ROOT, "bench"))
+import dynamics_bench  # noqa: E402
 import redundant_bench  # noqa: E402
 import stream_latency  # noqa: E402
 
@@ -93,3 +94,32 @@ def test_the_docs_show_the_stream_latency_table_of_the_last_run():
         data = json.load(f)
     assert [r['robot'] for r in data['runs']] == list(stream_latency.ROBOTS)
     assert stream_latency.doc_block() == stream_latency.markdown(data)
+
+
+def _dynamics():
+    """A synthetic dynamics run file: one robot, the integrator meets its goal, simulate not."""
+    def run(way, rtf):
+        return {'kind': 'sine', 'way': way, 'steps': 160, 'rtf': rtf, 'halvings': 0,
+                'completed': True, 'step_cpu_median_s': 1e-4, 'step_cpu_p99_s': 2e-4}
+    robot = {'m': 1, 'robot': 'one_segment', 'first_mode_hz': 10.5, 'step_s': 0.00238,
+             'periods': 4.0, 'force_n': 0.117, 'modes_s': [0.02, 0.03, 0.025],
+             'runs': [run('integrator', [20.0, 22.0, 21.0]), run('simulate', [25.0, 29.0, 28.0])]}
+    return {'date': '2026-01-02T03:04:05+00:00', 'load': [0.5, 0.4, 0.3], 'cpus': 2,
+            'reps': 3, 'check_s': 0.01, 'robots': [robot]}
+
+
+def test_dynamics_bench_rows_give_verdicts_and_simulates_ratio():
+    lines = dynamics_bench.text(_dynamics()).splitlines()
+    assert lines[0].endswith('2 CPUs, load average 0.50, 0.40, 0.30 (1, 5, 15 min); '
+                             '2026-01-02 03:04 UTC')
+    assert 'first mode 10.500 Hz, default step 2.380 ms' in lines[1]
+    assert 'RTF median   21.00x  lowest   20.00x' in lines[2] and 'PASS (goal 10x)' in lines[2]
+    assert lines[3].endswith('MISS (goal 30x)  1.33x the integrator\'s')   # 28 / 21
+    assert lines[4] == '  modes    natural_modes (6 modes) median     25.0 ms, max     30.0 ms'
+
+
+def test_the_docs_show_the_dynamics_bench_of_the_last_run():
+    with open(os.path.join(ROOT, 'bench', 'dynamics.json')) as f:
+        data = json.load(f)
+    assert [r['m'] for r in data['robots']] == [1, 2, 3]
+    assert dynamics_bench.doc_block() == dynamics_bench.text(data)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros import cli
-from bellow_ancf_ros.core import GeneralizedAlpha, geometry, solve_forward
+from bellow_ancf_ros.core import DynamicsStatus, GeneralizedAlpha, geometry, solve_forward
 from bellow_ancf_ros.core.dynamics import natural_modes, piecewise_linear, sample_motion
 from bellow_ancf_ros.core.fit import write_bag
 
@@ -141,12 +141,14 @@ def test_simulate_pressure_table_is_linear_between_rows_and_starts_at_t0(capsys,
 
 def test_a_failed_integration_reports_and_keeps_what_was_computed(capsys, tmp_path,
                                                                   monkeypatch):
-    original = GeneralizedAlpha._try_step
+    original = GeneralizedAlpha._run
 
-    def fails_late(self, h, lam, load):
-        return None if self.state.t > 0.045 else original(self, h, lam, load)
+    def fails_late(self, times, steps, lams, load, *args):   # every step from 0.045 s on
+        n = int(np.sum(times - steps <= 0.045))
+        status, k = original(self, times[:n], steps[:n], lams[:n], load, *args)
+        return (status, k) if k < n or n == len(steps) else (DynamicsStatus.STEP_TOO_SMALL, k)
 
-    monkeypatch.setattr(GeneralizedAlpha, '_try_step', fails_late)
+    monkeypatch.setattr(GeneralizedAlpha, '_run', fails_late)
     out_csv = tmp_path / 'partial.csv'
     code, out, err = run(capsys, 'simulate', '--pressures-kpa', 0, 0, 0,
                          '--release-tip-force-n', 0.2, 0, 0, '--duration-s', 0.2,

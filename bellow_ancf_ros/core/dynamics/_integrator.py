@@ -32,7 +32,12 @@ silently wrong answer.
 Cost (issue 26: one segment at 10x real time needs a step in 0.24 ms): the
 iterations of a step run in one compiled call (``_kernels.chord_iterations``:
 static residual, dynamic right-hand side, triangular solves with the kept
-factors, no allocation); the predictor extrapolates the accelerations and
+factors, no allocation), and the steps of a run one after the other in
+another (``_kernels.run_steps``: predictor, history, the records of
+:meth:`GeneralizedAlpha.advance_through`; issue 36: Python around each step
+cost as much as the step); Python plans the steps and the inputs at their
+ends beforehand, factorises when the iterations ask, and halves a step that
+fails; the predictor extrapolates the accelerations and
 multipliers of the last three states (quadratic); a step has converged when the update,
 or the error it leaves at the observed contraction rate (``size c/(1-c)``),
 is within ``tol`` (about three iterations a step instead of four); a
@@ -58,10 +63,10 @@ import scipy.sparse.linalg as spla
 from ..model import RobotModel, TipLoad, as_tip_load
 from ..status import DynamicsStatus
 from ._inertia import Inertia
-from ._kernels import (chord_iterations, compact_factors, refactor, split_factors,
+from ._kernels import (NEED_FACTOR, compact_factors, refactor, run_steps, split_factors,
                        state_checks, symbolic_factors)
 
-__all__ = ["DynamicState", "GeneralizedAlpha", "StepReport", "DynamicsError",
+__all__ = ["DynamicState", "GeneralizedAlpha", "Passage", "StepReport", "DynamicsError",
            "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step",
            "warm_up_dynamics"]
 
@@ -75,6 +80,8 @@ MAX_DEFAULT_STEP_S = 0.01
 #: Largest backward error of a refactorised chord matrix along old pivots (a fresh
 #: SuperLU factorisation shows some 1e-17); beyond it SuperLU pivots afresh.
 REFACTOR_ERROR = 1e-13
+#: Steps of a run between two looks at its time budget (:meth:`GeneralizedAlpha.advance`).
+BUDGET_STEPS = 8
 
 
 def default_step(first_mode_hz: float) -> float:
@@ -131,6 +138,23 @@ class StepReport:
         return self.status == DynamicsStatus.COMPLETED
 
 
+@dataclass
+class Passage:
+    """What :meth:`GeneralizedAlpha.advance_through` recorded at each end it reached.
+
+    ``times_s`` (n,); ``plate`` (n, 12): the end plate's coordinates
+    (``RobotModel.end_effectors`` turns them into poses); ``checks`` (n, 3):
+    kinetic and potential energy [J] and the largest constraint residual
+    where asked (NaN elsewhere); ``pressures_pa`` (n, A): the input there
+    when the pressures were a function of time, else None.
+    """
+
+    times_s: np.ndarray
+    plate: np.ndarray
+    checks: np.ndarray
+    pressures_pa: np.ndarray | None
+
+
 class GeneralizedAlpha:
     """Generalized-alpha integrator of one robot (module docstring).
 
@@ -178,6 +202,10 @@ class GeneralizedAlpha:
         # factors of the identity: for the call that runs the predictor alone
         self._lu_dummy = split_factors(spla.splu(sp.identity(model.N, format="csc")))
         self._work = tuple(np.empty(model.N) for _ in range(4))
+        self._cur = tuple(np.empty(k) for k in (model.nq,) * 4 + (model.nc,))  # run_steps'
+        self._nxt = tuple(np.empty(k) for k in (model.nq,) * 4 + (model.nc,))
+        self._no_record = ((np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.bool_),
+                            np.zeros(12, dtype=np.int64)), (np.zeros((1, 12)), np.zeros((1, 3))))
         st1, cfg = model.stage1, model.cfg
         ia = self.inertia
         self._stage1_args = (
@@ -188,7 +216,7 @@ class GeneralizedAlpha:
             np.asarray(model.gravity, dtype=float) * 1.0)
         self._mass_cache, self._load_cache = {}, {}
         self._mass_values = (None, None)
-        self._hist = None   # the predictor's history (_extrapolation)
+        self._hist = None   # the predictor's history (_history)
         self._stretch_kept = None   # (pressures, their stretches): _stretch_input
         self.counters = {"steps": 0, "iterations": 0, "factorizations": 0}
 
@@ -289,15 +317,15 @@ class GeneralizedAlpha:
             self._mass_cache[payload_kg] = got
         return got
 
-    def _inputs(self, lam: np.ndarray, load: TipLoad):
-        """The kernel's inputs at stretch ``lam`` and ``load`` (point forces kept per load)."""
+    def _point_forces(self, load: TipLoad) -> np.ndarray:
+        """The point forces of ``load`` in the kernels' form (kept per load)."""
         q_point = self._load_cache.get(load)
         if q_point is None:
             q_point = np.ascontiguousarray(self.model.point_forces(load), dtype=float)
             if len(self._load_cache) > 16:
                 self._load_cache.clear()
             self._load_cache[load] = q_point
-        return (lam,) + self._stage1_args + (q_point,)
+        return q_point
 
     def _factor(self, st: DynamicState, h: float):
         """Factorise the chord matrix at the state ``st`` (its stretch, load and step ``h``)."""
@@ -356,85 +384,194 @@ class GeneralizedAlpha:
             return compact_factors(lu)
         return split_factors(superlu)   # SuperLU's own factors (not expected)
 
-    def _extrapolation(self, h: float):
-        """The predictor's earlier states and weights for a step ``h`` from ``self.state``.
+    def _history(self):
+        """The predictor's history (:func:`run_steps`' ``hist``) of ``self.state``.
 
-        Returns ``(prev, weights, back)``: the accelerations and multipliers
-        of the two states before (``(acc, mu, acc, mu)``), the weights of the
-        values at ``t_n, t_{n-1}, t_{n-2}`` (Lagrange extrapolation to
-        ``t_n + h``: quadratic when both are known, linear after one step,
-        constant after a start) and what the next step's history keeps.
-        Quadratic against linear: 14 % fewer iterations under a pressure sine,
-        3 % more in a release's first periods, where the scheme's alternating
-        high-frequency transient (damped by ``rho_inf``) is extrapolated too.
+        Kept from step to step; a state set from outside (:meth:`start`, an
+        assignment) starts without one (a constant predictor first).
         """
-        st0 = self.state
-        hist = self._hist   # (state, its step, the state before, (step, state) before that)
-        if hist is None or hist[0] is not st0:
-            return (st0.acc, st0.mu, st0.acc, st0.mu), (1.0, 0.0, 0.0), None
-        h1, s1 = hist[1], hist[2]
-        if hist[3] is None:
-            r = h / h1
-            return (s1.acc, s1.mu, s1.acc, s1.mu), (1.0 + r, -r, 0.0), (h1, s1)
-        h2, s2 = hist[3]
-        w0 = (h + h1) * (h + h1 + h2) / (h1 * (h1 + h2))
-        w1 = -h * (h + h1 + h2) / (h1 * h2)
-        w2 = h * (h + h1) / ((h1 + h2) * h2)
-        return (s1.acc, s1.mu, s2.acc, s2.mu), (w0, w1, w2), (h1, s1)
+        hist = self._hist
+        if hist is None or hist[0] is not self.state:
+            m = self.model
+            arrays = (np.zeros((2, m.nq)), np.zeros((2, m.nc)), np.zeros(2),
+                      np.zeros(1, dtype=np.int64))
+            hist = self._hist = (self.state, arrays)
+        return hist[1]
 
-    def _try_step(self, h: float, lam_next, load_next) -> DynamicState | None:
-        """One step of length ``h`` from ``self.state``; None if Newton does not converge.
+    def _plan(self, t: float, ends: np.ndarray):
+        """The steps from ``t`` through each time of ``ends`` in turn.
 
-        The iterations run compiled (:func:`chord_iterations`); Python only
-        refactors when they ask for it.  Predictor: the accelerations and
-        multipliers extrapolated from the last three states
-        (:meth:`_extrapolation`), which follows a smoothly changing input (a
-        pressure ramp or sine) that a constant acceleration misses.
+        Each span is cut into equal steps of about ``step_s`` (up to 10 %
+        longer rather than one more step: a physics tick of one step's
+        length, with its jitter, stays one step; a span that repeats repeats
+        the step, and the factorisation made for it is reused); its last step
+        lands on its end.  Returns ``(times, steps, last)``: each step's end
+        time and length, and the index of the step that ends each span (-1:
+        none yet, for a span that is not positive).
         """
-        m = self.model
-        nq, nc = m.nq, m.nc
-        st0 = self.state
-        lam = np.ascontiguousarray(lam_next, dtype=float)
-        load = as_tip_load(load_next)
+        times, steps, last = [], [], []
+        for end in ends.tolist():
+            span = end - t
+            if span > 0:
+                n = max(1, math.ceil(span / self.step_s - 0.1))
+                h = span / n
+                for _ in range(n - 1):
+                    t = t + h
+                    times.append(t)
+                    steps.append(h)
+                h = end - t
+                t = t + h
+                times.append(t)
+                steps.append(h)
+            last.append(len(steps) - 1)
+        return np.array(times), np.array(steps), np.array(last, dtype=np.int64)
+
+    def _input_tables(self, times, stretch, pressures_pa, load):
+        """Stretches (n, A), pressures (n, A or None) and loads at the steps' ends.
+
+        ``loads``: one :class:`TipLoad` when constant, else one per step.
+        """
+        n, st, stage1 = len(times), self.state, self.model.stage1
+        pres = None
+        if pressures_pa is not None and callable(pressures_pa):
+            pres = np.array([np.asarray(pressures_pa(t), dtype=float) for t in times.tolist()],
+                            dtype=float).reshape(n, -1) if n else np.zeros((0, self.model.A))
+            lams = np.asarray(stage1.stretch(pres.ravel()), dtype=float).reshape(n, self.model.A)
+        else:
+            if pressures_pa is not None:   # constant pressures: mapped once, kept
+                p = np.asarray(pressures_pa, dtype=float)
+                key = (p.shape, p.tobytes())
+                kept = self._stretch_kept
+                if kept is None or kept[0] is not stage1 or kept[1] != key:
+                    kept = self._stretch_kept = (stage1, key,
+                                                 np.array(stage1.stretch(p), dtype=float))
+                lam = kept[2]
+            elif stretch is not None and callable(stretch):
+                lam = None
+                lams = np.array([np.asarray(stretch(t), dtype=float) for t in times.tolist()],
+                                dtype=float).reshape(n, self.model.A)
+            else:
+                lam = st.stretch if stretch is None else np.asarray(stretch, dtype=float)
+            if lam is not None:
+                lams = np.tile(np.asarray(lam, dtype=float).ravel(), (n, 1))
+        if load is None:
+            loads = st.load
+        elif callable(load):
+            loads = [as_tip_load(load(t)) for t in times.tolist()]
+        else:
+            loads = as_tip_load(load)
+        return np.ascontiguousarray(lams), pres, loads
+
+    def _state_after(self, k, times, lams, load) -> DynamicState:
+        """The state after step ``k`` of a run: ``self._cur`` copied (``k < 0``: unchanged)."""
+        if k < 0:
+            return self.state
+        q, v, acc, aux, mu = (a.copy() for a in self._cur)
+        return DynamicState(float(times[k]), q, v, acc, aux, mu, lams[k].copy(), load)
+
+    def _run(self, times, steps, lams, load, stretch_at, load_at, rep, rec, deadline,
+             depth=0) -> tuple[DynamicsStatus, int]:
+        """Steps ``steps`` (ending at ``times``, stretches ``lams``) under one ``load``.
+
+        Compiled (:func:`run_steps`); Python only factorises the chord matrix
+        when the iterations ask for it, and halves a step that fails
+        (:meth:`_step_halving`, down to ``max_halvings``).  ``rec``: the
+        records of :func:`run_steps` (``(rec, out)``); ``deadline``: the
+        ``perf_counter`` time after which no further step starts (looked at
+        every :data:`BUDGET_STEPS` steps).  ``self.state`` ends at the last
+        converged step; returns the status and the number of the steps done.
+        """
+        n = len(steps)
         payload = float(load.payload_kg)
-        inputs = self._inputs(lam, load)
         mass = self._mass_arrays(payload)[0]
-        st = DynamicState(st0.t + h, np.empty(nq), np.empty(nq), np.empty(nq), np.empty(nq),
-                          np.empty(nc), lam, load)
-        key = self._lu_key
-        if self._lu is None or key[1] != payload or abs(key[0] - h) > 0.25 * h:
-            self._lu = None   # the chord matrix of a near step is kept
-        prev, weights, back = self._extrapolation(h)
         ia = self.inertia
-        coef = (float(h), self.alpha_m, self.alpha_f, self.beta, self.gamma,
-                ia.damping_time, ia.mass_damping)
-        s0 = (st0.q, st0.v, st0.acc, st0.aux, st0.mu)
-        s1 = (st.q, st.v, st.acc, st.aux, st.mu)
+        coef = (self.alpha_m, self.alpha_f, self.beta, self.gamma, ia.damping_time,
+                ia.mass_damping)
+        qpoint = self._point_forces(load)
         kargs = self.model.kernel_args
-        predict, refreshed, it, last = True, False, 0, np.inf
-        while True:
-            if self._lu is None:
-                if predict:   # the predictor alone (no iteration): the point to factor at
-                    chord_iterations(s0, prev, weights, True, s1, coef, inputs, kargs, mass,
-                                     self._lu_dummy, (self._inv_scale, self.tol, 0, 0, last,
-                                                      refreshed), self._work)
-                    predict = False
-                self._factor(st, h)
-                refreshed = True
-            code, n, last = chord_iterations(
-                s0, prev, weights, predict, s1, coef, inputs, kargs, mass, self._lu,
-                (self._inv_scale, self.tol, it, self.max_iter, last, refreshed), self._work)
-            predict = False
-            it += n
-            self.counters["iterations"] += n
-            if code == 0:
-                self._hist = (st, h, st0, back)
-                return st
+        ctl = (self._inv_scale, self.tol, self.max_iter)
+        rec_in, out = rec
+        k = 0
+        while k < n:
+            st = self.state
+            cur = self._cur
+            for a, b in zip(cur, (st.q, st.v, st.acc, st.aux, st.mu)):
+                a[:] = b
+            hist = self._history()
+            resume = (True, 0, math.inf, False)
+            first = k
+            code = 0
+            while k < n:
+                if deadline is not None and resume[0] and time.perf_counter() > deadline:
+                    code = -1
+                    failed = DynamicsStatus.TIME_BUDGET
+                    break
+                stop = n if deadline is None else min(n, k + BUDGET_STEPS)
+                if self._lu is not None and self._lu_key[1] != payload:
+                    self._lu = None
+                lu, lu_step = ((self._lu_dummy, 0.0) if self._lu is None
+                               else (self._lu, self._lu_key[0]))
+                before = k
+                code, k, it, last, its = run_steps(
+                    cur, self._nxt, hist, steps[:stop], lams[:stop], k, resume, coef,
+                    self._stage1_args, qpoint, kargs, mass, lu,
+                    ctl + (lu_step,), self._work, rec_in, out)
+                self.counters["iterations"] += its
+                self.counters["steps"] += k - before
+                if code == NEED_FACTOR:
+                    at = DynamicState(float(times[k]), *self._nxt, lams[k], load)
+                    try:
+                        self._factor(at, float(steps[k]))
+                    except DynamicsError as exc:
+                        code = -1
+                        failed = exc.status
+                        break
+                    resume = (False, it, last, True)
+                    continue
+                resume = (True, 0, math.inf, False)
+                if code != 0:
+                    break
+            if k > first:
+                self.state = self._state_after(k - 1, times, lams, load)
+                self._hist = (self.state, hist)
+            if code == -1:
+                return failed, k
             if code == 5:
-                raise DynamicsError(DynamicsStatus.NONFINITE, "a converged step is not finite")
-            if code != 1 or it >= self.max_iter:
-                return None
-            self._lu = None   # slow chord iterations: refactor at the current iterate
+                return DynamicsStatus.NONFINITE, k
+            if code == 0:
+                return DynamicsStatus.COMPLETED, k
+            # step k failed: two half steps instead (each halved again if it fails)
+            self._lu = None
+            if depth >= self.max_halvings:
+                return DynamicsStatus.STEP_TOO_SMALL, k
+            rep.halvings += 1
+            for _ in range(2):
+                status = self._step_halving(0.5 * float(steps[k]), stretch_at, load_at, rep,
+                                            depth + 1)
+                if status != DynamicsStatus.COMPLETED:
+                    return status, k
+            self._lu = None  # the next full step needs its own factorisation
+            self.state.t = float(times[k])   # on the planned time (not a rounding off it)
+            self._record(k, rec)
+            k += 1
+        return DynamicsStatus.COMPLETED, k
+
+    def _step_halving(self, h, stretch_at, load_at, rep, depth) -> DynamicsStatus:
+        """One step of length ``h`` from ``self.state`` (halved again if it fails)."""
+        t = self.state.t + h
+        lam = np.asarray(stretch_at(t), dtype=float).reshape(1, -1)
+        return self._run(np.array([t]), np.array([h]), np.ascontiguousarray(lam),
+                         as_tip_load(load_at(t)), stretch_at, load_at, rep, self._no_record,
+                         None, depth)[0]
+
+    def _record(self, k, rec):
+        """:func:`run_steps`' record of step ``k`` for a step Python made (halved)."""
+        (row, check, dofs), (out_q, out_checks) = rec
+        if k < len(row) and row[k] >= 0:
+            out_q[row[k]] = self.state.q[dofs]
+            if check[k]:
+                e, worst = self.checks()
+                out_checks[row[k]] = (e["kinetic_j"], e["potential_j"], worst)
 
     def advance(self, t_end: float, stretch=None, load=None, pressures_pa=None,
                 time_budget_s: float | None = None) -> StepReport:
@@ -450,6 +587,27 @@ class GeneralizedAlpha:
         Returns a :class:`StepReport`; on failure the state is the last
         converged step and ``status`` says why.
         """
+        return self._advance(np.array([float(t_end)]), stretch, load, pressures_pa,
+                             time_budget_s, None)[0]
+
+    def advance_through(self, ends, stretch=None, load=None, pressures_pa=None,
+                        time_budget_s: float | None = None, check=None):
+        """Integrate through each time of ``ends`` in turn, as :meth:`advance` to each would.
+
+        One compiled run for all of them (:func:`run_steps`): a run sampled
+        at every step costs no Python per step.  The inputs as
+        :meth:`advance` takes them.  ``check``: per end, whether to compute
+        the energy and the constraint violation there (:meth:`checks`).
+
+        Returns ``(report, passage)``: the :class:`StepReport` and a
+        :class:`Passage` of the ends reached.
+        """
+        check = np.zeros(np.size(ends), dtype=bool) if check is None else check
+        return self._advance(np.asarray(ends, dtype=float).ravel(), stretch, load, pressures_pa,
+                             time_budget_s, np.asarray(check, dtype=bool).ravel())
+
+    def _advance(self, ends, stretch, load, pressures_pa, time_budget_s, check):
+        """:meth:`advance_through`; ``check`` None: nothing recorded (:meth:`advance`)."""
         st = self.state
         if st is None:
             raise RuntimeError("call start(fw) first")
@@ -457,90 +615,65 @@ class GeneralizedAlpha:
         t0 = time.perf_counter()
         counters = self.counters
         c0 = (counters["steps"], counters["iterations"], counters["factorizations"])
-        stretch_at = self._stretch_input(stretch, pressures_pa)
-        load_at = self._load_input(load)
-        # equal steps of about step_s (up to 10 % longer rather than one more step: a physics
-        # tick of one step's length, with its jitter, stays one step); a span that repeats
-        # repeats the step, and the factorisation made for it is reused
-        span = t_end - st.t
-        n = max(1, math.ceil(span / self.step_s - 0.1))
-        h = span / n
-        start = st.t
-        for k in range(n if span > 0 else 0):
-            if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-                rep.status = DynamicsStatus.TIME_BUDGET
-                break
-            if k == n - 1:
-                h = t_end - self.state.t   # land exactly on t_end
-            elif k:
-                h = (t_end - start) / n
-            status = self._step_halving(h, stretch_at, load_at, rep)
-            if status != DynamicsStatus.COMPLETED:
-                rep.status = status
-                break
+        times, steps, last = self._plan(st.t, ends)
+        lams, pres, loads = self._input_tables(times, stretch, pressures_pa, load)
+        n, n_ends = len(steps), len(ends)
+        if check is None:
+            (row, checked, dofs), out = self._no_record
+            if len(row) < n:   # (kept: no allocation per call)
+                row = np.full(max(n, 2 * len(row)), -1, dtype=np.int64)
+                self._no_record = ((row, checked, dofs), out)
+        else:
+            dofs = np.ascontiguousarray(self.model.end_effector_dofs, dtype=np.int64)
+            row = np.full(n, -1, dtype=np.int64)
+            checked = np.zeros(n, dtype=np.bool_)
+            own = last >= 0
+            row[last[own]] = np.flatnonzero(own)
+            checked[last[own]] = check[own]
+            out = (np.full((n_ends, len(dofs)), np.nan), np.full((n_ends, 3), np.nan))
+
+        def stretch_at(t):   # a halved step's input between the planned ones
+            return self._input_tables(np.array([t]), stretch, pressures_pa, load)[0][0]
+
+        def load_at(t):
+            got = self._input_tables(np.array([t]), stretch, None, load)[2]
+            return got[0] if isinstance(got, list) else got
+
+        deadline = None if time_budget_s is None else t0 + time_budget_s
+        status = DynamicsStatus.COMPLETED
+        a = done = 0
+        while a < n and status == DynamicsStatus.COMPLETED:   # runs of one load
+            ld, b = loads, n
+            if isinstance(loads, list):
+                ld, b = loads[a], a + 1
+                while b < n and loads[b] == ld:
+                    b += 1
+            status, k = self._run(times[a:b], steps[a:b], lams[a:b], ld, stretch_at, load_at,
+                                  rep, ((row[a:b], checked[a:b] if check is not None else
+                                         checked, dofs), out), deadline)
+            done += k
+            a = b
+        rep.status = status
         rep.steps = counters["steps"] - c0[0]
         rep.iterations = counters["iterations"] - c0[1]
         rep.factorizations = counters["factorizations"] - c0[2]
         rep.wall_s = time.perf_counter() - t0
         rep.message = rep.status.message if rep.success else (
             f"{rep.status.message} at t = {self.state.t:.6g} s")
-        return rep
-
-    def _stretch_input(self, stretch, pressures_pa):
-        """``f(t)``: the stretches at ``t`` (:meth:`advance`); constant pressures map once.
-
-        The stretches of the last constant pressures are kept (a run advanced
-        sample by sample maps them once, not at every step); each call gets
-        its own copy, which the states of its steps share.
-        """
-        if pressures_pa is not None:
-            stage1 = self.model.stage1
-            if callable(pressures_pa):
-                return lambda t: np.asarray(
-                    stage1.stretch(np.asarray(pressures_pa(t), dtype=float)), dtype=float)
-            p = np.asarray(pressures_pa, dtype=float)
-            key = (p.shape, p.tobytes())
-            kept = self._stretch_kept
-            if kept is None or kept[0] is not stage1 or kept[1] != key:
-                kept = self._stretch_kept = (stage1, key, np.array(stage1.stretch(p), dtype=float))
-            lam = kept[2].copy()
-            return lambda t: lam
-        if stretch is not None:
-            if callable(stretch):
-                return lambda t: np.asarray(stretch(t), dtype=float)
-            lam = np.asarray(stretch, dtype=float)
-            return lambda t: lam
-        return lambda t: self.state.stretch
-
-    def _load_input(self, load):
-        """``f(t)``: the payload and tip force at ``t`` (:meth:`advance`)."""
-        if load is None:
-            return lambda t: self.state.load
-        if callable(load):
-            return lambda t: as_tip_load(load(t))
-        fixed = as_tip_load(load)
-        return lambda t: fixed
-
-    def _step_halving(self, h, stretch_at, load_at, rep, depth=0) -> DynamicsStatus:
-        t = self.state.t
-        try:
-            new = self._try_step(h, stretch_at(t + h), load_at(t + h))
-        except DynamicsError as exc:
-            return exc.status
-        if new is not None:   # finite: _try_step checked
-            self.state = new
-            self.counters["steps"] += 1
-            return DynamicsStatus.COMPLETED
-        self._lu = None
-        if depth >= self.max_halvings:
-            return DynamicsStatus.STEP_TOO_SMALL
-        rep.halvings += 1
-        for _ in range(2):
-            status = self._step_halving(0.5 * h, stretch_at, load_at, rep, depth + 1)
-            if status != DynamicsStatus.COMPLETED:
-                return status
-        self._lu = None  # the next full step needs its own factorisation
-        return DynamicsStatus.COMPLETED
+        if check is None:
+            return rep, None
+        reached = int(np.searchsorted(last, done - 1, side="right"))   # the ends reached
+        plate = out[0][:reached]
+        for j in range(reached):   # an end without a step of its own: the state before
+            if last[j] < 0:
+                plate[j] = st.q[dofs]
+            elif row[last[j]] != j:
+                plate[j] = out[0][row[last[j]]]
+                out[1][j] = out[1][row[last[j]]]
+        at = np.where(last[:reached] >= 0, times[np.maximum(last[:reached], 0)], st.t) \
+            if n else np.full(reached, st.t)
+        p_rows = None if pres is None else pres[np.maximum(last[:reached], 0)]
+        return rep, Passage(at, plate, out[1][:reached], p_rows)
 
     # ------------------------------------------------------------ read-outs
     def static_coordinates(self, state: DynamicState | None = None) -> np.ndarray:
@@ -559,7 +692,8 @@ class GeneralizedAlpha:
         st = state or self.state
         load = as_tip_load(st.load)
         lam = np.ascontiguousarray(st.stretch, dtype=float)
-        kin, pot, worst = state_checks(st.q, st.v, st.mu, self._inputs(lam, load),
+        inputs = (lam,) + self._stage1_args + (self._point_forces(load),)
+        kin, pot, worst = state_checks(st.q, st.v, st.mu, inputs,
                                        self.model.kernel_args,
                                        self._mass_arrays(float(load.payload_kg))[0])
         return {"kinetic_j": kin, "potential_j": pot, "total_j": kin + pot}, worst

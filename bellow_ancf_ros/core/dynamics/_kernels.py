@@ -10,6 +10,9 @@
   iterations in one call (residual, right-hand side, :func:`lu_solve`,
   update, convergence and refactorisation tests): at a few hundred
   unknowns the Python around separate calls cost more than the arithmetic;
+* :func:`run_steps` runs the steps of a run one after the other (the
+  predictor's history, the state, the records of the samples), returning
+  to Python only for a factorisation or a step that failed;
 * :func:`lu_solve`, :func:`symbolic_factors`, :func:`refactor`: triangular
   solves with LU factors, and their numeric refactorisation along the
   pivots of an earlier SuperLU factorisation;
@@ -26,8 +29,8 @@ from numba import njit
 
 from ..model import element_parameters, evaluate_kernel
 
-__all__ = ["chord_iterations", "compact_factors", "dynamic_rhs", "lu_solve", "refactor",
-           "split_factors", "state_checks", "symbolic_factors"]
+__all__ = ["NEED_FACTOR", "chord_iterations", "compact_factors", "dynamic_rhs", "lu_solve",
+           "refactor", "run_steps", "split_factors", "state_checks", "symbolic_factors"]
 
 
 @njit(cache=True, nogil=True)
@@ -436,6 +439,119 @@ def chord_iterations(st0, prev, weights, predict, st, coef, inputs, kargs, mass,
                 return 1, it + 1 - it0, size
         last = size
     return 4, max_iter - it0, last
+
+
+#: :func:`run_steps` asks for the chord matrix at the step's current iterate.
+NEED_FACTOR = 1
+
+
+@njit(cache=True, nogil=True)
+def _weights(h, cur, hist):  # pragma: no cover - compiled
+    """The predictor's earlier values and weights for a step ``h`` (``run_steps``).
+
+    Lagrange extrapolation of the accelerations and multipliers to
+    ``t_n + h`` from ``t_n`` and the (up to) two states before: constant
+    after a start, linear after one step, quadratic after two.
+    """
+    acc0, mu0 = cur[2], cur[4]
+    ah, mh, hh, count = hist
+    if count[0] == 0:
+        return (acc0, mu0, acc0, mu0), (1.0, 0.0, 0.0)
+    h1 = hh[0]
+    if count[0] == 1:
+        r = h / h1
+        return (ah[0], mh[0], ah[0], mh[0]), (1.0 + r, -r, 0.0)
+    h2 = hh[1]
+    w0 = (h + h1) * (h + h1 + h2) / (h1 * (h1 + h2))
+    w1 = -h * (h + h1 + h2) / (h1 * h2)
+    w2 = h * (h + h1) / ((h1 + h2) * h2)
+    return (ah[0], mh[0], ah[1], mh[1]), (w0, w1, w2)
+
+
+@njit(cache=True, nogil=True)
+def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kargs, mass, lu,
+              ctl, work, rec, out):  # pragma: no cover - compiled
+    """Steps ``k0, k0 + 1, ...`` of a run in one call: predictor, iterations, history, records.
+
+    * ``cur = (q, v, acc, aux, mu)``: the last converged state, advanced in
+      place after every step; ``nxt``: five arrays for the step's unknowns;
+    * ``hist = (acc (2, nq), mu (2, nc), steps (2,), count (1,))``: the
+      accelerations, multipliers and steps of the two states before ``cur``
+      (``count`` of them known), advanced in place;
+    * ``steps (n,)``, ``lams (n, A)``: each step's length and its stretches
+      at its end; ``resume = (predict, it0, last, refreshed)``: how step
+      ``k0`` starts (a fresh step: ``(True, 0, inf, False)``; after a
+      factorisation the caller asked for: ``(False, it, last, True)``);
+    * ``coef = (alpha_m, alpha_f, beta, gamma, beta_kv, alpha_air)``;
+      ``stage1 = (slope_act, k_coefficients, dk_coefficients, l0,
+      n_elements, d_a, rho0, g)`` and ``qpoint``: as the ``inputs`` of
+      :func:`chord_iterations` without the stretches;
+    * ``ctl = (inv_scale, tol, max_iter, lu_step)``: ``lu_step`` the step the
+      chord matrix ``lu`` was made for (0: none yet);
+    * ``rec = (row (n,), check (n,), dofs)``: after step ``k``, when
+      ``row[k] >= 0``, the coordinates ``dofs`` go to ``out[0][row[k]]`` and,
+      when ``check[k]``, :func:`state_checks` (kinetic, potential, largest
+      ``|C|``) to ``out[1][row[k]]``.
+
+    Returns ``(code, k, it, last, iterations)``: ``code`` 0 when every step
+    is done (``k = n``); :data:`NEED_FACTOR` when step ``k`` needs the chord
+    matrix at its current iterate ``nxt`` (then call again from ``k`` with
+    ``resume = (False, it, last, True)``); otherwise :func:`chord_iterations`'
+    code of the step ``k`` that failed (``cur`` is the state before it).
+    ``iterations``: the iterations done in this call.
+    """
+    am, af, be, ga, beta_kv, alpha_air = coef
+    slope_act, kcoef, dkcoef, l0, n_el, d_a, rho0, g = stage1
+    inv_scale, tol, max_iter, lu_step = ctl
+    row, check, dofs = rec
+    out_q, out_checks = out
+    ah, mh, hh, count = hist
+    predict, it, last, refreshed = resume
+    total = 0
+    for k in range(k0, steps.shape[0]):
+        h = steps[k]
+        lam = lams[k]
+        inputs = (lam, slope_act, kcoef, dkcoef, l0, n_el, d_a, rho0, g, qpoint)
+        step_coef = (h, am, af, be, ga, beta_kv, alpha_air)
+        prev, weights = _weights(h, cur, hist)
+        if predict and (lu_step <= 0.0 or abs(lu_step - h) > 0.25 * h):
+            # the predictor alone: the point to factor the chord matrix at
+            chord_iterations(cur, prev, weights, True, nxt, step_coef, inputs, kargs, mass, lu,
+                             (inv_scale, tol, 0, 0, np.inf, False), work)
+            return NEED_FACTOR, k, 0, np.inf, total
+        code, n, last = chord_iterations(cur, prev, weights, predict, nxt, step_coef, inputs,
+                                         kargs, mass, lu,
+                                         (inv_scale, tol, it, max_iter, last, refreshed), work)
+        it += n
+        total += n
+        if code == 1 and it < max_iter:
+            return NEED_FACTOR, k, it, last, total
+        if code != 0:
+            return (4 if code == 1 else code), k, it, last, total
+        # converged: the history moves on, the state becomes the step's
+        acc0 = cur[2]
+        mu0 = cur[4]
+        if count[0] >= 1:
+            ah[1, :] = ah[0]
+            mh[1, :] = mh[0]
+            hh[1] = hh[0]
+        ah[0, :] = acc0
+        mh[0, :] = mu0
+        hh[0] = h
+        count[0] = min(count[0] + 1, 2)
+        for j in range(5):
+            cur[j][:] = nxt[j]
+        r = row[k]
+        if r >= 0:
+            for i in range(dofs.shape[0]):
+                out_q[r, i] = cur[0][dofs[i]]
+            if check[k]:
+                kin, pot, worst = state_checks(cur[0], cur[1], cur[4], inputs, kargs, mass)
+                out_checks[r, 0] = kin
+                out_checks[r, 1] = pot
+                out_checks[r, 2] = worst
+        predict, it, last, refreshed = True, 0, np.inf, False
+    return 0, steps.shape[0], 0, np.inf, total
 
 
 @njit(cache=True, nogil=True)

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..status import DynamicsStatus
 from ._integrator import GeneralizedAlpha, StepReport
 
 __all__ = ["SampledMotion", "sample_motion", "piecewise_linear", "sampling_step"]
@@ -41,7 +40,7 @@ class SampledMotion:
     no pressures;
     ``report``: the integrator's :class:`StepReport` of the whole run;
     ``step_s``: the step used; ``step_wall_s``: wall time of each step (the
-    mean over its sample interval).
+    run's mean: the steps run compiled, without Python between them).
     """
 
     times_s: np.ndarray
@@ -132,77 +131,55 @@ def sample_motion(integrator: GeneralizedAlpha, t_end: float, sample_s: float | 
     ig.step_s = sampling_step(ig.step_s, sample_s)
     every = ig.step_s if sample_s is None else float(sample_s)
     model = ig.model
-    last = [None, None]
-
-    def asked_once(t):   # the input at a step's end is the sample's: asked once
-        if t != last[0]:
-            last[0], last[1] = t, np.asarray(pressures_pa(t), dtype=float)
-        return last[1]
-
-    inputs, fixed = pressures_pa, None
-    if pressures_pa is None:  # the stretches are given, not the pressures
-        fixed = np.full(model.A, np.nan)
-    elif callable(pressures_pa):
-        inputs = asked_once
-    else:
-        fixed = np.asarray(pressures_pa, dtype=float)
-
-    times, pos, zax, pres, energy, walls, violations = [], [], [], [], [], [], []
-
-    def record(check):
-        st = ig.state
-        x, rot = ig.end_effector(st)
-        times.append(st.t)
-        pos.append(x)
-        zax.append(rot[:, 2])
-        pres.append(fixed if fixed is not None else inputs(st.t))
-        if check:
-            e, c = ig.checks(st)
-            energy.append(e["total_j"])
-            violations.append(c)
-        else:
-            energy.append(math.nan)
-
-    total = StepReport()
-    c0 = dict(ig.counters)
     t0 = time.perf_counter()
-    record(True)
-    t_start = times[0]
+    c0 = dict(ig.counters)
+    st = ig.state
+    t_start = st.t
+    n = max(0, int(round((t_end - t_start) / every)))
+    ends = np.array([min(t_start + k * every, t_end) if k < n else t_end
+                     for k in range(1, n + 1)], dtype=float)
     gap = every if check_s is None else float(check_s)
+    check = np.zeros(n, dtype=bool)
     next_check = t_start + gap
-    n = max(0, int(round((t_end - ig.state.t) / every)))
-    for k in range(1, n + 1):
-        t_next = min(t_start + k * every, t_end) if k < n else t_end
-        budget = None if time_budget_s is None else time_budget_s - (time.perf_counter() - t0)
-        if budget is not None and budget <= 0:
-            total.status = DynamicsStatus.TIME_BUDGET
-            break
-        w0 = time.perf_counter()
-        rep = ig.advance(t_next, pressures_pa=inputs, load=load, time_budget_s=budget)
-        steps = max(rep.steps, 1)
-        walls.extend([(time.perf_counter() - w0) / steps] * steps)
-        total.halvings += rep.halvings
-        if not rep.success:
-            total.status = rep.status
-            if ig.state.t > times[-1]:
-                record(True)
-            break
-        t = ig.state.t + 1e-9 * every   # a sample at a multiple of check_s, give or take roundoff
-        due = k == n or t >= next_check
-        if due:
+    for k, t_k in enumerate(ends.tolist()):   # the first sample at or after each multiple
+        t = t_k + 1e-9 * every                  # of check_s, give or take roundoff; the last
+        if k == n - 1 or t >= next_check:
+            check[k] = True
             next_check = t_start + gap * (math.floor((t - t_start) / gap) + 1)
-        record(due)
-    if math.isnan(energy[-1]):   # the last sample is checked too (a time budget ran out)
+    total, passage = ig.advance_through(ends, pressures_pa=pressures_pa, load=load,
+                                        time_budget_s=time_budget_s, check=check)
+    e0, c_0 = ig.checks(st)
+    times = np.r_[t_start, passage.times_s]
+    x, rot = model.end_effectors(np.vstack([st.q[model.end_effector_dofs], passage.plate]))
+    energy = np.r_[e0["total_j"], passage.checks[:, 0] + passage.checks[:, 1]]
+    violations = np.r_[c_0, passage.checks[:, 2]]
+    if pressures_pa is None:   # the stretches are given, not the pressures
+        pres = np.full((len(times), model.A), np.nan)
+    elif callable(pressures_pa):
+        first = np.asarray(pressures_pa(t_start), dtype=float)
+        pres = np.vstack([first] + ([passage.pressures_pa] if len(passage.times_s) else []))
+    else:
+        pres = np.tile(np.asarray(pressures_pa, dtype=float), (len(times), 1))
+    if ig.state.t > times[-1]:   # stopped between samples: the state it stopped at, checked
+        (xs, rs), (e, c) = ig.end_effector(), ig.checks()
+        times = np.r_[times, ig.state.t]
+        x, rot = np.vstack([x, xs]), np.concatenate([rot, rs[None]])
+        energy, violations = np.r_[energy, e["total_j"]], np.r_[violations, c]
+        p_last = (np.full(model.A, np.nan) if pressures_pa is None else
+                  np.asarray(pressures_pa(ig.state.t) if callable(pressures_pa)
+                             else pressures_pa, dtype=float))
+        pres = np.vstack([pres, p_last])
+    elif math.isnan(energy[-1]):   # the last sample is checked too (a time budget ran out)
         e, c = ig.checks()
         energy[-1] = e["total_j"]
-        violations.append(c)
+        violations[-1] = c
     total.wall_s = time.perf_counter() - t0
     for key in ("steps", "iterations", "factorizations"):
         setattr(total, key, ig.counters[key] - c0[key])
     total.message = total.status.message if total.success else (
         f"{total.status.message} at t = {ig.state.t:.6g} s")
-    return SampledMotion(times_s=np.array(times), positions_m=np.array(pos),
-                         z_axes=np.array(zax), pressures_pa=np.array(pres),
-                         energy_j=np.array(energy),
-                         constraint_violation=float(np.max(violations)),
-                         report=total, step_s=float(ig.step_s), step_wall_s=np.array(walls))
+    steps = max(total.steps, 1)
+    return SampledMotion(times_s=times, positions_m=x, z_axes=rot[:, :, 2], pressures_pa=pres,
+                         energy_j=energy, constraint_violation=float(np.nanmax(violations)),
+                         report=total, step_s=float(ig.step_s),
+                         step_wall_s=np.full(total.steps, total.wall_s / steps))

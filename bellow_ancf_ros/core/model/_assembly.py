@@ -523,6 +523,20 @@ class RobotModel:
         p, D = self.plate_frame(q, self.ee_plate)
         return p + self.cfg.tool_length * D[:, 2], D @ self._ee_rot
 
+    @property
+    def end_effector_dofs(self) -> np.ndarray:
+        """The end plate's 12 coordinates (centre, then d1, d2, d3) in ``q``."""
+        return self.plate_dofs[self.ee_plate]
+
+    def end_effectors(self, c):
+        """:meth:`end_effector` of many states at once: positions (n, 3), rotations (n, 3, 3).
+
+        ``c`` (n, 12): each state's ``q[end_effector_dofs]``.
+        """
+        c = np.asarray(c, dtype=float).reshape(-1, 12)
+        D = c[:, 3:].reshape(-1, 3, 3).transpose(0, 2, 1)
+        return c[:, :3] + self.cfg.tool_length * D[:, :, 2], D @ self._ee_rot
+
     def plate_poses(self, q):
         """List of ``(segment, fraction, position, rotation)`` for every plate, base first."""
         out = []

@@ -136,6 +136,57 @@ def test_constant_pressures_are_mapped_once_and_follow_a_change(one):
     np.testing.assert_array_equal(a.state.stretch, one.stage1.stretch(p2))
 
 
+@pytest.mark.parametrize("settings", [{}, {"tol": 1e-12, "max_iter": 3}])
+def test_a_run_through_many_ends_is_advancing_to_each_in_turn(one, settings):
+    """advance_through: one compiled run, the same states as advance end by end.
+
+    ``tol 1e-12, max_iter 3``: steps that fail and are halved (Python's path).
+    """
+    fw = solve_forward(one, np.zeros(3), tip_force_n=[0.1, 0.0, 0.0])
+
+    def p(t):
+        return np.array([20e3 * (1.0 - np.cos(40.0 * t)), 0.0, 5e3 * t])
+    ends = [0.003, 0.0071, 0.0071, 0.02, 0.05]
+    check = [False, True, True, False, True]   # (0.0071 twice: no step between, one record)
+    a = GeneralizedAlpha(one, step_s=0.002, **settings)
+    b = GeneralizedAlpha(one, step_s=0.002, **settings)
+    a.start_released(fw)
+    b.start_released(fw)
+    rep, run = a.advance_through(ends, pressures_pa=p, check=check)
+    assert rep.success and rep.steps > 0
+    if settings:
+        assert rep.halvings > 0
+    for j, t in enumerate(ends):
+        r = b.advance(t, pressures_pa=p)
+        assert r.success
+        assert run.times_s[j] == b.state.t
+        pos, rot = b.end_effector()
+        x, r_ = one.end_effectors(run.plate[j])
+        np.testing.assert_array_equal(x[0], pos)
+        np.testing.assert_array_equal(r_[0], rot)
+        np.testing.assert_array_equal(run.pressures_pa[j], p(b.state.t))
+        e, worst = b.checks()
+        if check[j]:
+            assert run.checks[j].tolist() == [e["kinetic_j"], e["potential_j"], worst]
+        else:
+            assert np.all(np.isnan(run.checks[j]))
+    np.testing.assert_array_equal(a.state.q, b.state.q)
+    np.testing.assert_array_equal(a.state.mu, b.state.mu)
+    assert a.counters == b.counters
+
+
+def test_a_time_budget_stops_between_steps(one):
+    fw = solve_forward(one, np.zeros(3), tip_force_n=[0.1, 0.0, 0.0])
+    ig = GeneralizedAlpha(one, step_s=0.002)
+    ig.start_released(fw)
+    rep = ig.advance(0.1, time_budget_s=0.0)
+    assert rep.status == DynamicsStatus.TIME_BUDGET and rep.steps == 0 and ig.state.t == 0.0
+    rep = ig.advance(10.0, time_budget_s=0.05)
+    assert rep.status == DynamicsStatus.TIME_BUDGET and 0 < rep.steps < 5000
+    assert ig.state.t == pytest.approx(0.002 * rep.steps) and "at t = " in rep.message
+    assert ig.advance(ig.state.t + 0.01).success   # and it goes on from there
+
+
 def test_second_order_by_step_halving(one, recorded):
     r = integrator_checks.step_halving(one)
     e = r["errors_m"]
