@@ -232,7 +232,7 @@ class InverseKinetostaticNode(LifecycleNode):
                                            'inverse-solver', lambda: self._lockstep.work_done())
         self._lockstep = lockstep.LockstepReport(self, self._worker.idle)   # use_sim_time
         rate = float(self.get_parameter('command_rate_hz').value)
-        self._republish_timer = (self.create_timer(1.0 / rate, self._republish)
+        self._republish_timer = (self._lockstep.create_timer(1.0 / rate, self._republish)
                                  if rate > 0 else None)
         if self._feedback.wanted or self._targets.wanted:
             self._modes = ModeWatch(self, self._feedback.mode_check())

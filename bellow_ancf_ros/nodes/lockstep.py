@@ -39,7 +39,9 @@ another.
 from __future__ import annotations
 
 import threading
+import time
 from typing import Callable
+import weakref
 
 from builtin_interfaces.msg import Time
 from rclpy.clock import Clock as RosClock, ClockType
@@ -48,7 +50,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Header
 
-__all__ = ['LEAVE_SEC', 'TOPIC', 'UNBOUNDED_SEC', 'LockstepReport', 'report_of']
+__all__ = ['HOLD_LIMIT_S', 'LEAVE_SEC', 'TOPIC', 'UNBOUNDED_SEC', 'LockstepReport',
+           'create_timer', 'report_of']
 
 #: The topic (in the node's namespace) a simulated robot's lockstep listens to.
 TOPIC = 'lockstep_clock'
@@ -59,6 +62,23 @@ RETRY_S = 0.005
 #: A report stamped this many seconds holds no time, only counts messages
 #: (:meth:`LockstepReport.report_counts`: a publisher without a cadence of its own).
 UNBOUNDED_SEC = LEAVE_SEC - 1
+#: How long [wall s] a watched timer's call may hold the reports before its callback runs
+#: (:meth:`LockstepReport.create_timer`; a bound in case rcl skips a call it advanced past).
+HOLD_LIMIT_S = 0.25
+
+_REPORTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # node -> its controller's
+
+
+def create_timer(node, period_s: float, callback: Callable[[], None], **kw):
+    """``node.create_timer``, watched by the node's controller lockstep when it has one.
+
+    (:meth:`LockstepReport.create_timer`: the re-solve timers of the inverse
+    node's parts, which do not hold its :class:`LockstepReport` themselves.)
+    """
+    report = _REPORTS.get(node)
+    if report is None:
+        return node.create_timer(period_s, callback, **kw)
+    return report.create_timer(period_s, callback, **kw)
 
 
 def report_of(msg: Header) -> tuple[str, float | None, dict, dict]:
@@ -101,6 +121,8 @@ class LockstepReport:
         self._counts: dict[str, dict[str, int]] = {'sent': {}, 'received': {}}
         self._last = None   # what the newest report said (frame_id, stamp)
         self._pub = self._sub = self._retry = None
+        self._watched: list = []   # (timer, period [ns], [end of its last callback, ns])
+        self._stuck: dict = {}     # (timer id, call [ns]) -> since [monotonic s]
         self._name = node.get_fully_qualified_name()
         if node.get_parameter('use_sim_time').value:
             self._pub = node.create_publisher(Header, TOPIC, 10)
@@ -111,6 +133,7 @@ class LockstepReport:
                                history=HistoryPolicy.KEEP_LAST))
                 self._retry = node.create_timer(RETRY_S, self.work_done,
                                                 clock=RosClock(clock_type=ClockType.STEADY_TIME))
+                _REPORTS[node] = self
 
     @property
     def active(self) -> bool:
@@ -169,23 +192,77 @@ class LockstepReport:
             pass
 
     def work_done(self) -> None:
-        """Report the newest tick received, unless work is pending or running or a timer due."""
-        if self._pub is None or not self._idle() or self._timer_due():
-            return
-        self._publish(None)
+        """Report the newest tick received, unless a timer is due or work pending or running.
 
-    def _timer_due(self) -> bool:
-        """One of the node's timers is due by the newest tick and has not run yet.
+        In that order, and for the tick read once: a timer's callback (on the
+        executor's thread) submits its work before it counts as run, while
+        this may run on the worker's thread.
+        """
+        tick = self._tick
+        if self._pub is None or tick is None or self._timer_due(tick) or not self._idle():
+            return
+        self._publish(tick)
+
+    def create_timer(self, period_s: float, callback: Callable[[], None], **kw):
+        """``node.create_timer`` whose calls hold the reports until their callback has run.
+
+        rcl takes a timer's call (its next call moves on) before the executor
+        runs its callback: rclpy's EventsExecutor queues the callback, and
+        the worker's thread may report meanwhile.  A watched timer counts as
+        due from its call until its callback has returned (at most
+        :data:`HOLD_LIMIT_S` of wall time).  A plain timer without a
+        controller's lockstep.  ``kw``: as ``create_timer`` takes them.
+        """
+        node = self._node
+        if self._sub is None:
+            return node.create_timer(period_s, callback, **kw)
+        done = [node.get_clock().now().nanoseconds]
+
+        def run():
+            try:
+                callback()
+            finally:
+                done[0] = node.get_clock().now().nanoseconds
+        timer = node.create_timer(period_s, run, **kw)
+        with self._lock:
+            self._watched = [w for w in self._watched if not _gone(w[0])]
+            self._watched.append((timer, int(round(period_s * 1e9)), done))
+        return timer
+
+    def _called_not_run(self, now: int) -> bool:
+        """A watched timer was called (by rcl) and its callback has not returned yet."""
+        with self._lock:
+            watched = list(self._watched)
+        for timer, period, done in watched:
+            try:
+                left = None if timer.is_canceled() else timer.time_until_next_call()
+            except Exception:  # noqa: BLE001 - destroyed meanwhile
+                continue
+            if left is None:
+                continue
+            called = now + left - period
+            if called <= done[0]:
+                continue
+            since = self._stuck.setdefault((id(timer), called), time.monotonic())
+            if time.monotonic() - since < HOLD_LIMIT_S:
+                return True
+        if len(self._stuck) > 64:
+            self._stuck.clear()
+        return False
+
+    def _timer_due(self, tick: Time) -> bool:
+        """One of the node's timers is due by ``tick`` and has not run yet.
 
         Due by the tick, not by the node's clock: the node's time source may
         not have taken the same ``/clock`` message yet, and its timers would
-        then look not due.  If one is, :data:`RETRY_S` later it looks again.
+        then look not due.  A watched timer (:meth:`create_timer`) also from
+        its call until its callback returns.  If one is, :data:`RETRY_S`
+        later it looks again.
         """
-        tick = self._tick
-        ahead = 0
-        if tick is not None:
-            now = self._node.get_clock().now().nanoseconds
-            ahead = max(tick.sec * 1_000_000_000 + tick.nanosec - now, 0)
+        now = self._node.get_clock().now().nanoseconds
+        ahead = max(tick.sec * 1_000_000_000 + tick.nanosec - now, 0)
+        if self._called_not_run(now):
+            return True
         for timer in list(self._node.timers):
             if timer is self._retry or timer.is_canceled():
                 continue
@@ -209,6 +286,8 @@ class LockstepReport:
     def destroy(self) -> None:
         """Stop reporting (on cleanup): a last report that this node leaves, then the topics go."""
         self._publish(Time(sec=LEAVE_SEC, nanosec=0))   # (its counts: owed no more)
+        if _REPORTS.get(self._node) is self:
+            del _REPORTS[self._node]
         pub, sub, self._pub, self._sub = self._pub, self._sub, None, None
         if self._retry is not None:
             self._node.destroy_timer(self._retry)
@@ -222,3 +301,11 @@ class LockstepReport:
             self._node.destroy_subscription(sub)
         if pub is not None:
             self._node.destroy_publisher(pub)
+
+
+def _gone(timer) -> bool:
+    """The timer was destroyed or cancelled."""
+    try:
+        return timer.is_canceled()
+    except Exception:  # noqa: BLE001 - destroyed
+        return True

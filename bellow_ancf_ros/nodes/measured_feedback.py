@@ -53,6 +53,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, LOOP_DELAY_S, LOOP_LAG_S,
                             FeedbackSettings, IntegralFeedback, ModeCheck, gain_setting)
 from ..core import geometry
+from . import lockstep
 from .diagnostics import Refusals
 from .frames import PoseFrames
 from .ros_util import (QOS_DEPTH, Param, StartupParameterError, control_clock, declare_all,
@@ -210,7 +211,7 @@ class FeedbackLink:
             item = self._last_item
             if item is not None and self._clock.now() - item[3] >= period:
                 resubmit(item)
-        self._timer = self.node.create_timer(period, tick)
+        self._timer = lockstep.create_timer(self.node, period, tick)
         if modes is not None:
             modes.listen(self._on_mode)
             if modes.result is not None:

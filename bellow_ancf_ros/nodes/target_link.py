@@ -44,6 +44,7 @@ from typing import Any, Callable
 from rcl_interfaces.msg import ParameterType
 
 from ..core.control import TARGET_SHAPINGS, TargetFilter
+from . import lockstep
 from .ros_util import Param, StartupParameterError, control_clock, declare_all, descriptor
 
 __all__ = ['SHAPING_RATE_HZ', 'TARGET_PARAMETER_TABLE', 'TargetLink']
@@ -131,7 +132,7 @@ class TargetLink:
                     timed = any(t.is_alive() for t in self._levels)
                 if item is not None and busy and not timed:   # (a step's levels are timed:
                     resubmit(item)   # a re-solve in between would only delay one of them)
-            self._timer = self.node.create_timer(1.0 / SHAPING_RATE_HZ, tick)
+            self._timer = lockstep.create_timer(self.node, 1.0 / SHAPING_RATE_HZ, tick)
         self.node.get_logger().info(
             f'targets: shaping {self._kind}, dynamic feedforward '
             f'{"on" if filt.feedforward is not None else "off"} (lag {lag_s:g} s)')
@@ -261,20 +262,24 @@ class _OneShot:
         self._node, self._fn = node, fn
         self._lock = threading.Lock()
         self._done = False
-        self._timer = node.create_timer(delay_s, self._fire)
+        self._timer = lockstep.create_timer(node, delay_s, self._fire)   # (held for)
 
     def _end(self) -> bool:
-        """Stop and destroy the timer; whether it was still pending."""
+        """Mark it done; whether it was still pending."""
         with self._lock:
             pending, self._done = not self._done, True
-        if pending:
-            self._timer.cancel()
-            self._node.destroy_timer(self._timer)   # (safe from its own callback)
         return pending
+
+    def _destroy(self) -> None:
+        self._timer.cancel()
+        self._node.destroy_timer(self._timer)   # (safe from its own callback)
 
     def _fire(self) -> None:
         if self._end():
-            self._fn()
+            try:
+                self._fn()   # (its work submitted before the timer goes: a lockstep holds)
+            finally:
+                self._destroy()
 
     def is_alive(self) -> bool:
         """True until it fired or was cancelled."""
@@ -282,4 +287,5 @@ class _OneShot:
 
     def cancel(self) -> None:
         """Do not fire (no-op once fired)."""
-        self._end()
+        if self._end():
+            self._destroy()

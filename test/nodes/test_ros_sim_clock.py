@@ -175,6 +175,9 @@ def test_a_reporting_controller_holds_the_simulation_step_by_step(h, one):
     pub.publish(target_msg(solve_forward(one, [70e3, 10e3, -30e3]).position))
     wait_for(lambda: sim.clock.done_s is not None, what="the controller's first report")
     assert sim.clock.participants == [node.get_fully_qualified_name()]
+    # (before its first report the simulation ran on its own: that lead is caught up first)
+    wait_for(lambda: sim.clock.time_s - sim.clock.done_s <= 1.0 / RATE_HZ + 1e-9,
+             what='the controller caught up')
     ahead = []
     t_end = time.monotonic() + 3.0
     while time.monotonic() < t_end:

@@ -210,6 +210,52 @@ def test_the_command_keepalive_runs_at_its_rate_in_simulation_seconds(h, one, cl
     assert node.stats['published'] == 1                       # the target was solved once
 
 
+def test_a_watched_timers_call_holds_the_reports_until_its_callback_returned(h, clock):
+    """rcl takes a timer's call before its callback runs; a report must not slip in between.
+
+    The timer's callback blocks on its own thread (a reentrant group) while
+    the lockstep's 5 ms retries run beside it: no report of the tick it is due
+    by until it returns (before: the timer looked not due, the node idle).
+    """
+    import rclpy
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Header
+    from bellow_ancf_ros.nodes import lockstep
+    node = rclpy.create_node('watched', namespace=h.ns, context=h.ctx,
+                             parameter_overrides=[Parameter('use_sim_time', value=True)])
+    ex = MultiThreadedExecutor(num_threads=3, context=h.ctx)
+    ex.add_node(node)
+    spin = threading.Thread(target=ex.spin, daemon=True)
+    spin.start()
+    reports = h.record(Header, f'{h.ns}/lockstep_clock')
+    entered, gate = threading.Event(), threading.Event()
+    try:
+        report = lockstep.LockstepReport(node)
+        c = clock(10.0, factor=0.0)   # 10 s, again every 2 ms
+        wait_for(lambda: any(seconds(m.stamp) == 10.0 for _, m in list(reports)),
+                 what='the report of 10 s')
+
+        def slow():
+            entered.set()
+            gate.wait(5.0)
+        lockstep.create_timer(node, 0.1, slow, callback_group=ReentrantCallbackGroup())
+        c.jump(0.15)   # 10.15 s: the timer (due at 10.1 s) is called
+        assert entered.wait(5.0)
+        time.sleep(0.1)   # some 20 retries while the callback runs
+        assert max(seconds(m.stamp) for _, m in list(reports)) == 10.0
+        gate.set()
+        wait_for(lambda: any(abs(seconds(m.stamp) - 10.15) < 1e-9 for _, m in list(reports)),
+                 what='the report of 10.15 s once the callback returned')
+        report.destroy()
+    finally:
+        gate.set()
+        ex.shutdown(timeout_sec=2.0)
+        spin.join(5.0)
+        node.destroy_node()
+
+
 def test_a_shaped_steps_levels_are_solved_at_their_times_in_simulation_time(h, one, clock):
     """ZVD step at 0.25x: each level of the staircase is solved at its impulse time (sim s)."""
     clock(300.0, factor=0.25)
