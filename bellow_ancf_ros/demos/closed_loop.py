@@ -51,7 +51,11 @@ from zero over min(period, ``--spin-up``) (``spin_up_s``, default 5 s); the
 first period at full speed lets the integrator learn, the second is
 evaluated; then the trajectory publisher stops, this process brings the
 path to rest over the same time (``spin_down``) and holds its last target
-(``--hold``, default 4 s).  Then the step phase (:mod:`.step_target`): a
+(``--hold``, default 4 s).  On simulation time every target of this process
+goes out at the same simulated time in every run: the lead-in's one target
+at :data:`LEAD_IN_AT_S`, the spin-down's and the hold's on the clock's ticks,
+each holding the simulation until it is out (``TargetSender.every``).  Then
+the step phase (:mod:`.step_target`): a
 10 mm step target, two segments, feedforward unshaped and ZVD-shaped (the
 residual swing 1-2 s after it) and the closed loop at its defaults (its
 overshoot and its error from 1.5 s after the step).
@@ -122,6 +126,7 @@ from .step_target import RUNS as STEP_RUNS
 PAPER_PERIOD_S = 20.0
 SPEEDS = (1.0, 4.0, 10.0)      # times the paper's speed
 TARGET_RATE_HZ = 50.0
+HOLD_REPUBLISH_S = 0.1         # the held target after the path is sent again this often [s]
 #: (segments, speed, payload [kg]) -> closed-loop RMSE goals (mm, deg or None)
 GOALS = {(1, 1.0, 0.0): (0.5, None), (1, 4.0, 0.0): (1.0, None), (1, 10.0, 0.0): (0.5, None),
          (2, 1.0, 0.0): (0.5, 0.5), (2, 4.0, 0.0): (1.5, 1.0), (2, 10.0, 0.0): (1.0, 0.5),
@@ -132,6 +137,7 @@ SPIN_UP_S = 5.0                # the path's speed rises over min(period, this) [
 #: the path's first point (the lead-in from 0.1 s; the two-segment robot with 50 g was still
 #: 3 mm off 4.4 s into it).
 SIM_START_S = 8.0
+LEAD_IN_AT_S = 0.1             # on simulation time the lead-in's one target is sent then [s]
 OUTLIER_EXCESS_GOAL_KPA = 2.0  # a command step after an outlier, beyond the normal steps
 OUTLIER_MIN_M = 5e-3           # a measured pose this far from the true one is an outlier
 DROPOUT_GAP_S = 0.25           # measured poses this far apart: a dropout
@@ -284,6 +290,12 @@ class Run:
                        and all(p.alive() for p in self.procs.values()),
                        self.args.startup_timeout):
             raise RuntimeError('nodes did not come up')
+        if self.args.sim_time:   # the lead-in: once, at LEAD_IN_AT_S in every run (counted)
+            if not wait_until(self._targets.inverse_matched, self.args.startup_timeout):
+                raise RuntimeError('the inverse node did not match the targets')
+            rec.wait_for(LEAD_IN_AT_S)
+            self._targets.send(self._first)
+            self._targets.hold(self._path_start + 0.5)   # until the path flows (wait_flowing)
 
     def start_trajectory(self) -> None:
         """Hold the path's first point (lead-in), start the trajectory publisher after it.
@@ -292,8 +304,9 @@ class Run:
         trajectory publisher's first target (a real stamp) arrives (checked on
         every lead-in tick, so that no lead-in target follows it); it waits
         ``--lead-in`` seconds after its start-up (``start_delay_s``).  On
-        simulation time both are already up (:meth:`wait_up`): the path starts
-        at :data:`SIM_START_S` of simulation time (or ``--lead-in``, if later).
+        simulation time both are already up (:meth:`wait_up`, which sends the
+        lead-in's one target at :data:`LEAD_IN_AT_S`): the path starts at
+        :data:`SIM_START_S` of simulation time (or ``--lead-in``, if later).
         """
         if not self.args.sim_time:
             self._lead_in_publisher()
@@ -306,13 +319,16 @@ class Run:
         case = self.case
         pos, z = trajectory(case.trajectory, 0.0, case.robot, **self.col.path_kw)
         q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
-        first = pose_message(pos[0], q, 'base', self._zero_stamp())
+        first = self._first = pose_message(pos[0], q, 'base', self._zero_stamp())
         # on simulation time this process is in the lockstep: its targets count in the
-        # messages owed, and it holds the simulation where it takes over from the publisher
+        # messages owed, and it holds the simulation where it sends the lead-in's one target
+        # (:meth:`wait_up`) and where it takes over from the publisher
         self._targets = TargetSender(self.rec.node)
-        if self.args.sim_time:   # held until the path flows (then: :meth:`wait_flowing`)
-            self._targets.hold(self._path_start + 0.5)
         pub = self._target_pub = self._targets.pub
+        if self.args.sim_time:
+            self._targets.hold(LEAD_IN_AT_S)
+            self._lead_in = None
+            return
         if not wait_until(lambda: pub.get_subscription_count() >= 1, self.args.startup_timeout):
             raise RuntimeError('the inverse node does not subscribe target_pose')
 
@@ -321,9 +337,6 @@ class Run:
             # pull the robot back to the path's first point (latest target wins)
             if self._first_trajectory_target() is not None:
                 self._lead_in.cancel()
-            elif self.args.sim_time:   # at fixed times: the path's first target comes after
-                if self._targets.inverse_matched() and self.rec.now() < self._path_start - 0.1:
-                    self._targets.send(first)
             else:
                 pub.publish(first)
         self._lead_in = self.rec.node.create_timer(0.1, lead_in)
@@ -361,7 +374,8 @@ class Run:
         """
         ok = wait_until(lambda: self._first_trajectory_target() is not None,
                         self.args.startup_timeout + self.args.lead_in)
-        self._lead_in.cancel()
+        if self._lead_in is not None:
+            self._lead_in.cancel()
         if not ok:
             raise RuntimeError('no target from the trajectory publisher')
         period = self.col.period_s
@@ -394,9 +408,11 @@ class Run:
         its speed falling to zero over the spin-up's time (``spin_down``: a
         path that stopped dead would ring the robot's mode, and the held
         target would measure the ringing), targets at 50 Hz stamped like the
-        publisher's (previewed); the last one is then republished at 10 Hz
-        during the hold, so that the inverse node holds the same target as
-        the one the measured poses are compared with.
+        publisher's (previewed); the last one is then republished every
+        :data:`HOLD_REPUBLISH_S` during the hold, so that the inverse node
+        holds the same target as the one the measured poses are compared
+        with.  On simulation time each tick holds the simulation until its
+        target is out (``TargetSender.every``).
         """
         from builtin_interfaces.msg import Time
 
@@ -415,17 +431,16 @@ class Run:
         tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
         case, kw = self.case, self.col.path_kw
         clock = self.rec.node.get_clock()
-        final, ticked = [], [-1]
+        final, ticks = [], [0]
+        every = round(TARGET_RATE_HZ * HOLD_REPUBLISH_S)
 
         def tick() -> None:
+            ticks[0] += 1
             if final:
-                self._targets.send(final[0])
+                if ticks[0] % every == 0:   # at rest: held (every HOLD_REPUBLISH_S)
+                    self._targets.send(final[0])
                 return
-            now = clock.now()
-            if now.nanoseconds <= ticked[0]:   # (rcl's timer on /clock can fire twice at once)
-                return
-            ticked[0] = now.nanoseconds
-            stamp_s = now.nanoseconds * 1e-9 + preview
+            stamp_s = clock.now().nanoseconds * 1e-9 + preview
             s = stamp_s - last
             pos, z = trajectory(case.trajectory, tau_last + spin_down(s, d), case.robot, **kw)
             q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
@@ -433,15 +448,12 @@ class Run:
                                                        nanosec=int(stamp_s % 1.0 * 1e9)))
             self._targets.send(msg)
             if s >= d:
-                final.append(msg)   # at rest: held from now on (10 Hz)
-                self._hold_timer.cancel()
-                self._hold_timer = self.rec.node.create_timer(0.1, tick)
-        self._hold_timer = self.rec.node.create_timer(1.0 / TARGET_RATE_HZ, tick)
+                final.append(msg)
+        # this process takes over; on simulation time each of its ticks holds the simulation
+        self._hold_timer = self._targets.every(1.0 / TARGET_RATE_HZ, tick)
         proc.stop()
         self.times['hold'] = self.rec.now() + d
         self.times['end'] = self.times['hold'] + self.hold_s
-        if self.args.sim_time:
-            self._targets.hold(None)   # this process takes over: the simulation runs on
 
     @staticmethod
     def _settle(count, quiet_s: float = 0.3, timeout_s: float = 5.0) -> None:
@@ -455,7 +467,7 @@ class Run:
     def hold(self) -> None:
         """Wait until the end of the hold phase (a dead node raises)."""
         self.rec.wait_for(self.times['end'], self._check)
-        self._hold_timer.cancel()
+        self._hold_timer()   # (cancel)
 
     def play(self) -> dict:
         """The run from start-up to the end of its hold; the recording (:meth:`finish`)."""

@@ -24,6 +24,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 __all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'TargetSender', 'child_env',
            'clock_parameters', 'hardware_parameters', 'machine_state', 'plant_effects',
@@ -400,6 +401,47 @@ class TargetSender:
             self._lockstep.report_counts()
         else:
             self._lockstep.report(self._hold_at)
+
+    def every(self, period_s: float, fn: Callable[[], None]) -> Callable[[], None]:
+        """Call ``fn`` every ``period_s`` of the node's clock from now; returns a cancel.
+
+        On simulation time at the first clock update at or after each tick
+        (rcl's timers on ``/clock`` can fire twice at one time and skip the
+        next tick), and the simulation is held just before the next tick until
+        ``fn`` has run: its targets reach the inverse node at the same
+        simulated times in every run, however late the computer runs it.  On
+        the wall clock an ordinary timer.
+        """
+        from rclpy.clock import JumpThreshold
+        from rclpy.duration import Duration
+        node = self.node
+        if not self._lockstep.active:
+            timer = node.create_timer(period_s, fn)
+            return timer.cancel
+        clock, period = node.get_clock(), int(round(period_s * 1e9))
+        lock, state = threading.Lock(), {'due': clock.now().nanoseconds + period, 'on': True}
+        self.hold(state['due'] * 1e-9 - 1e-6)
+
+        def on_time(_jump) -> None:
+            with lock:
+                now = clock.now().nanoseconds
+                if not state['on'] or now < state['due']:
+                    return
+                state['due'] += period * (1 + (now - state['due']) // period)
+            fn()
+            with lock:
+                if state['on']:
+                    self.hold(state['due'] * 1e-9 - 1e-6)
+        handle = clock.create_jump_callback(
+            JumpThreshold(min_forward=Duration(nanoseconds=1),
+                          min_backward=Duration(nanoseconds=-1), on_clock_change=False),
+            post_callback=on_time)
+
+        def cancel() -> None:   # (the hold stays where it is)
+            with lock:
+                state['on'] = False
+            handle.unregister()
+        return cancel
 
     def close(self) -> None:
         """Leave the lockstep: its targets are owed no more."""

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..cli.output import number
 from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
-                       hardware_parameters, start_clock, wait_up)
+                       hardware_parameters, start_clock, wait_up, wait_until)
 
 __all__ = ['LATE_GOAL_M', 'OVERSHOOT_GOAL_M', 'RUNS', 'STEP_GOAL_M', 'STEP_M',
            'residual_swing', 'step_phase']
@@ -40,7 +40,8 @@ LATE_GOAL_M = 2e-4        # closed loop: the error from 1.5 s after the step at 
 #: run -> (feedback, target_shaping)
 RUNS = {'none': ('none', 'none'), 'zvd': ('none', 'zvd'), 'closed': ('integral', 'smooth')}
 
-SETTLE_S = 8.0     # the first target is held this long before the step
+FIRST_S = 0.5      # [simulated s] the first target (on simulation time)
+SETTLE_S = 8.0     # the first target is held until then (or this long) before the step
 AFTER_S = 3.0      # the step target is held this long
 ROBOT = 'two_segment'
 
@@ -94,7 +95,7 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
     try:
         pub = targets.pub
         if args.sim_time:   # robot, inverse node and this recorder on the clock, then it runs
-            targets.hold(SETTLE_S)   # the step at the same simulated time in every run
+            targets.hold(FIRST_S)   # the first target at the same simulated time in every run
             start_clock(rec, procs.values(), lambda: pub.get_subscription_count() >= 1, 3,
                         args.startup_timeout)
         if not wait_up(procs.values(), lambda: rec.count('true_pose') > 0
@@ -102,13 +103,18 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
             raise RuntimeError('nodes did not come up')
         msgs = [pose_message(p, quaternion_from_z_axis(z), 'base', Time(sec=0, nanosec=0))
                 for p, z in poses]
-
-        def hold_first() -> None:   # (on simulation time: once the inverse node has matched)
-            if not args.sim_time or targets.inverse_matched():
-                targets.send(msgs[0])
-        timer = rec.node.create_timer(0.1, hold_first)
+        timer = None
+        if args.sim_time:   # once, counted: the simulation waits for the inverse node to take it
+            if not wait_until(targets.inverse_matched, args.startup_timeout):
+                raise RuntimeError('the inverse node did not match the targets')
+            rec.wait_for(FIRST_S)
+            targets.send(msgs[0])
+            targets.hold(SETTLE_S)   # the step at the same simulated time in every run
+        else:
+            timer = rec.node.create_timer(0.1, lambda: targets.send(msgs[0]))
         rec.wait_for(SETTLE_S if args.sim_time else rec.now() + SETTLE_S)
-        timer.cancel()   # the step target once (the node holds it): no re-solve of the same
+        if timer is not None:
+            timer.cancel()   # the step target once (the node holds it): no re-solve of the same
         targets.send(msgs[1])   # target between the shaper's levels
         t_step = SETTLE_S if args.sim_time else rec.now()
         targets.hold(None)

@@ -223,6 +223,7 @@ class LockstepReport:
                 callback()
             finally:
                 done[0] = node.get_clock().now().nanoseconds
+            self.work_done()   # at once (else at the next retry): the simulation waits for it
         timer = node.create_timer(period_s, run, **kw)
         with self._lock:
             self._watched = [w for w in self._watched if not _gone(w[0])]
