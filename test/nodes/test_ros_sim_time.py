@@ -211,7 +211,7 @@ def test_the_command_keepalive_runs_at_its_rate_in_simulation_seconds(h, one, cl
 
 
 def test_a_watched_timers_call_holds_the_reports_until_its_callback_returned(h, clock):
-    """rcl takes a timer's call before its callback runs; a report must not slip in between.
+    """A timer's call comes before its callback runs (rcl): no report slips in between.
 
     The timer's callback blocks on its own thread (a reentrant group) while
     the lockstep's 5 ms retries run beside it: no report of the tick it is due
