@@ -184,7 +184,7 @@ def run_line(r: dict, g: dict) -> str:
     if g['way'] == "simulate":
         base = [x for x in r['runs'] if x['kind'] == g['kind'] and x['way'] == "integrator"]
         if base:
-            ratio = f"  {med / float(np.median(base[0]['rtf'])):.2f}x the integrator's"
+            ratio = f"  {med / float(np.median(base[0]['rtf'])):.2f}x the integrator"
     what = "step  " if g['way'] == "integrator" else "mean  "
     return (f"  {g['kind']:<8} {g['way']:<10} steps {g['steps']:5d}  {what} CPU median "
             f"{g['step_cpu_median_s'] * 1e3:7.3f} ms  p99 {g['step_cpu_p99_s'] * 1e3:7.3f} ms  "

@@ -114,7 +114,7 @@ def test_dynamics_bench_rows_give_verdicts_and_simulates_ratio():
                              '2026-01-02 03:04 UTC')
     assert 'first mode 10.500 Hz, default step 2.380 ms' in lines[1]
     assert 'RTF median   21.00x  lowest   20.00x' in lines[2] and 'PASS (goal 10x)' in lines[2]
-    assert lines[3].endswith('MISS (goal 30x)  1.33x the integrator\'s')   # 28 / 21
+    assert lines[3].endswith('MISS (goal 30x)  1.33x the integrator')   # 28 / 21
     assert lines[4] == '  modes    natural_modes (6 modes) median     25.0 ms, max     30.0 ms'
 
 
