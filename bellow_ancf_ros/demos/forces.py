@@ -64,9 +64,6 @@ from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, machi
 
 PLANT, MODEL = 'one_segment_mismatched', 'one_segment'
 PAYLOAD_KG, PUSH_N = 0.03, (0.1, 0.0, 0.0)
-#: On simulation time the simulation waits here [s] until the path's start (its first
-#: target, 1 s) is known and the first load's time with it.
-HOLD_FIRST_S = 2.0
 LATERAL_TOL_N, VERTICAL_TOL_N = 0.03, 0.1
 G = 9.81
 
@@ -130,8 +127,10 @@ class LoadRun:
         rec = self.rec
         if self.args.sim_time:
             from ..nodes.lockstep import LockstepReport
+            # (it holds the simulation from play_events on: the path's start known, each
+            # load's time 5 s or more later; a hold before it would also hold back a
+            # trajectory publisher that comes up late, whose path starts on the clock)
             self._hold = LockstepReport(rec.node, follow_clock=False)
-            self._hold.report(HOLD_FIRST_S)   # until the path's start is known (play_events)
             self._trajectory()
             start_clock(rec, self.procs.values(),
                         lambda: rec.publishers('pressure_command') >= 1
