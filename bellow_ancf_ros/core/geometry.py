@@ -17,7 +17,8 @@ import numpy as np
 __all__ = [
     "QUATERNION_MIN_NORM", "angle_between", "hat", "kabsch", "left_jacobian_so3",
     "quaternion_from_rotation", "quaternion_from_z_axis", "quaternion_mean",
-    "quaternion_to_rotation", "rotation_between", "rotation_from_vector", "rotation_z",
+    "quaternion_to_rotation", "rotation_between", "rotation_from_vector", "rotation_vector",
+    "rotation_z",
     "unit_quaternion", "z_axis_from_quaternion",
 ]
 
@@ -131,6 +132,19 @@ def rotation_from_vector(v: Any) -> np.ndarray:
         return np.eye(3)
     K = hat(v / theta)
     return np.eye(3) + math.sin(theta) * K + (1.0 - math.cos(theta)) * (K @ K)
+
+
+def rotation_vector(R: Any) -> np.ndarray:
+    """Rotation vector (axis times angle in ``[0, pi]``) of a rotation matrix.
+
+    The inverse of :func:`rotation_from_vector`, through
+    :func:`quaternion_from_rotation` (``w >= 0``): ``2 atan2(|v|, w) v / |v|``.
+    """
+    x, y, z, w = quaternion_from_rotation(R)
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-300:
+        return np.zeros(3)
+    return np.array([x, y, z]) * (2.0 * math.atan2(s, w) / s)
 
 
 def rotation_between(z_from: Any, z_to: Any) -> np.ndarray:

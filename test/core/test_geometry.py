@@ -112,3 +112,21 @@ def test_quaternion_mean_of_sign_flipped_copies():
 def test_rotation_z_turns_x_onto_y():
     np.testing.assert_allclose(geometry.rotation_z(math.pi / 2) @ [1, 0, 0], [0, 1, 0],
                                atol=1e-15)
+
+
+def test_rotation_vector_inverts_rotation_from_vector_and_agrees_with_scipy():
+    """Log map: round trips from tiny turns to half turns, scipy's ``as_rotvec`` the reference."""
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng(5)
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    angles = np.concatenate([[0.0, 1e-12, 1e-8, 1e-4, math.pi - 1e-9, math.pi],
+                             rng.uniform(0.0, math.pi, 194)])
+    for axis, angle in zip(axes, angles):
+        R = geometry.rotation_from_vector(axis * angle)
+        v = geometry.rotation_vector(R)
+        np.testing.assert_allclose(geometry.rotation_from_vector(v), R, atol=1e-12)
+        assert np.linalg.norm(v) == pytest.approx(angle, abs=1e-9)
+        ref = Rotation.from_matrix(R).as_rotvec()
+        if angle < math.pi - 1e-6:   # (at a half turn v and -v are the same rotation)
+            np.testing.assert_allclose(v, ref, atol=1e-12)

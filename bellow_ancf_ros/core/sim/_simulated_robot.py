@@ -35,10 +35,9 @@ from collections import deque
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..dynamics import GeneralizedAlpha, default_step, natural_modes
-from ..geometry import rotation_from_vector
+from ..geometry import rotation_from_vector, rotation_vector
 from ..history import bracket
 from ..model import RobotConfig, RobotModel, TipLoad, load_robot, tip_load
 from ..solve import ForwardResult, solve_forward
@@ -286,7 +285,7 @@ class SimulatedRobot:
         a = (t - before[0]) / (after[0] - before[0])
         p0, p1 = before[1].position, after[1].position
         R0, R1 = before[1].rotation, after[1].rotation
-        turn = Rotation.from_matrix(R0.T @ R1).as_rotvec()
+        turn = rotation_vector(R0.T @ R1)
         return p0 + a * (p1 - p0), R0 @ rotation_from_vector(a * turn)
 
     def measure(self) -> tuple[np.ndarray, np.ndarray]:
