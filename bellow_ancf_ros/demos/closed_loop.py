@@ -500,9 +500,11 @@ class Run:
         if bad:
             print(f'  {self.name}: nodes exited with non-zero codes: {bad}')
             self.ok = False
+        self.rec.drain()   # (the vent may still be queued here)
         snap = self.rec.snapshot()
         self.rec.close()
-        return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap)
+        return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap,
+                    sim_time=bool(self.args.sim_time))
 
 
 def preview_s(plant: str, mode: str = 'none') -> float:
@@ -578,7 +580,10 @@ def analyse(run: dict, cfg) -> dict:
     """True pose against the target wanted then, steady state, model error, outliers, safety."""
     rec = run['rec']
     ts, tp, tz = _reference(rec)
-    true = [(t, _stamp(m), *_pose(m)) for t, m in rec['true_pose']]
+    # a pose's time: on simulation time its stamp (the time it was taken: the same in every
+    # run, however late a busy computer delivered it), else its arrival (the monotonic clock)
+    when = (lambda t, m: _stamp(m)) if run.get('sim_time') else (lambda t, m: t)
+    true = [(when(t, m), _stamp(m), *_pose(m)) for t, m in rec['true_pose']]
     res = {'n_targets': len(ts)}
     rows = [r for r in true if run['eval'] <= r[0] <= run['stop'] and len(ts)
             and ts[0] <= r[1] <= ts[-1]]
@@ -603,12 +608,13 @@ def analyse(run: dict, cfg) -> dict:
     tt = np.array([r[0] for r in true])
     model_err = []
     for t, m in rec['predicted_pose']:
+        t = when(t, m)
         if run['eval'] <= t <= run['stop'] and len(tt):
             j = int(np.argmin(np.abs(tt - t)))
             model_err.append(np.linalg.norm(_pose(m)[0] - true[j][2]))
     res['model_rms_mm'] = (float(np.sqrt(np.mean(np.square(model_err))) * 1e3) if model_err
                            else None)
-    res.update(_outliers_and_dropouts(run, rec, true, ts, tp))
+    res.update(_outliers_and_dropouts(run, rec, true, ts, tp, when))
     # pressure safety over the whole run
     cmds = [np.asarray(m.data, dtype=float) for _, m in rec['pressure_command']]
     res['n_commands'] = len(cmds)
@@ -627,17 +633,20 @@ def analyse(run: dict, cfg) -> dict:
     return res
 
 
-def _outliers_and_dropouts(run: dict, rec: dict, true: list, ts, tp) -> dict:
-    """Outliers (measured far from true), command steps after them, dropouts and recovery."""
+def _outliers_and_dropouts(run: dict, rec: dict, true: list, ts, tp, when) -> dict:
+    """Outliers (measured far from true), command steps after them, dropouts and recovery.
+
+    ``when(arrival, msg)``: a pose's time (:func:`analyse`); commands by arrival.
+    """
     true_stamps = np.array([r[1] for r in true])
-    meas = [(t, _stamp(m), _pose(m)[0]) for t, m in rec['measured_pose']
-            if run['eval'] - run['period'] <= t <= run['end']]
-    outliers = []
-    for t, st, p in meas:
+    meas = [(when(t, m), _stamp(m), _pose(m)[0], t) for t, m in rec['measured_pose']
+            if run['eval'] - run['period'] <= when(t, m) <= run['end']]
+    outliers = []   # (by arrival, as the commands they are compared with)
+    for _, st, p, arrival in meas:
         if len(true_stamps):
             j = int(np.argmin(np.abs(true_stamps - st)))
             if np.linalg.norm(p - true[j][2]) > OUTLIER_MIN_M:
-                outliers.append(t)
+                outliers.append(arrival)
     cmds = [(t, np.asarray(m.data, dtype=float)) for t, m in rec['pressure_command']
             if run['eval'] - run['period'] <= t <= run['end']]
     after, normal = [], []

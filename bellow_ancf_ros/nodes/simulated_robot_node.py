@@ -94,6 +94,7 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, Header
@@ -110,7 +111,6 @@ from .ros_util import (
     Param,
     StartupParameterError,
     Topic,
-    command_qos,
     declare_all,
     descriptor,
     diagnostics_qos,
@@ -122,6 +122,9 @@ from .ros_util import (
 __all__ = ['EFFECT_PARAMETERS', 'MAX_PRESSURE_RATE_HZ', 'STEP_TIMEOUT_S', 'SimulatedRobotNode',
            'main', 'plant_effects']
 
+#: History its readings keep for a reliable reader that falls behind [messages]: a recorder on a
+#: busy computer kept 22-93 of a run's 241-255 true poses with the writers' depth of 5.
+SENSOR_HISTORY = 1000
 #: Highest rate of measured_pressure [Hz] (a physics rate above it publishes every n-th step).
 MAX_PRESSURE_RATE_HZ = 100.0
 
@@ -381,7 +384,8 @@ class SimulatedRobotNode(Node):
         self._step_lock = threading.Lock()
         self._t_offset = 0.0   # simulation time of the robot's time 0 (the last reset's)
         self.last_refusal_reason = ''
-        qos = command_qos()
+        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST, depth=SENSOR_HISTORY)
         self._pub_pose = self.create_publisher(PoseStamped, 'measured_pose', qos)
         self._pub_true = self.create_publisher(PoseStamped, 'true_pose', qos)
         self._pub_p = self.create_publisher(Float64MultiArray, 'measured_pressure', qos)
