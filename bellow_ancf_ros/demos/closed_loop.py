@@ -500,7 +500,6 @@ class Run:
         if bad:
             print(f'  {self.name}: nodes exited with non-zero codes: {bad}')
             self.ok = False
-        self.rec.drain()   # (the vent may still be queued here)
         snap = self.rec.snapshot()
         self.rec.close()
         return dict(self.times, ok=self.ok and 'end' in self.times, rec=snap,

@@ -184,7 +184,6 @@ class LoadRun:
         for p in self.procs.values():
             p.interrupt()
         codes = {k: p.stop() for k, p in self.procs.items()}
-        self.rec.drain()   # (the vent may still be queued here)
         snap = self.rec.snapshot()
         self.rec.close()
         return {'codes': codes, 'rec': snap}

@@ -343,25 +343,6 @@ class Recorder(SpunNode):
         with self.lock:
             return len(self.msgs[topic])
 
-    def drain(self, quiet_s: float = 0.3, timeout: float = 5.0) -> bool:
-        """Wait until nothing more arrives for ``quiet_s`` (at most ``timeout``); True if so.
-
-        After the nodes stopped, what they sent last (the vent) may still be
-        queued for this process's spin thread on a busy computer: a
-        snapshot taken at once lost it.
-        """
-        deadline = time.monotonic() + timeout
-        last, since = -1, time.monotonic()
-        while time.monotonic() < deadline:
-            with self.lock:
-                n = sum(len(v) for v in self.msgs.values())
-            if n != last:
-                last, since = n, time.monotonic()
-            elif time.monotonic() - since >= quiet_s:
-                return True
-            time.sleep(0.02)
-        return False
-
     def snapshot(self) -> dict:
         """A copy of everything recorded: topic -> [(arrival time (:meth:`now`), message), ...]."""
         with self.lock:
