@@ -62,7 +62,7 @@ RETRY_S = 0.005
 #: A report stamped this many seconds holds no time, only counts messages
 #: (:meth:`LockstepReport.report_counts`: a publisher without a cadence of its own).
 UNBOUNDED_SEC = LEAVE_SEC - 1
-#: How long [wall s] a watched timer's call may hold the reports before its callback runs
+#: How long [wall s] a watched timer's call may hold the reports before its callback starts
 #: (:meth:`LockstepReport.create_timer`; a bound in case rcl skips a call it advanced past).
 HOLD_LIMIT_S = 0.25
 
@@ -121,7 +121,7 @@ class LockstepReport:
         self._counts: dict[str, dict[str, int]] = {'sent': {}, 'received': {}}
         self._last = None   # what the newest report said (frame_id, stamp)
         self._pub = self._sub = self._retry = None
-        self._watched: list = []   # (timer, period [ns], [end of its last callback, ns])
+        self._watched: list = []   # (timer, period [ns], [end of its last callback, ns; running])
         self._stuck: dict = {}     # (timer id, call [ns]) -> since [monotonic s]
         self._name = node.get_fully_qualified_name()
         if node.get_parameter('use_sim_time').value:
@@ -209,20 +209,25 @@ class LockstepReport:
         rcl takes a timer's call (its next call moves on) before the executor
         runs its callback: rclpy's EventsExecutor queues the callback, and
         the worker's thread may report meanwhile.  A watched timer counts as
-        due from its call until its callback has returned (at most
-        :data:`HOLD_LIMIT_S` of wall time).  A plain timer without a
+        due from its call until its callback has returned (from its call
+        to the callback's start at most :data:`HOLD_LIMIT_S` of wall time;
+        while the callback runs, however long).  A plain timer without a
         controller's lockstep.  ``kw``: as ``create_timer`` takes them.
         """
         node = self._node
         if self._sub is None:
             return node.create_timer(period_s, callback, **kw)
-        done = [node.get_clock().now().nanoseconds]
+        done = [node.get_clock().now().nanoseconds, 0]   # end of its last callback, running
 
         def run():
+            with self._lock:
+                done[1] += 1
             try:
                 callback()
             finally:
-                done[0] = node.get_clock().now().nanoseconds
+                with self._lock:
+                    done[0] = node.get_clock().now().nanoseconds
+                    done[1] -= 1
             self.work_done()   # at once (else at the next retry): the simulation waits for it
         timer = node.create_timer(period_s, run, **kw)
         with self._lock:
@@ -234,6 +239,8 @@ class LockstepReport:
         """A watched timer was called (by rcl) and its callback has not returned yet."""
         with self._lock:
             watched = list(self._watched)
+            if any(done[1] for _, _, done in watched):
+                return True   # a callback is running (however long: its work is not done)
         for timer, period, done in watched:
             try:
                 left = None if timer.is_canceled() else timer.time_until_next_call()
