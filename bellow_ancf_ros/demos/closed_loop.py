@@ -118,8 +118,8 @@ from ..core.geometry import angle_between
 from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
 from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
-                       hardware_parameters, machine_state, plant_effects, start_clock, tidy,
-                       wait_until, wait_up)
+                       hardware_parameters, machine_state, message_time, plant_effects,
+                       start_clock, tidy, wait_until, wait_up)
 from .step_target import LATE_GOAL_M, OVERSHOOT_GOAL_M, STEP_GOAL_M, step_phase
 from .step_target import RUNS as STEP_RUNS
 
@@ -579,9 +579,10 @@ def analyse(run: dict, cfg) -> dict:
     """True pose against the target wanted then, steady state, model error, outliers, safety."""
     rec = run['rec']
     ts, tp, tz = _reference(rec)
-    # a pose's time: on simulation time its stamp (the time it was taken: the same in every
-    # run, however late a busy computer delivered it), else its arrival (the monotonic clock)
-    when = (lambda t, m: _stamp(m)) if run.get('sim_time') else (lambda t, m: t)
+    sim_time = bool(run.get('sim_time'))
+
+    def when(t, m):   # a pose's time (message_time): its stamp on simulation time
+        return message_time(t, m, sim_time)
     true = [(when(t, m), _stamp(m), *_pose(m)) for t, m in rec['true_pose']]
     res = {'n_targets': len(ts)}
     rows = [r for r in true if run['eval'] <= r[0] <= run['stop'] and len(ts)
@@ -638,8 +639,8 @@ def _outliers_and_dropouts(run: dict, rec: dict, true: list, ts, tp, when) -> di
     ``when(arrival, msg)``: a pose's time (:func:`analyse`); commands by arrival.
     """
     true_stamps = np.array([r[1] for r in true])
-    meas = [(when(t, m), _stamp(m), _pose(m)[0], t) for t, m in rec['measured_pose']
-            if run['eval'] - run['period'] <= when(t, m) <= run['end']]
+    meas = [(tm, _stamp(m), _pose(m)[0], t) for t, m in rec['measured_pose']
+            if run['eval'] - run['period'] <= (tm := when(t, m)) <= run['end']]
     outliers = []   # (by arrival, as the commands they are compared with)
     for _, st, p, arrival in meas:
         if len(true_stamps):

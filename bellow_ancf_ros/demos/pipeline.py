@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'TargetSender', 'child_env',
-           'clock_parameters', 'hardware_parameters', 'machine_state', 'plant_effects',
-           'start_clock', 'tidy', 'wait_until', 'wait_up']
+           'clock_parameters', 'hardware_parameters', 'machine_state', 'message_time',
+           'plant_effects', 'start_clock', 'tidy', 'wait_until', 'wait_up']
 
 #: Wall seconds without the simulation's clock moving before a wait gives up.
 STALL_S = 30.0
@@ -462,6 +462,18 @@ def wait_up(procs, pred, timeout: float) -> bool:
     if not [p.restart_if_silent() for p in procs].count(True):
         return False
     return wait_until(pred, timeout)
+
+
+def message_time(arrival: float, msg, sim_time: bool) -> float:
+    """A recorded stamped message's time [s]: its stamp on simulation time, else its arrival.
+
+    On simulation time the stamp (the time a pose was taken) is the same in
+    every run, however late a busy computer delivered it; on the wall clock
+    the recorder's times are the monotonic clock's, which stamps are not.
+    """
+    if not sim_time:
+        return arrival
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
 def wait_until(pred, timeout: float) -> bool:

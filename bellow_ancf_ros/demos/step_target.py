@@ -28,7 +28,7 @@ import numpy as np
 
 from ..cli.output import number
 from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
-                       hardware_parameters, start_clock, wait_up, wait_until)
+                       hardware_parameters, message_time, start_clock, wait_up, wait_until)
 
 __all__ = ['LATE_GOAL_M', 'OVERSHOOT_GOAL_M', 'RUNS', 'STEP_GOAL_M', 'STEP_M',
            'residual_swing', 'step_phase']
@@ -120,9 +120,7 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
         targets.hold(None)
         rec.wait_for(t_step + AFTER_S)
         snap = rec.snapshot()['true_pose']
-        # on simulation time the poses' own stamps (the time each was taken), else arrival
-        t = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec if args.sim_time
-                      else a for a, m in snap]) - t_step
+        t = np.array([message_time(a, m, args.sim_time) for a, m in snap]) - t_step
         pos = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
                         for _, m in snap])
         goal = poses[1][0]
