@@ -28,7 +28,11 @@ publishes
 QoS: reliable, keep-last, depth 5 for the pressures and the outputs;
 ``/diagnostics`` keep-last 10.  Like the inverse node it works on the latest
 input only (one-item slot, worker thread, at most ``max_rate_hz`` solves per
-second), warm-started from the previous solution.
+second), warm-started from the previous solution.  Under ``use_sim_time`` it
+is in a simulated robot's lockstep (:mod:`.lockstep`): it counts the
+pressures it takes and reports each ``/clock`` tick once its solve is done,
+so the prediction from a pressure goes out at the same simulated time
+however busy the computer is.
 
 Bad input (wrong length, NaN/inf, outside the robot's pressure limits, wrong
 unit label): refused with a throttled warning and a WARN diagnostic; the
@@ -57,6 +61,7 @@ from ..core import ConfigError, RobotModel, load_robot, solve_forward
 from ..core import geometry
 from . import contract, worker
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, solve_values
+from .lockstep import LockstepReport
 from .ros_util import (
     WARN_THROTTLE_S,
     Param,
@@ -150,6 +155,8 @@ TOPICS = (
           'backbones and plates, for RViz'),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray',
           'per-solve status and 1 Hz heartbeat'),
+    Topic('publishes', 'lockstep_clock', 'std_msgs/Header',
+          'use_sim_time: the simulation time its predictions are done until (a lockstep)'),
 )
 
 
@@ -191,9 +198,13 @@ class ForwardKinetostaticNode(Node):
         self.heartbeat = Heartbeat(self, self._pub_diag, self._heartbeat_status,
                                    lambda: self.cfg.name)
         self._worker = worker.LatestWorker(self._solve, self._min_period, self._on_worker_error,
-                                           name='forward-solver')
+                                           name='forward-solver',
+                                           on_done=lambda: self._lockstep.work_done())
+        # use_sim_time: a simulation's lockstep waits for the prediction from each pressure
+        self._lockstep = LockstepReport(self, self._worker.idle)
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_pressures, qos)
+        self._lockstep.received(self._sub.topic_name, 0)   # (a receiver of them)
         self.get_logger().info(
             f'robot {self.cfg.name!r}: {self.model.A} actuators, limits '
             f'[{self.cfg.p_min / 1e3:g}, {self.cfg.p_max / 1e3:g}] kPa gauge; listening on '
@@ -224,8 +235,9 @@ class ForwardKinetostaticNode(Node):
                 self.cfg.p_min, self.cfg.p_max, label)
         except contract.InputError as exc:
             self._refuse(str(exc))
-            return
-        self._worker.submit(p)
+        else:
+            self._worker.submit(p)
+        self._lockstep.received(self._sub.topic_name)   # (its prediction: when the worker idles)
 
     def _refuse(self, reason: str) -> None:
         self.stats['refused'] += 1
@@ -280,7 +292,8 @@ class ForwardKinetostaticNode(Node):
         self._status.submit(self.cfg.name, level, message, values)
 
     def destroy_node(self):
-        """Stop the worker, then destroy the node."""
+        """Leave a simulation's lockstep, stop the worker, then destroy the node."""
+        self._lockstep.destroy()
         self._worker.stop()
         return super().destroy_node()
 

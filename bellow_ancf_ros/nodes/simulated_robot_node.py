@@ -53,7 +53,8 @@ with ``use_sim_time:=true`` (the simulated robot itself too: its
 clock (1: real time, 0: as fast as it can).  With ``lockstep``, a
 participant that reports the time up to which it has done its work on
 ``lockstep_clock`` (under ``use_sim_time`` the inverse node does after each
-``/clock`` tick, the trajectory publisher before each of its ticks) holds
+``/clock`` tick, the trajectory publisher before each of its ticks, the
+forward node once it has predicted from every ``measured_pressure`` sent) holds
 the simulation to it step by step, the slowest of them: their computation
 takes no simulated time, and a participant slowed by a busy computer slows
 the simulation instead of changing its result; one that stops says so and
@@ -588,6 +589,9 @@ class SimulatedRobotNode(Node):
             self._pub_p.publish(pressure_message(p, self._unit))
         except Exception:  # noqa: BLE001 - publisher gone at shutdown
             return False
+        if self.clock is not None and self.clock.lockstep_period_s is not None:
+            # owed to a participant that counts them (the forward node): no step until taken
+            self.clock.sent_here(self._pub_p.topic_name)
         return True
 
     def _deliver(self, t: float) -> None:

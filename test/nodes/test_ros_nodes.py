@@ -76,12 +76,15 @@ class Harness:
         except Exception:  # noqa: BLE001 - executor shut down
             pass
 
-    def add(self, cls, *, name=None, **params):
+    def add(self, cls, *, name=None, remap=None, **params):
         if cls is InverseKinetostaticNode:
             # these tests count commands per solve: no republishing unless a test asks for it
             params.setdefault('command_rate_hz', 0.0)
         overrides = [Parameter(k, value=v) for k, v in params.items()]
         kw = {'namespace': self.ns, 'context': self.ctx, 'parameter_overrides': overrides}
+        if remap:   # {'from': 'to'}: the node's own remappings (--ros-args -r)
+            kw['cli_args'] = ['--ros-args'] + [a for k, v in remap.items()
+                                               for a in ('-r', f'{k}:={v}')]
         node = cls(name, **kw) if name else cls(**kw)
         self.nodes.append(node)
         self.executor.add_node(node)

@@ -24,6 +24,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bellow_ancf_ros.core import solve_forward  # noqa: E402
 from bellow_ancf_ros.core.sim import CATCH_UP  # noqa: E402
+from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.simulated_robot_node import SimulatedRobotNode  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
@@ -236,6 +237,52 @@ def test_the_trajectory_publisher_holds_the_simulation_to_its_ticks_and_leaves_w
     traj.destroy_node()
     wait_for(lambda: sim.clock.participants == [node.get_fully_qualified_name()],
              what='the publisher leaving')
+    t_left = sim.clock.time_s
+    wait_for(lambda: sim.clock.time_s > t_left + 1.0, timeout=20.0, what='1 s more')
+    assert sim.clock.lockstep_timeouts == 0
+
+
+def test_the_forward_node_holds_the_simulation_until_it_predicted_from_each_pressure(h):
+    """A forward node slowed to 30 ms a prediction (a busy computer) still predicts them all.
+
+    Without the lockstep, the simulation (as fast as it can) would send
+    pressures far faster than it predicts, and its one-item slot would drop
+    most of them; with it, each prediction goes out at its simulated time.
+    """
+    sim = clock_sim(h, real_time_factor=0.0, lockstep=True)
+    predicted = h.record(PoseStamped, 'predicted_pose', DEEP)
+    fwd = h.add(ForwardKinetostaticNode, use_sim_time=True, max_rate_hz=1000.0,
+                remap={'pressure_command': 'measured_pressure'})
+    me = fwd.get_fully_qualified_name()
+    wait_for(lambda: sim.clock.participants == [me], what="the forward node's report")
+    solve = fwd._worker._process
+
+    def slow(p):
+        time.sleep(0.03)
+        solve(p)
+    fwd._worker._process = slow   # (once it is in: a node slower than the stream joins no
+    dropped = fwd._worker.dropped  # simulation that runs free as fast as it can)
+    first = h.count('predicted_pose') + 2
+    wait_for(lambda: h.count('predicted_pose') >= first + 40, timeout=30.0,
+             what='40 predictions')
+    t0, n0 = sim.clock.time_s, fwd._worker.submitted
+    time.sleep(1.5)
+    with sim.clock._cond:
+        t1, n1 = sim.clock.time_s, fwd._worker.submitted
+    # the simulation ran at the forward node's pace: one pressure (every 10 ms) per prediction
+    assert 20 <= n1 - n0 <= 1.5 / 0.03 + 2, n1 - n0
+    assert abs((t1 - t0) - 0.01 * (n1 - n0)) <= 0.02, (t1 - t0, n1 - n0)
+    assert fwd._worker.dropped - dropped <= 1 and sim.clock.lockstep_timeouts == 0
+    with h.lock:
+        stamps = np.array([seconds(m.header.stamp) for _, m in predicted[first:]])
+    gaps = np.diff(stamps)
+    assert gaps.size > 30 and 0.005 - 1e-6 <= gaps.min() and gaps.max() <= 0.015 + 1e-6, gaps
+    sent, received = sim.clock.ledger()
+    assert received[me][fwd._sub.topic_name] >= sent[fwd._sub.topic_name] - 1
+    h.executor.remove_node(fwd)
+    h.nodes.remove(fwd)
+    fwd.destroy_node()
+    wait_for(lambda: sim.clock.participants == [], what='the forward node leaving')
     t_left = sim.clock.time_s
     wait_for(lambda: sim.clock.time_s > t_left + 1.0, timeout=20.0, what='1 s more')
     assert sim.clock.lockstep_timeouts == 0

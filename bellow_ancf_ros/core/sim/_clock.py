@@ -29,8 +29,9 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
   (a participant stopped or dead), and it runs free if none is left.
 * Messages owed: a report may also count the messages its participant has
   sent and received on named topics (``sent``, ``received``; cumulative),
-  and the simulation counts what it receives itself
-  (:meth:`received_here`).  No step is taken while a receiver has counted
+  and the simulation counts what it receives and sends itself
+  (:meth:`received_here`, :meth:`sent_here`: its sensors' readings, owed
+  to a receiver from its first report on).  No step is taken while a receiver has counted
   fewer messages on a topic than the participants have sent on it: a
   message in flight (a target, a command) is seen at the same simulated
   time however long the computer takes to deliver it.  Only reliable
@@ -174,12 +175,28 @@ class SimulationClock:
         """
         with self._cond:
             self._done[who] = max(self._done.get(who, float(t)), float(t))
+            for topic, n in (received or {}).items():   # a new receiver of the simulation's own
+                if topic not in self._received.get(who, {}):   # messages: owed from now on
+                    before = self._sent.get('', {}).get(topic, 0)
+                    if before > n:
+                        self._forgiven.setdefault(who, {})[topic] = before - int(n)
             for book, counts in ((self._sent, sent), (self._received, received)):
                 if counts:
                     mine = book.setdefault(who, {})
                     for topic, n in counts.items():
                         mine[topic] = max(mine.get(topic, 0), int(n))
             self._free = False
+            self._cond.notify_all()
+
+    def sent_here(self, topic: str, n: int = 1) -> None:
+        """The simulation itself sent ``n`` more messages on ``topic`` (e.g. its sensors').
+
+        Owed to every receiver that counts ``topic`` in its reports, from its
+        first report on: what was sent before it (a node started late) is not.
+        """
+        with self._cond:
+            mine = self._sent.setdefault('', {})
+            mine[topic] = mine.get(topic, 0) + int(n)
             self._cond.notify_all()
 
     def received_here(self, topic: str, n: int = 1) -> None:

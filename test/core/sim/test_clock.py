@@ -255,3 +255,22 @@ def test_a_message_lost_is_forgiven_once_and_those_after_it_are_owed_again():
     assert clock.wait_until(held + 20, 5.0) and clock.lockstep_timeouts == 1
     assert clock.ledger() == ({'/target': 2}, {'controller': {'/target': 2}})
     r.stop()
+
+
+def test_the_simulations_own_messages_are_owed_to_a_receiver_from_its_first_report_on():
+    clock, r = reported_and_running(controller=1e6)
+    clock.sent_here('/measured_pressure', 3)         # before the forward node reported: not owed
+    clock.done_until(1e6, 'forward', received={'/measured_pressure': 0})
+    assert clock.wait_until(5, 5.0)
+    clock.sent_here('/measured_pressure')            # in flight: no step until it is taken
+    held = steps_after(clock, 0.05)
+    assert steps_after(clock, 0.2) == held
+    clock.done_until(1e6, 'forward', received={'/measured_pressure': 1})
+    assert clock.wait_until(held + 20, 5.0)
+    assert clock.lockstep_timeouts == 0
+    assert clock.ledger() == ({'/measured_pressure': 4}, {'forward': {'/measured_pressure': 4}})
+    clock.leave('forward')                            # gone: owed nothing
+    clock.sent_here('/measured_pressure')
+    held = clock.steps
+    assert clock.wait_until(held + 20, 5.0)
+    r.stop()
