@@ -60,7 +60,7 @@ import numpy as np
 
 from ..cli.output import numbers
 from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, machine_state,
-                       start_clock, tidy, wait_until, wait_up)
+                       message_time, start_clock, tidy, wait_until, wait_up)
 
 PLANT, MODEL = 'one_segment_mismatched', 'one_segment'
 PAYLOAD_KG, PUSH_N = 0.03, (0.1, 0.0, 0.0)
@@ -115,6 +115,7 @@ class LoadRun:
         }
         self.env, self.log_dir, self.tag = env, log_dir, tag
         self.t_start = None
+        self._hold = None   # on simulation time: holds the simulation where a load changes
 
     def start(self) -> None:
         """Wait for the nodes, then start the trajectory publisher.
@@ -125,6 +126,11 @@ class LoadRun:
         """
         rec = self.rec
         if self.args.sim_time:
+            from ..nodes.lockstep import LockstepReport
+            # (it holds the simulation from play_events on: the path's start known, each
+            # load's time 5 s or more later; a hold before it would also hold back a
+            # trajectory publisher that comes up late, whose path starts on the clock)
+            self._hold = LockstepReport(rec.node, follow_clock=False)
             self._trajectory()
             start_clock(rec, self.procs.values(),
                         lambda: rec.publishers('pressure_command') >= 1
@@ -146,11 +152,11 @@ class LoadRun:
             tag=self.tag)
 
     def first_target(self) -> float | None:
-        """Arrival time of the first target (None before; on the recorder's clock)."""
+        """Time of the first target (None before): its stamp on simulation time, else arrival."""
         with self.rec.lock:
             for t, m in self.rec.msgs['target_pose']:
                 if m.header.stamp.sec or m.header.stamp.nanosec:
-                    return t
+                    return message_time(t, m, self.args.sim_time)
         return None
 
     def set_robot(self, name: str, value) -> None:
@@ -173,14 +179,24 @@ class LoadRun:
                                f'{future.result().results[0].reason}')
 
     def play_events(self, t0: float) -> None:
-        """Load the simulated robot at the events' times after ``t0``; wait for the path's end."""
+        """Load the simulated robot at the events' times after ``t0``; wait for the path's end.
+
+        On simulation time the simulation is held at each event until the
+        load is set: it comes at the same simulated time in every run.
+        """
         for t_ev, name, value in _events(self.args.period):
+            if self._hold is not None:
+                self._hold.report(t0 + t_ev)
             self.rec.wait_for(t0 + t_ev)
             self.set_robot(name, value)
+        if self._hold is not None:
+            self._hold.report_counts()   # (holds no time any more)
         self.rec.wait_for(t0 + self.args.period)
 
     def finish(self) -> dict:
         """Stop the nodes (the inverse vents), close the recorder; the recording."""
+        if self._hold is not None:
+            self._hold.destroy()
         for p in self.procs.values():
             p.interrupt()
         codes = {k: p.stop() for k, p in self.procs.items()}
@@ -194,9 +210,13 @@ def _xyz(m):
     return np.array([p.x, p.y, p.z])
 
 
-def analyse(run: dict, t0: float, period: float) -> dict:
-    """Estimator against the truth per phase, tracking error after the payload came, safety."""
-    rec = run['rec']
+def analyse(run: dict, t0: float, period: float, sim_time: bool = False) -> dict:
+    """Estimator against the truth per phase, tracking error after the payload came, safety.
+
+    Times: the messages' stamps on simulation time, else their arrival.
+    """
+    rec = {k: [(message_time(t, m, sim_time), m) for t, m in v] if k != 'pressure_command' else v
+           for k, v in run['rec'].items()}
     tt = np.array([t for t, _ in rec['target_pose']])
     targets = [_xyz(m) for _, m in rec['target_pose']]
     err = []
@@ -265,7 +285,7 @@ def main(argv=None) -> int:
         return 1
     records = []
     for r, res, t0 in zip(runs, results, starts):
-        a = analyse(res, t0, args.period)
+        a = analyse(res, t0, args.period, args.sim_time)
         good = a['safe'] and a['vent'] and all(c in (0, None) for c in a['codes'].values())
         record = {'name': r.name, 'compensate': r.compensate, 'safe': bool(a['safe']),
                   'vent': bool(a['vent']), 'n_commands': a['n_commands'], 'rmse_mm': None,

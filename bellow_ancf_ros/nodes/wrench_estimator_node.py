@@ -17,7 +17,11 @@ compliance) and publishes its reading:
   default 0.1 m per newton), for RViz;
 * ``~/tare`` (std_srvs/Trigger): zero the reading at the current estimate;
 * ``/diagnostics`` heartbeat: the force and its standard deviations, the
-  directions the data cannot see yet (WARN), samples and refusals.
+  directions the data cannot see yet (WARN), samples and refusals;
+* under ``use_sim_time``, in a simulated robot's lockstep
+  (:mod:`.lockstep`): it counts the pressures it takes and reports each
+  ``/clock`` tick, so each pose meets the pressures of its simulated time
+  however busy the computer is.
 
 Use the calibrated robot file: the estimator reads any model error as a force.
 
@@ -45,6 +49,7 @@ from ..core.geometry import z_axis_from_quaternion
 from . import contract
 from .diagnostics import Heartbeat, Refusals, publish_diagnostic
 from .frames import PoseFrames
+from .lockstep import LockstepReport
 from .measured_feedback import measured_pose_qos
 from .ros_util import (WARN_THROTTLE_S, Param, StartupParameterError, Topic, command_qos,
                        control_clock, declare_all, descriptor, diagnostics_qos, main_for)
@@ -112,6 +117,8 @@ TOPICS = (
     Topic('publishes', 'estimated_wrench_marker', 'visualization_msgs/Marker',
           'the force as an arrow, for RViz'),
     Topic('publishes', '/diagnostics', 'diagnostic_msgs/DiagnosticArray', '1 Hz heartbeat'),
+    Topic('publishes', 'lockstep_clock', 'std_msgs/Header',
+          'use_sim_time: the simulation time its samples are taken until (a lockstep)'),
     Topic('services', '~/tare', 'std_srvs/Trigger', 'zero the reading'),
 )
 
@@ -165,10 +172,17 @@ class WrenchEstimatorNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._refusals = Refusals(self, 'samples', self._publish_diag)
         self.heartbeat = Heartbeat(self, self._pub_diag, self._status, lambda: self.cfg.name)
+        # use_sim_time: a simulation's lockstep waits until it has taken every pressure sent
+        # (its work runs in its callbacks: idle between them)
+        self._lockstep = LockstepReport(self)
         self.create_subscription(PoseStamped, 'measured_pose', self._on_pose, measured_pose_qos())
+        self._topics = {}
         for topic, key in (('measured_pressure', 'measured'), ('pressure_command', 'command')):
-            self.create_subscription(Float64MultiArray, topic,
-                                     lambda m, key=key: self._on_pressures(m, key), command_qos())
+            sub = self.create_subscription(Float64MultiArray, topic,
+                                           lambda m, key=key: self._on_pressures(m, key),
+                                           command_qos())
+            self._topics[key] = sub.topic_name
+            self._lockstep.received(sub.topic_name, 0)   # (a receiver of them)
         self.create_service(Trigger, '~/tare', self._on_tare)
         self.create_timer(1.0 / float(self.get_parameter('rate_hz').value), self._publish)
         self.get_logger().info(
@@ -178,6 +192,7 @@ class WrenchEstimatorNode(Node):
 
     # -------------------------------------------------------------- inputs
     def _on_pressures(self, msg: Float64MultiArray, key: str) -> None:
+        self._lockstep.received(self._topics[key])
         label = msg.layout.dim[0].label if msg.layout.dim else None
         try:
             p = contract.validate_pressure_input(msg.data, self.unit, self.estimator.model.A,
@@ -296,6 +311,11 @@ class WrenchEstimatorNode(Node):
     def _publish_diag(self, level: bytes, message: str, values: dict) -> None:
         publish_diagnostic(self, self._pub_diag, f'{self.get_name()}: samples', self.cfg.name,
                            level, message, dict(values, **self.stats))
+
+    def destroy_node(self):
+        """Leave a simulation's lockstep, then destroy the node."""
+        self._lockstep.destroy()
+        return super().destroy_node()
 
 
 main = main_for(WrenchEstimatorNode)
