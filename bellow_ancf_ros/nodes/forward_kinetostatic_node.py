@@ -28,7 +28,8 @@ publishes
 QoS: reliable, keep-last, depth 5 for the pressures and the outputs;
 ``/diagnostics`` keep-last 10.  Like the inverse node it works on the latest
 input only (one-item slot, worker thread, at most ``max_rate_hz`` solves per
-second), warm-started from the previous solution.  Under ``use_sim_time`` it
+second, of simulation time under ``use_sim_time``), warm-started from the
+previous solution.  Under ``use_sim_time`` it
 is in a simulated robot's lockstep (:mod:`.lockstep`): it counts the
 pressures it takes and reports each ``/clock`` tick once its solve is done,
 so the prediction from a pressure goes out at the same simulated time
@@ -139,8 +140,8 @@ PARAMETERS = (
         'Unit of the incoming gauge pressures: Pa (default, REP-103) or kPa.', S,
         constraints="one of: 'Pa', 'kPa'")),
     Param('max_rate_hz', 100.0, descriptor(
-        'Maximum prediction rate [Hz]; only the newest pressure array is solved.', D,
-        lo=0.1, hi=1000.0)),
+        'Maximum prediction rate [Hz]; only the newest pressure array is solved (under '
+        'use_sim_time: per second of simulation time).', D, lo=0.1, hi=1000.0)),
     Param('backbone_points', 20, descriptor(
         'Points per actuator backbone in predicted_shape.', INT, lo=2, hi=200)),
 )
@@ -202,6 +203,7 @@ class ForwardKinetostaticNode(Node):
                                            on_done=lambda: self._lockstep.work_done())
         # use_sim_time: a simulation's lockstep waits for the prediction from each pressure
         self._lockstep = LockstepReport(self, self._worker.idle)
+        self._last_due_ns = -(1 << 62)   # the newest prediction's simulation time (lockstep)
         self._sub = self.create_subscription(Float64MultiArray, 'pressure_command',
                                              self._on_pressures, qos)
         self._lockstep.received(self._sub.topic_name, 0)   # (a receiver of them)
@@ -222,8 +224,28 @@ class ForwardKinetostaticNode(Node):
         return DiagnosticStatus.OK, 'running', values
 
     # ------------------------------------------------------------ params
-    def _min_period(self) -> float:
+    def _period(self) -> float:
         return 1.0 / float(self.get_parameter('max_rate_hz').value)
+
+    def _min_period(self) -> float:
+        """The worker's wall-clock spacing of solves (none in a lockstep: :meth:`_due`)."""
+        return 0.0 if self._lockstep.active else self._period()
+
+    def _due(self) -> bool:
+        """A prediction is due: always on the wall clock (the worker's token bucket).
+
+        Under use_sim_time at most ``max_rate_hz`` per second of simulation
+        time, the pressures between skipped: in a simulation's lockstep a
+        solve waiting for wall-clock credit would hold the simulation (at
+        5 Hz: 0.05x real time).
+        """
+        if not self._lockstep.active:
+            return True
+        now = self.get_clock().now().nanoseconds
+        if now - self._last_due_ns < 1e9 * self._period():
+            return False
+        self._last_due_ns = now
+        return True
 
     # ------------------------------------------------------------ input
     def _on_pressures(self, msg: Float64MultiArray) -> None:
@@ -236,7 +258,8 @@ class ForwardKinetostaticNode(Node):
         except contract.InputError as exc:
             self._refuse(str(exc))
         else:
-            self._worker.submit(p)
+            if self._due():
+                self._worker.submit(p)
         self._lockstep.received(self._sub.topic_name)   # (its prediction: when the worker idles)
 
     def _refuse(self, reason: str) -> None:

@@ -288,6 +288,34 @@ def test_the_forward_node_holds_the_simulation_until_it_predicted_from_each_pres
     assert sim.clock.lockstep_timeouts == 0
 
 
+def test_the_forward_nodes_rate_counts_simulation_time_and_holds_nothing_back(h):
+    """``max_rate_hz`` 20 on simulation time: 0.05 s apart, the simulation not held to it.
+
+    A rate kept on the wall clock held the simulation while a pressure waited
+    for its credit: ``make demo``'s forward nodes at 5 Hz ran it at 0.05x real
+    time.
+    """
+    sim = clock_sim(h, real_time_factor=0.0, lockstep=True)
+    predicted = h.record(PoseStamped, 'predicted_pose', DEEP)
+    fwd = h.add(ForwardKinetostaticNode, use_sim_time=True, max_rate_hz=20.0,
+                remap={'pressure_command': 'measured_pressure'})
+    wait_for(lambda: sim.clock.participants == [fwd.get_fully_qualified_name()],
+             what="the forward node's report")
+    first = h.count('predicted_pose') + 1
+    t0, wall0 = sim.clock.time_s, time.monotonic()
+    wait_for(lambda: h.count('predicted_pose') >= first + 20, timeout=30.0,
+             what='20 predictions')
+    # 20 predictions a second of simulation time; held to 20 a second of wall time it would
+    # have run at 0.2x real time (a pressure every 10 ms)
+    assert sim.clock.time_s - t0 > time.monotonic() - wall0
+    with h.lock:
+        stamps = np.array([seconds(m.header.stamp) for _, m in predicted[first:]])
+    gaps = np.diff(stamps)
+    assert gaps.min() >= 0.05 - 1.0 / RATE_HZ - 1e-6, gaps
+    assert gaps.max() <= 0.06 + 1.0 / RATE_HZ + 1e-6, gaps
+    assert sim.clock.lockstep_timeouts == 0
+
+
 def test_pause_freezes_the_controller_too_no_command_no_dropout_after_it(h, one):
     """Paused 1.5 s of wall time (six times the pose timeout): the loop just resumes."""
     sim = clock_sim(h, lockstep=True)
