@@ -30,8 +30,8 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
 * Messages owed: a report may also count the messages its participant has
   sent and received on named topics (``sent``, ``received``; cumulative),
   and the simulation counts what it receives and sends itself
-  (:meth:`received_here`, :meth:`sent_here`: its sensors' readings, owed
-  to a receiver from its first report on).  No step is taken while a receiver has counted
+  (:meth:`received_here`, :meth:`sent_here`: its sensors' readings).  A
+  receiver owes what was sent from its first report of a topic on.  No step is taken while a receiver has counted
   fewer messages on a topic than the participants have sent on it: a
   message in flight (a target, a command) is seen at the same simulated
   time however long the computer takes to deliver it.  Only reliable
@@ -171,13 +171,17 @@ class SimulationClock:
         participants' newest reports (their computation takes no simulated
         time); an older report than one already given changes nothing.
         ``sent`` / ``received``: the messages ``who`` has sent / received so
-        far per topic (cumulative counts; see the module's text).
+        far per topic (cumulative counts; see the module's text).  A
+        receiver owes the messages sent from its first report of a topic on:
+        those sent before it (a node started late, its subscription not yet
+        matched) never reach it.
         """
         with self._cond:
             self._done[who] = max(self._done.get(who, float(t)), float(t))
-            for topic, n in (received or {}).items():   # a new receiver of the simulation's own
-                if topic not in self._received.get(who, {}):   # messages: owed from now on
-                    before = self._sent.get('', {}).get(topic, 0)
+            sent_before = self._sent_totals()
+            for topic, n in (received or {}).items():   # a new receiver of a topic: what was
+                if topic not in self._received.get(who, {}):   # sent before it is not owed
+                    before = sent_before.get(topic, 0)
                     if before > n:
                         self._forgiven.setdefault(who, {})[topic] = before - int(n)
             for book, counts in ((self._sent, sent), (self._received, received)):
@@ -191,8 +195,8 @@ class SimulationClock:
     def sent_here(self, topic: str, n: int = 1) -> None:
         """The simulation itself sent ``n`` more messages on ``topic`` (e.g. its sensors').
 
-        Owed to every receiver that counts ``topic`` in its reports, from its
-        first report on: what was sent before it (a node started late) is not.
+        Owed to every receiver that counts ``topic`` in its reports, as any
+        participant's (:meth:`done_until`).
         """
         with self._cond:
             mine = self._sent.setdefault('', {})

@@ -257,7 +257,7 @@ def test_a_message_lost_is_forgiven_once_and_those_after_it_are_owed_again():
     r.stop()
 
 
-def test_the_simulations_own_messages_are_owed_to_a_receiver_from_its_first_report_on():
+def test_messages_are_owed_to_a_receiver_from_its_first_report_on():
     clock, r = reported_and_running(controller=1e6)
     clock.sent_here('/measured_pressure', 3)         # before the forward node reported: not owed
     clock.done_until(1e6, 'forward', received={'/measured_pressure': 0})
@@ -273,4 +273,14 @@ def test_the_simulations_own_messages_are_owed_to_a_receiver_from_its_first_repo
     clock.sent_here('/measured_pressure')
     held = clock.steps
     assert clock.wait_until(held + 20, 5.0)
+    # a participant's messages likewise: a receiver that reports late owes none sent before
+    clock.done_until(1e6, 'controller', sent={'/cmd': 7})
+    clock.done_until(1e6, 'estimator', received={'/cmd': 0})
+    held = clock.steps
+    assert clock.wait_until(held + 20, 5.0)
+    clock.done_until(1e6, 'controller', sent={'/cmd': 8})   # in flight: owed
+    held = steps_after(clock, 0.05)
+    assert steps_after(clock, 0.2) == held
+    clock.done_until(1e6, 'estimator', received={'/cmd': 1})
+    assert clock.wait_until(held + 20, 5.0) and clock.lockstep_timeouts == 0
     r.stop()
