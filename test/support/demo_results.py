@@ -22,7 +22,8 @@ def analysis(period_s, err_mm, held_mm, n=2400):
             'measured': target + off, 'pos_err': np.linalg.norm(off, axis=1),
             'ang_err': np.full(n, np.radians(0.4 * err_mm)), 'steady_mm': held_mm,
             'steady_deg': 0.3 * held_mm, 'model_rms_mm': 1.2, 'outliers': 3,
-            'step_after_outlier_kpa': 0.5, 'step_normal_p99_kpa': 0.6, 'dropouts': 1,
+            'step_after_outlier_kpa': 0.5, 'step_normal_p99_kpa': 0.6,
+            'step_normal_max_kpa': 0.7, 'dropouts': 1,
             'error_2s_after_dropouts_mm': [0.05], 'n_commands': 1000, 'safe': True,
             'vent': [0.0] * 6, 'levels': [100, 2, 0]}
 
