@@ -22,17 +22,25 @@ limit_blas_threads()
 
 
 #: Test modules that start ROS 2 nodes, node processes or launch files, or use the colcon
-#: install (marker ``ros``: ``make test`` runs them one at a time, after the others).
+#: install (marker ``ros``: ``make test`` runs them after the others, on two workers).
 ROS_MODULES = ('test_launch.py', 'test_readme_examples.py', 'test_package_layout.py')
+#: ROS test modules that run alone (marker ``serial``): ``make demo``'s runs (eight node
+#: processes on the cores, on domains the demo draws itself) and the CPU-bound burners.
+SERIAL_MODULES = ('test_ros_demo.py', 'test_ros_busy_loop.py')
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark ROS tests ``ros``: ``test_ros_*.py``, :data:`ROS_MODULES`, users of ``ros_context``."""
+    """Mark ROS tests ``ros``: ``test_ros_*.py``, :data:`ROS_MODULES`, users of ``ros_context``.
+
+    And those of :data:`SERIAL_MODULES` ``serial``.
+    """
     for item in items:
         name = item.path.name
         if (name.startswith('test_ros_') or name in ROS_MODULES
                 or 'ros_context' in getattr(item, 'fixturenames', ())):
             item.add_marker(pytest.mark.ros)
+        if name in SERIAL_MODULES:
+            item.add_marker(pytest.mark.serial)
 
 
 @pytest.fixture(scope="session")

@@ -120,7 +120,7 @@ from .closed_loop_plot import MODE_NAMES, MODES, PAPER, plot
 from .closed_loop_plot import rms as _rms
 from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
                        hardware_parameters, machine_state, message_time, plant_effects,
-                       start_clock, tidy, wait_until, wait_up)
+                       start_clock, stop_all, tidy, wait_until, wait_up)
 from .step_target import LATE_GOAL_M, OVERSHOOT_GOAL_M, STEP_GOAL_M, step_phase
 from .step_target import RUNS as STEP_RUNS
 
@@ -494,9 +494,7 @@ class Run:
         """Stop the nodes (SIGINT, the inverse vents), close the recorder; the recording."""
         if getattr(self, '_targets', None) is not None:
             self._targets.close()   # its targets are owed no more
-        for p in self.procs.values():
-            p.interrupt()                   # all at once: they shut down in parallel
-        codes = {k: p.stop() for k, p in reversed(list(self.procs.items()))}
+        codes = stop_all(self.procs)   # the inverse node first: its vent reaches the others
         bad = {k: c for k, c in codes.items() if c not in (0, None)}
         if bad:
             print(f'  {self.name}: nodes exited with non-zero codes: {bad}')

@@ -60,7 +60,8 @@ import numpy as np
 
 from ..cli.output import numbers
 from .pipeline import (NodeProcess, Recorder, child_env, clock_parameters, machine_state,
-                       message_time, start_clock, tidy, wait_until, wait_up)
+                       message_time, start_clock, stop_all, tidy, wait_until,
+                       wait_up)
 
 PLANT, MODEL = 'one_segment_mismatched', 'one_segment'
 PAYLOAD_KG, PUSH_N = 0.03, (0.1, 0.0, 0.0)
@@ -197,9 +198,7 @@ class LoadRun:
         """Stop the nodes (the inverse vents), close the recorder; the recording."""
         if self._hold is not None:
             self._hold.destroy()
-        for p in self.procs.values():
-            p.interrupt()
-        codes = {k: p.stop() for k, p in self.procs.items()}
+        codes = stop_all(self.procs)   # the inverse node first: its vent reaches the others
         snap = self.rec.snapshot()
         self.rec.close()
         return {'codes': codes, 'rec': snap}

@@ -28,7 +28,7 @@ from typing import Callable
 
 __all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'TargetSender', 'child_env',
            'clock_parameters', 'hardware_parameters', 'machine_state', 'message_time',
-           'plant_effects', 'start_clock', 'tidy', 'wait_until', 'wait_up']
+           'plant_effects', 'start_clock', 'stop_all', 'tidy', 'wait_until', 'wait_up']
 
 #: Wall seconds without the simulation's clock moving before a wait gives up.
 STALL_S = 30.0
@@ -474,6 +474,25 @@ def message_time(arrival: float, msg, sim_time: bool) -> float:
     if not sim_time:
         return arrival
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def stop_all(procs: dict, first: str = 'inverse') -> dict:
+    """Stop node processes: ``first`` (the controller) alone, then the others at once; exit codes.
+
+    The controller vents as it stops, and its vent must reach the nodes
+    that subscribe it while they still run (a lab stops its controller
+    before its regulator driver for the same reason): stopped at the same
+    moment as the simulated robot, the vent's acknowledgement took 2.1-2.6 s
+    and the recorder missed it in about one run in ten.
+    """
+    codes = {}
+    if first in procs:
+        codes[first] = procs[first].stop()
+    rest = {k: p for k, p in procs.items() if k != first}
+    for p in rest.values():
+        p.interrupt()                    # all at once: they shut down in parallel
+    codes.update({k: p.stop() for k, p in reversed(list(rest.items()))})
+    return codes
 
 
 def wait_until(pred, timeout: float) -> bool:

@@ -28,7 +28,8 @@ import numpy as np
 
 from ..cli.output import number
 from .pipeline import (NodeProcess, Recorder, TargetSender, child_env, clock_parameters,
-                       hardware_parameters, message_time, start_clock, wait_up, wait_until)
+                       hardware_parameters, message_time, start_clock, stop_all, wait_up,
+                       wait_until)
 
 __all__ = ['LATE_GOAL_M', 'OVERSHOOT_GOAL_M', 'RUNS', 'STEP_GOAL_M', 'STEP_M',
            'residual_swing', 'step_phase']
@@ -134,9 +135,7 @@ def _run(kind: str, args, domain: int, log_dir: Path, poses) -> dict:
         for p in procs.values():
             print(f'--- {p.module} log (last lines):\n{p.tail()}')
     targets.close()
-    for p in procs.values():
-        p.interrupt()
-    codes = {k: p.stop() for k, p in procs.items()}
+    codes = stop_all(procs)   # the inverse node first: its vent reaches the others
     if any(c not in (0, None) for c in codes.values()):
         print(f'  step, {kind}: nodes exited with non-zero codes: {codes}')
         out['ok'] = False

@@ -64,3 +64,28 @@ def test_wait_up_restarts_a_silent_process_and_waits_again(tmp_path):
         assert starts == ['a']
     finally:
         p.stop(2.0)
+
+
+class _Proc:
+    """Records when it was told to stop, and whether the controller had exited by then."""
+
+    def __init__(self, name, log):
+        self.name, self.log, self.exited = name, log, False
+
+    def interrupt(self):
+        self.log.append(('interrupt', self.name))
+
+    def stop(self):
+        self.log.append(('stop', self.name))
+        self.exited = True
+        return 0
+
+
+def test_the_controller_stops_alone_before_the_others_so_its_vent_reaches_them():
+    log = []
+    procs = {k: _Proc(k, log) for k in ('robot', 'inverse', 'forward')}
+    codes = pipeline.stop_all(procs)
+    assert codes == {'inverse': 0, 'robot': 0, 'forward': 0}
+    assert log[0] == ('stop', 'inverse')                  # exited (vented) first
+    assert {e for e in log[1:3]} == {('interrupt', 'robot'), ('interrupt', 'forward')}
+    assert [e for e in log[3:]] == [('stop', 'forward'), ('stop', 'robot')]
