@@ -31,8 +31,9 @@ simulation instead of changing its result.  :class:`SimulationClock` decides
   sent and received on named topics (``sent``, ``received``; cumulative),
   and the simulation counts what it receives and sends itself
   (:meth:`received_here`, :meth:`sent_here`: its sensors' readings).  A
-  receiver owes what was sent from its first report of a topic on.  No step is taken while a receiver has counted
-  fewer messages on a topic than the participants have sent on it: a
+  receiver owes what was sent from its first report of a topic on.  No
+  step is taken while a receiver has counted fewer messages on a topic
+  than the participants have sent on it: a
   message in flight (a target, a command) is seen at the same simulated
   time however long the computer takes to deliver it.  Only reliable
   topics should be counted (a lost best-effort message would be owed until
