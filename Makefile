@@ -43,7 +43,7 @@ demo-offline: $(STAMP)
 
 # the tests without ROS on two workers (pytest-xdist: CPU-bound, independent), then the ROS
 # tests on two workers (each its own share of the ROS domains), then the ROS tests marked
-# serial alone (make demo's runs, the CPU burners); fails if any part fails
+# serial alone (make demo's runs, the CPU burners, the simulation clock); fails if any part fails
 test: $(STAMP)
 	@$(VENV)/bin/python -m pytest -m "not ros" -n 2; a=$$?; \
 	$(VENV)/bin/python -m pytest -m "ros and not serial" -n 2; b=$$?; \
