@@ -242,8 +242,8 @@ class ForwardKinetostaticNode(Node):
         if not self._lockstep.active:
             return True
         now = self.get_clock().now().nanoseconds
-        if now - self._last_due_ns < 1e9 * self._period():
-            return False
+        if 0 <= now - self._last_due_ns < 1e9 * self._period():
+            return False   # (a clock that jumped back: due at once)
         self._last_due_ns = now
         return True
 
