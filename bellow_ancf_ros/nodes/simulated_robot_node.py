@@ -54,7 +54,8 @@ clock (1: real time, 0: as fast as it can).  With ``lockstep``, a
 participant that reports the time up to which it has done its work on
 ``lockstep_clock`` (under ``use_sim_time`` the inverse node does after each
 ``/clock`` tick, the trajectory publisher before each of its ticks, the
-forward node once it has predicted from every ``measured_pressure`` sent) holds
+forward node once it has predicted from every ``measured_pressure`` sent,
+the wrench estimator once it has taken them) holds
 the simulation to it step by step, the slowest of them: their computation
 takes no simulated time, and a participant slowed by a busy computer slows
 the simulation instead of changing its result; one that stops says so and

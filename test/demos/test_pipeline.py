@@ -67,17 +67,16 @@ def test_wait_up_restarts_a_silent_process_and_waits_again(tmp_path):
 
 
 class _Proc:
-    """Records when it was told to stop, and whether the controller had exited by then."""
+    """Records in ``log`` when it was interrupted and when it was stopped."""
 
     def __init__(self, name, log):
-        self.name, self.log, self.exited = name, log, False
+        self.name, self.log = name, log
 
     def interrupt(self):
         self.log.append(('interrupt', self.name))
 
     def stop(self):
         self.log.append(('stop', self.name))
-        self.exited = True
         return 0
 
 

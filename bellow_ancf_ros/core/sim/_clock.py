@@ -179,12 +179,14 @@ class SimulationClock:
         """
         with self._cond:
             self._done[who] = max(self._done.get(who, float(t)), float(t))
-            sent_before = self._sent_totals()
-            for topic, n in (received or {}).items():   # a new receiver of a topic: what was
-                if topic not in self._received.get(who, {}):   # sent before it is not owed
-                    before = sent_before.get(topic, 0)
+            known = self._received.get(who, {})
+            new = [t for t in (received or {}) if t not in known]
+            if new:   # a new receiver of a topic: what was sent before it is not owed
+                sent_before = self._sent_totals()
+                for topic in new:
+                    before, n = sent_before.get(topic, 0), int(received[topic])
                     if before > n:
-                        self._forgiven.setdefault(who, {})[topic] = before - int(n)
+                        self._forgiven.setdefault(who, {})[topic] = before - n
             for book, counts in ((self._sent, sent), (self._received, received)):
                 if counts:
                     mine = book.setdefault(who, {})
