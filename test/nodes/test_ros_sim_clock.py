@@ -305,9 +305,9 @@ def test_the_forward_nodes_rate_counts_simulation_time_and_holds_nothing_back(h)
     t0, wall0 = sim.clock.time_s, time.monotonic()
     wait_for(lambda: h.count('predicted_pose') >= first + 20, timeout=30.0,
              what='20 predictions')
-    # 20 predictions a second of simulation time; held to 20 a second of wall time it would
-    # have run at 0.2x real time (a pressure every 10 ms)
-    assert sim.clock.time_s - t0 > time.monotonic() - wall0
+    # 20 predictions a second of simulation time; held to 20 a second of wall time it ran at
+    # 0.2x real time (a pressure every 10 ms; measured 0.196x); free, at 0.9-2x in this process
+    assert sim.clock.time_s - t0 > 0.5 * (time.monotonic() - wall0)
     with h.lock:
         stamps = np.array([seconds(m.header.stamp) for _, m in predicted[first:]])
     gaps = np.diff(stamps)
