@@ -417,7 +417,7 @@ class Run:
         """
         from builtin_interfaces.msg import Time
 
-        from ..core.experiments import spin_down, spin_up, trajectory
+        from ..core.experiments import spin_down, spin_up, trajectory_target
         from ..core.geometry import quaternion_from_z_axis
         from ..nodes.ros_util import pose_message
         proc = self.procs['trajectory']
@@ -430,7 +430,8 @@ class Run:
         first, last = _stamp(stamped[0]), _stamp(stamped[-1])
         d, preview = self.spin_up_s, preview_s(self.args.plant, self.mode)
         tau_last = spin_up(last - first + preview, d)   # the publisher's path clock
-        case, kw = self.case, self.col.path_kw
+        case = self.case
+        path = trajectory_target(case.trajectory, case.robot, **self.col.path_kw)
         clock = self.rec.node.get_clock()
         final, ticks = [], [0]
         every = round(TARGET_RATE_HZ * HOLD_REPUBLISH_S)
@@ -443,10 +444,10 @@ class Run:
                 return
             stamp_s = clock.now().nanoseconds * 1e-9 + preview
             s = stamp_s - last
-            pos, z = trajectory(case.trajectory, tau_last + spin_down(s, d), case.robot, **kw)
-            q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z[0])
-            msg = pose_message(pos[0], q, 'base', Time(sec=int(stamp_s),
-                                                       nanosec=int(stamp_s % 1.0 * 1e9)))
+            pos, z = path(tau_last + spin_down(s, d))
+            q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z)
+            msg = pose_message(pos, q, 'base', Time(sec=int(stamp_s),
+                                                    nanosec=int(stamp_s % 1.0 * 1e9)))
             self._targets.send(msg)
             if s >= d:
                 final.append(msg)

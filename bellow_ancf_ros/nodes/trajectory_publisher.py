@@ -65,7 +65,7 @@ from rclpy.node import Node
 
 from ..core import ConfigError, RobotModel, load_robot, solve_forward
 from ..core.experiments import (TRAJECTORY_NAMES, lead_in, spin_up, trajectory,
-                                trajectory_parameters)
+                                trajectory_parameters, trajectory_target)
 from ..core import geometry
 from . import contract
 from .diagnostics import Heartbeat
@@ -186,6 +186,7 @@ class TrajectoryPublisher(Node):
             raise StartupParameterError(
                 'robot_config', robot, 'a shipped robot name or a robot YAML path',
                 str(exc)) from None
+        self._path = (None, None)   # (the kwargs it is of, trajectory_target): pose_at
         try:
             self._kwargs = self._trajectory_kwargs({})
         except (ValueError, TypeError) as exc:
@@ -314,11 +315,14 @@ class TrajectoryPublisher(Node):
 
     def pose_at(self, t: float):
         """(position (3,), quaternion (4,)) of the target at time ``t`` [s]."""
-        kw = dict(self._kwargs)
-        name = kw.pop('name')
-        pos, z = trajectory(name, t, self.cfg, **kw)
-        q = np.array([0.0, 0.0, 0.0, 1.0]) if z is None else geometry.quaternion_from_z_axis(z[0])
-        return pos[0], q
+        kw = self._kwargs
+        if self._path[0] is not kw:   # checked and merged once per change
+            args = dict(kw)
+            name = args.pop('name')
+            self._path = (kw, trajectory_target(name, self.cfg, **args))
+        pos, z = self._path[1](t)
+        q = np.array([0.0, 0.0, 0.0, 1.0]) if z is None else geometry.quaternion_from_z_axis(z)
+        return pos, q
 
     def _period(self) -> float:
         return float(self._effective()['period'])

@@ -281,3 +281,33 @@ def test_spin_down_mirrors_the_spin_up():
     assert spin_down(9.0, d) == pytest.approx(d / 2)      # at rest after it
     for s in np.linspace(0, d, 11):   # the spin-up run backwards
         assert spin_down(s, d) == pytest.approx(d / 2 - spin_up(d - s, d))
+
+
+@pytest.mark.parametrize("name,config,params", [
+    ("planar_circle", "one_segment", {"period": 2.0}),
+    ("bending_circle", "two_segment", {"period": 4.0, "bending_angle_deg": 10.0}),
+    ("space_rose", "two_segment", {"height": 0.2}),
+])
+def test_trajectory_target_is_the_trajectory_with_its_parameters_merged_once(
+        monkeypatch, name, config, params):
+    """``trajectory_target(t)`` gives :func:`trajectory`'s pose at t without re-merging.
+
+    The defaults cost a stage-1 set-up (about 1 ms, 40 % of a closed-loop
+    simulation's CPU when it was done at every control step): the target
+    function merges the parameters once, when it is made.
+    """
+    from bellow_ancf_ros.core.experiments import trajectories as tr
+    times = [0.0, 0.37, 1.9, 7.25]
+    expected = [trajectory(name, t, config, **params) for t in times]
+    target = tr.trajectory_target(name, config, **params)
+
+    def merged_again(*args, **kwargs):
+        raise AssertionError("parameters merged again")
+    monkeypatch.setattr(tr, "_merge", merged_again)
+    for t, (pos, z) in zip(times, expected):
+        got_p, got_z = target(t)
+        np.testing.assert_array_equal(got_p, pos[0])
+        if z is None:
+            assert got_z is None
+        else:
+            np.testing.assert_array_equal(got_z, z[0])
