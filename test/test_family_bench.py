@@ -94,3 +94,42 @@ def test_the_docs_show_the_identified_creep_table_of_its_last_full_run():
         data = json.load(f)
     assert data['robots_per_count'] >= 100 and data['creep'] == 'identified'
     assert family_bench.doc_block('identified') == family_bench.markdown(data)
+
+
+def test_a_robots_play_is_read_from_a_staircase():
+    """``--lab``: the regulators' play of a drawn robot, as ``fit_play`` reads it."""
+    from bellow_ancf_ros.core.sim import draw_robot
+    draw = draw_robot('two_segment', 25)     # play 1.57 kPa
+    got = family_bench.identified_play(draw)
+    assert got['error'] == ''
+    assert got['width_pa'] == pytest.approx(draw.values['regulator_hysteresis_pa'], abs=20.0)
+
+
+def test_the_calibration_finds_the_drawn_robot():
+    """``--lab``: the nominal file calibrated on a drawn robot predicts its poses far better."""
+    from bellow_ancf_ros.core import solve_forward
+    from bellow_ancf_ros.core.sim import draw_robot
+    base = family_bench.load_robot('one_segment')
+    draw = draw_robot('one_segment', 3)
+    cfg, rmse = family_bench.calibrated_config(draw, base)
+    assert rmse < 0.5   # the motion capture's noise (0.05-0.3 mm) and the finer mesh
+    p = np.array([40e3, 0.0, 10e3])
+    truth = solve_forward(family_bench.RobotModel(draw.config), p).position
+    before = solve_forward(family_bench.RobotModel(base), p).position
+    after = solve_forward(family_bench.RobotModel(cfg), p).position
+    assert np.linalg.norm(after - truth) < 0.2 * np.linalg.norm(before - truth)
+
+
+def test_the_lab_table_says_what_was_identified():
+    runs = [_run(i, 0.1, 0.05) for i in range(4)]
+    for i, r in enumerate(runs):
+        r['values'].update(creep_time_constant_s=2.0, regulator_hysteresis_pa=1000.0)
+        r['creep_identified'] = {'fraction': 0.1, 'time_constant_s': 2.0, 'error': ''}
+        r['calibration'] = {'rmse_after_mm': 0.1 * (i + 1)}
+        r['play_identified'] = ({'width_pa': 1000.0 + 10.0 * i, 'error': ''} if i < 3 else
+                                {'width_pa': None, 'error': 'no'})
+    text = family_bench.markdown({'robots_per_count': 4, 'creep': 'identified', 'lab': True,
+                                  'runs': runs})
+    assert ('calibrated robot files (the fit\'s RMSE after: 0.250 mm median, 0.400 mm worst), '
+            'the play read on 3 of 4 robots (off by 10 Pa median, 20 Pa worst)') in text
+    assert 'creep identified on 4 of 4 robots' in text

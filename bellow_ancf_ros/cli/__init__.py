@@ -37,8 +37,9 @@ This interface is a contract other programs script against:
   ``register(subparsers)`` (:data:`COMMAND_FAMILIES`, in help order):
   :mod:`.solve` (``forward``, ``inverse``), :mod:`.loads` (``compliance``,
   ``stiffness``), :mod:`.dynamics` (``modes``, ``simulate``; also ``identify
-  damping``), :mod:`.creep` (``identify creep``), :mod:`.identify` (``identify
-  stiffness|deff|da|damping|creep``), :mod:`.studies` (``convergence``, ``workspace``,
+  damping``), :mod:`.creep` (``identify creep``), :mod:`.play` (``identify
+  play``), :mod:`.identify` (``identify stiffness|deff|da|damping|creep|play``),
+  :mod:`.studies` (``convergence``, ``workspace``,
   ``compare-pcc``), :mod:`.track` (``track``), :mod:`.calibrate`
   (``calibrate``), :mod:`.record` (``record``), :mod:`.warmup` (``warm-up``);
   shared helpers in

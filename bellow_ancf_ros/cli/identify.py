@@ -10,6 +10,7 @@
     bellow-ancf identify da --drop-mm D --tip-mass-kg M [--config C] [--elements N] [--json]
     bellow-ancf identify damping (--csv FILE | --bag DIR) ...   (module :mod:`.dynamics`)
     bellow-ancf identify creep (--csv FILE | --bag DIR) ...     (module :mod:`.creep`)
+    bellow-ancf identify play (--csv FILE | --bag DIR) ...      (module :mod:`.play`)
 
 A readable table on stdout, or with ``--json`` one JSON object on one line
 (SI units, non-finite numbers as ``null``); plots are PNG files.  ``--yaml-out``
@@ -43,6 +44,7 @@ from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_out, emit
                      positive_float, print_lines, run_study, warn)
 from .creep import register_identify_creep
 from .dynamics import register_identify_damping
+from .play import register_identify_play
 from .output import (figure, fmt, robot_file_text, robot_name_for, save_figure, source_text,
                      table, write_text)
 
@@ -293,6 +295,7 @@ def register(subparsers):
     _register_da(isub)
     register_identify_damping(isub)
     register_identify_creep(isub)
+    register_identify_play(isub)
 
 
 def _register_stiffness(isub):

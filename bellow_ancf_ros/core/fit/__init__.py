@@ -15,19 +15,24 @@
   recording to fit;
 * :func:`fit_creep`: the bellows' creep fraction and time constant from a
   recorded pressure step held still; :func:`pressure_step_time`: when a
-  recording's pressure command stepped.
+  recording's pressure command stepped;
+* :func:`fit_play`: the pressure regulators' play from a staircase of
+  set-points (:func:`play_staircase`) and their own pressure sensors.
 """
 
 from . import calibration, identification
 from ._cantilever import Cantilever, CantileverResult
 from ._creep import CreepFit, fit_creep, pressure_step_time
 from ._excitation import excitation_sequence, random_pressures, simulate_recording
+from ._regulator_play import SETTLE_S as PLAY_SETTLE_S
+from ._regulator_play import PlayFit, fit_play, play_staircase
 from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_STREAM_COLUMNS, POSE_TOPIC,
                           PRESSURE_TOPIC, BagWriter, PoseStream, Recording, RecordingError,
                           csv_header, numeric_csv_rows, pressure_unit, read_bag, read_csv,
                           read_pose_stream,
                           read_pose_stream_bag, read_pose_stream_csv, read_recording,
-                          settled_samples, write_bag, write_csv)
+                          settled_samples, write_bag, write_csv, MEASURED_PRESSURE_TOPIC,
+                          PressureRecording, pressure_csv_header, read_pressure_recording)
 from ._sensitivities import RecordingModel
 from ._vibration import (DampingIdentification, FreeVibrationFit, RingdownWindow,
                          fit_free_vibration, identify_damping, ringdown_window)
@@ -37,7 +42,9 @@ __all__ = [
     "BagWriter", "CalibrationError", "DampingIdentification", "FreeVibrationFit",
     "fit_free_vibration", "identify_damping", "RingdownWindow", "ringdown_window",
     "CalibrationResult", "Cantilever", "CreepFit", "fit_creep", "pressure_step_time",
-    "CantileverResult",
+    "CantileverResult", "PLAY_SETTLE_S", "PlayFit", "fit_play", "play_staircase",
+    "MEASURED_PRESSURE_TOPIC",
+    "PressureRecording", "pressure_csv_header", "read_pressure_recording",
     "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_STREAM_COLUMNS", "POSE_TOPIC",
     "PRESSURE_TOPIC", "PoseStream", "Recording", "read_pose_stream", "read_pose_stream_bag",
     "read_pose_stream_csv",

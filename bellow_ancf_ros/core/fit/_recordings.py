@@ -35,6 +35,15 @@ such a file); bag: every ``measured_pose`` message (times: the header
 stamps, the capture times, when all are set, else the receive times) and
 ``pressure_command`` when the bag has it.
 
+A *pressure recording* (:class:`PressureRecording`,
+:func:`read_pressure_recording`) holds the regulators' own pressure sensors
+and the set-points in effect (what :func:`~._regulator_play.fit_play`
+reads): CSV columns ``t_s, p1_kpa ... pN_kpa, m1_kpa ... mN_kpa`` (set-point
+and measured pressure of each actuator, one row per measured sample); bag:
+every ``measured_pressure`` message (``std_msgs/Float64MultiArray``, the
+regulator driver's readings, units as ``pressure_command``'s), with the
+newest ``pressure_command`` received before it (receive times).
+
 Every problem is a :class:`RecordingError` (a ``ValueError``) with a one-line
 message naming the file, line or topic.  No ROS import.
 """
@@ -57,6 +66,8 @@ __all__ = [
     'FLOAT64_MULTI_ARRAY', 'POSE_STAMPED', 'pressure_unit', 'BagWriter', 'PoseStream',
     'numeric_csv_rows',
     'read_pose_stream', 'read_pose_stream_csv', 'read_pose_stream_bag', 'POSE_STREAM_COLUMNS',
+    'MEASURED_PRESSURE_TOPIC', 'PressureRecording', 'pressure_csv_header',
+    'read_pressure_recording',
 ]
 
 PRESSURE_TOPIC = 'pressure_command'
@@ -402,12 +413,15 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
 
 def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3',
               pressure_topic: str = '/' + PRESSURE_TOPIC, pose_topic: str = '/' + POSE_TOPIC,
-              unit: str = 'Pa', frame_id: str = 'mocap') -> None:
+              unit: str = 'Pa', frame_id: str = 'mocap', measured: Sequence = (),
+              measured_topic: str = '/' + 'measured_pressure') -> None:
     """Write a rosbag2 directory (``storage`` 'sqlite3' or 'mcap') without ROS.
 
     ``commands``: ``(t_s, pressures_pa)`` pairs; ``poses``: ``(t_s, position_m,
-    quaternion_xyzw)`` triples (the pose header stamp is ``t_s`` too).  Pressures
-    are written in ``unit`` with the layout label the nodes use.
+    quaternion_xyzw)`` triples (the pose header stamp is ``t_s`` too);
+    ``measured``: ``(t_s, pressures_pa)`` pairs of the regulators' sensors, on
+    ``measured_topic`` (none: no such topic).  Pressures are written in
+    ``unit`` with the layout label the nodes use.
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -421,13 +435,16 @@ def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3
     events = [(float(t), 0, np.asarray(p, dtype=float)) for t, p in commands]
     events += [(float(t), 1, (np.asarray(x, dtype=float), np.asarray(q, dtype=float)))
                for t, x, q in poses]
+    events += [(float(t), 2, np.asarray(p, dtype=float)) for t, p in measured]
     events.sort(key=lambda e: (e[0], e[1]))
     with Writer(path, version=9, storage_plugin=plugins[storage]) as writer:
         c_cmd = writer.add_connection(pressure_topic, FLOAT64_MULTI_ARRAY, typestore=store)
         c_pose = writer.add_connection(pose_topic, POSE_STAMPED, typestore=store)
+        c_meas = (writer.add_connection(measured_topic, FLOAT64_MULTI_ARRAY, typestore=store)
+                  if len(measured) else None)
         for t, kind, value in events:
             ns = int(round(t * 1e9))
-            if kind == 0:
+            if kind != 1:
                 values = value / _UNITS[unit]
                 dim = T['std_msgs/msg/MultiArrayDimension'](
                     label=f'actuator_pressure_gauge_{unit.lower()}', size=len(values),
@@ -435,7 +452,8 @@ def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3
                 msg = T[FLOAT64_MULTI_ARRAY](
                     layout=T['std_msgs/msg/MultiArrayLayout'](dim=[dim], data_offset=0),
                     data=values.astype(np.float64))
-                writer.write(c_cmd, ns, store.serialize_cdr(msg, FLOAT64_MULTI_ARRAY))
+                writer.write(c_cmd if kind == 0 else c_meas, ns,
+                             store.serialize_cdr(msg, FLOAT64_MULTI_ARRAY))
             else:
                 x, q = value
                 stamp = T['builtin_interfaces/msg/Time'](sec=ns // 1_000_000_000,
@@ -665,3 +683,117 @@ def read_pose_stream(csv_path=None, bag_path=None, **bag_options) -> PoseStream:
     if csv_path is not None:
         return read_pose_stream_csv(csv_path)
     return read_pose_stream_bag(bag_path, **bag_options)
+
+
+# ------------------------------------------------------- pressure recordings
+#: The topic a regulator driver publishes its pressure sensors' readings on.
+MEASURED_PRESSURE_TOPIC = 'measured_pressure'
+
+
+@dataclass
+class PressureRecording:
+    """The regulators' measured pressures and the set-points in effect (module doc).
+
+    ``times_s`` (n,) increasing; ``command_pa`` and ``measured_pa`` (n, A) [Pa].
+    """
+
+    times_s: np.ndarray
+    command_pa: np.ndarray
+    measured_pa: np.ndarray
+    source: str = ''
+
+    def __len__(self) -> int:
+        """The number of measured samples."""
+        return len(self.times_s)
+
+
+def pressure_csv_header(n_actuators: int) -> list[str]:
+    """``t_s, p1_kpa, ..., pN_kpa, m1_kpa, ..., mN_kpa``."""
+    return (['t_s'] + [f'p{i + 1}_kpa' for i in range(n_actuators)]
+            + [f'm{i + 1}_kpa' for i in range(n_actuators)])
+
+
+def _pressure_recording(t, cmd, meas, label: str) -> PressureRecording:
+    t, cmd, meas = np.asarray(t, float), np.asarray(cmd, float), np.asarray(meas, float)
+    if len(t) < 3:
+        raise RecordingError(f'{label}: {len(t)} measured samples with a set-point in effect; '
+                             'at least 3 needed')
+    if not (np.all(np.isfinite(cmd)) and np.all(np.isfinite(meas))):
+        raise RecordingError(f'{label}: a pressure is not finite (NaN or inf)')
+    order = np.argsort(t, kind='stable')
+    return PressureRecording(t[order], cmd[order], meas[order], source=label)
+
+
+def _read_pressure_csv(path) -> PressureRecording:
+    label = str(path)
+
+    def check(header, line):
+        n = (len(header) - 1) // 2
+        if n < 1 or header != pressure_csv_header(n):
+            raise RecordingError(f'{label}, line {line}: expected the header '
+                                 f'{",".join(pressure_csv_header(max(n, 1)))}, got '
+                                 f'{",".join(header)}')
+    header, rows = numeric_csv_rows(path, check)
+    if header is None:
+        raise RecordingError(f'{label}: the file is empty (expected the header '
+                             f'{",".join(pressure_csv_header(3))})')
+    data = np.array([v for _, v in rows]).reshape(-1, len(header))
+    n = (len(header) - 1) // 2
+    return _pressure_recording(data[:, 0], data[:, 1:1 + n] * 1e3, data[:, 1 + n:] * 1e3, label)
+
+
+def _read_pressure_bag(path, command_topic: str, measured_topic: str) -> PressureRecording:
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
+    label = str(path)
+    if not Path(path).exists():
+        raise RecordingError(f'{label}: no such bag directory')
+    store = _typestore()
+    got = {}
+    try:
+        with Reader(path) as reader:
+            topics = {c.topic: c.msgtype for c in reader.connections}
+            names = {_find_topic(topics, command_topic, label, '--pressure-topic'): 'command',
+                     _find_topic(topics, measured_topic, label, '--measured-topic'): 'measured'}
+            for topic in names:
+                if topics[topic] != FLOAT64_MULTI_ARRAY:
+                    raise RecordingError(f'{label}: topic {topic} has type {topics[topic]}, '
+                                         f'expected {FLOAT64_MULTI_ARRAY}')
+                got[names[topic]] = ([], [])
+            conns = [c for c in reader.connections if c.topic in names]
+            for conn, stamp, raw in reader.messages(connections=conns):
+                msg = store.deserialize_cdr(raw, conn.msgtype)
+                times, values = got[names[conn.topic]]
+                where = f'{label}: {conn.topic} message {len(times) + 1}'
+                v = np.asarray(msg.data, dtype=float) * pressure_unit(msg, where)
+                if values and v.size != values[0].size:
+                    raise RecordingError(f'{where}: {v.size} pressures, earlier messages had '
+                                         f'{values[0].size}')
+                times.append(stamp * 1e-9)
+                values.append(v)
+    except RecordingError:
+        raise
+    except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
+        raise RecordingError(f'{label}: cannot read the bag: '
+                             f'{type(exc).__name__}: {exc}') from None
+    (tc, pc), (tm, pm) = got['command'], got['measured']
+    if pc and pm and pc[0].size != pm[0].size:
+        raise RecordingError(f'{label}: {pc[0].size} set-points but {pm[0].size} measured '
+                             'pressures per message')
+    tc, tm = np.array(tc), np.array(tm)
+    k = np.searchsorted(tc, tm, side='right') - 1   # the newest set-point received before
+    keep = k >= 0
+    return _pressure_recording(tm[keep], np.array(pc)[k[keep]] if len(pc) else np.zeros((0, 1)),
+                               np.array(pm)[keep] if len(pm) else np.zeros((0, 1)), label)
+
+
+def read_pressure_recording(csv_path=None, bag_path=None,
+                            command_topic: str = PRESSURE_TOPIC,
+                            measured_topic: str = MEASURED_PRESSURE_TOPIC) -> PressureRecording:
+    """Read a pressure recording from a CSV file or a bag directory (exactly one)."""
+    if (csv_path is None) == (bag_path is None):
+        raise RecordingError('give exactly one of a CSV file and a bag directory')
+    if csv_path is not None:
+        return _read_pressure_csv(csv_path)
+    return _read_pressure_bag(bag_path, command_topic, measured_topic)
