@@ -133,3 +133,10 @@ def test_the_lab_table_says_what_was_identified():
     assert ('calibrated robot files (the fit\'s RMSE after: 0.250 mm median, 0.400 mm worst), '
             'the play read on 3 of 4 robots (off by 10 Pa median, 20 Pa worst)') in text
     assert 'creep identified on 4 of 4 robots' in text
+
+
+def test_the_docs_show_the_lab_table_of_its_last_full_run():
+    with open(os.path.join(ROOT, "bench", "family_lab.json")) as f:
+        data = json.load(f)
+    assert data['robots_per_count'] >= 100 and data['lab'] is True
+    assert family_bench.doc_block('lab') == family_bench.markdown(data)

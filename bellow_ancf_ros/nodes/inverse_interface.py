@@ -49,7 +49,8 @@ PARAMETERS = (
         'out [Hz]; 0 = off. A regulator driver tells a live controller from a dead one by '
         'it (command_timeout_s).', D, lo=0.0, hi=1000.0, read_only=True)),
     Param('regulator_play_kpa', 0.0, descriptor(
-        "The regulators' hysteresis (play) band [kPa], from their data sheet: each command "
+        "The regulators' hysteresis (play) band [kPa], from their data sheet or bellow-ancf "
+        'identify play: each command '
         'is sent at the edge of the band that puts the valve exactly at the pressure wanted '
         '(a change of direction no longer vanishes in the play; a shaped step then leaves no '
         'swing); 0 = off. Read on configure.', D, lo=0.0, hi=50.0)),
