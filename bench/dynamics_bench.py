@@ -28,7 +28,16 @@ seconds per CPU second of the whole run), ``simulate``'s real-time factor
 over the integrator's (medians, the same machine load), and PASS/MISS against the goals
 (:data:`RTF_GOALS`: the integrator at 10x real time for one segment, 3x for
 two; :data:`SIMULATE_GOALS`: ``simulate`` at 30x for one and two segments;
-none for three).  Then the time of
+none for three).  Then, for the robots that have a shipped simulated robot
+(``<robot>_mismatched``: one and two segments), the rest of the public API
+at that goal: ``SimulatedRobot``, its realistic default (twice the
+model's elements, regulators, creep, motion capture) at its own physics
+rate, the sine on the top segment's first actuator commanded at 50 Hz
+and every motion-capture sample taken, over two sine periods; and
+``LoopSimulation``, the inverse node's closed loop at its defaults
+(:func:`~bellow_ancf_ros.core.loop.default_loop`) on the paper's circle
+at 10x over one period after 1 s at its start, with the robot's share of
+its CPU time (its steps and captures).  Then the time of
 ``natural_modes`` (six modes) at that equilibrium, median of ``--reps``.
 One BLAS thread, as the nodes run.  Writes ``bench/dynamics.json``;
 ``--doc`` puts the output into docs/performance.md between its markers (a
@@ -51,6 +60,8 @@ from bellow_ancf_ros.cli.dynamics import CHECK_S  # noqa: E402
 from bellow_ancf_ros.core import (GeneralizedAlpha, RobotModel, limit_blas_threads,  # noqa: E402
                                   load_robot, natural_modes, solve_forward)
 from bellow_ancf_ros.core.dynamics import sample_motion  # noqa: E402
+from bellow_ancf_ros.core.loop import default_loop, paper_circle  # noqa: E402
+from bellow_ancf_ros.core.sim import SimulatedRobot  # noqa: E402
 from bellow_ancf_ros.demos.pipeline import machine_state  # noqa: E402
 from update_readme import block, splice  # noqa: E402
 
@@ -122,6 +133,45 @@ def run_once(model, fw_start, kind, f1, released, way):
     return np.array(steps), ig.state.t / cpu, len(steps), halvings, ok
 
 
+def robot_rtf(name, model, kind):
+    """One run of the public API: (real-time factor, the robot's share of the CPU time)."""
+    robot = SimulatedRobot(f'{name}_mismatched', seed=1)
+    dt = 1.0 / robot.auto_physics_rate_hz
+    spent = [0.0]
+
+    def timed(fn):
+        def wrapped(*args, **kwargs):
+            c0 = time.process_time()
+            out = fn(*args, **kwargs)
+            spent[0] += time.process_time() - c0
+            return out
+        return wrapped
+    if kind == 'LoopSimulation':
+        sim = default_loop(model, robot)
+        path = paper_circle(model.cfg, 2.0)
+        sim.run(1.0, lambda t: path(0.0))
+        robot.step, robot.capture = timed(robot.step), timed(robot.capture)
+        c0 = time.process_time()
+        t0 = robot.time_s
+        sim.run(2.0, lambda t: path(t - t0))
+        cpu = time.process_time() - c0
+        return 2.0 / cpu, spent[0] / cpu
+    pressures = _inputs(robot.model, 'sine', robot.first_mode_hz)
+    duration = 4.0 / robot.first_mode_hz
+    c0 = time.process_time()
+    t_cmd = t_cap = 0.0
+    while robot.time_s < duration:
+        if robot.time_s >= t_cmd - 1e-12:
+            robot.command(pressures(robot.time_s))
+            t_cmd += 0.02
+        robot.step(dt)
+        while t_cap <= robot.time_s + 1e-12:
+            robot.capture(t_cap)
+            t_cap += robot.mocap.period_s
+    cpu = time.process_time() - c0
+    return robot.time_s / cpu, 1.0
+
+
 def bench_robot(m, reps):
     """All runs of one robot: its entry of the run file (printed as it comes)."""
     model = RobotModel(load_robot(ROBOTS[m]))
@@ -156,6 +206,14 @@ def bench_robot(m, reps):
             g['step_cpu_p99_s'] = float(np.percentile(st, 99))
             robot['runs'].append(g)
             print(run_line(robot, g), flush=True)
+    if m in SIMULATE_GOALS:
+        robot['public'] = []
+        for kind in ('SimulatedRobot', 'LoopSimulation'):
+            robot_rtf(ROBOTS[m], model, kind)   # warm-up
+            got = [robot_rtf(ROBOTS[m], model, kind) for _ in range(reps)]
+            g = {'what': kind, 'rtf': [x[0] for x in got], 'robot_share': [x[1] for x in got]}
+            robot['public'].append(g)
+            print(public_line(robot, g), flush=True)
     mt = []
     for _ in range(reps):
         t0 = time.perf_counter()
@@ -192,6 +250,19 @@ def run_line(r: dict, g: dict) -> str:
             f"{'completed' if g['completed'] else 'FAILED'}  {verdict}{ratio}")
 
 
+def public_line(r: dict, g: dict) -> str:
+    """A row of the public API's real-time factors."""
+    goal = SIMULATE_GOALS[r['m']]
+    med = float(np.median(g['rtf']))
+    line = (f"  {g['what']:<15} of {r['robot']}_mismatched  RTF median {med:7.2f}x  lowest "
+            f"{min(g['rtf']):7.2f}x  {'PASS' if med >= goal else 'MISS'} (goal {goal:g}x)")
+    if g['what'] == 'LoopSimulation':
+        share = float(np.median(g['robot_share']))
+        line += (f"  the robot {100 * share:.0f} % of it (alone "
+                 f"{med / max(share, 1e-9):.2f}x), the controller the rest")
+    return line
+
+
 def modes_line(r: dict) -> str:
     """The modal analysis' row."""
     mt = r['modes_s']
@@ -215,6 +286,7 @@ def text(data: dict) -> str:
     for r in data['robots']:
         out.append(robot_line(r))
         out.extend(run_line(r, g) for g in r['runs'])
+        out.extend(public_line(r, g) for g in r.get('public', []))
         out.append(modes_line(r))
     return "\n".join(out) + "\n"
 

@@ -288,11 +288,12 @@ def _lab(runs: list) -> str:
     ok = [r for r in runs if r['play_identified']['width_pa'] is not None]
     err = [abs(r['play_identified']['width_pa'] - r['values']['regulator_hysteresis_pa'])
            for r in ok]
-    text = (f'calibrated robot files (the fit\'s RMSE after: {np.median(rmse):.3f} mm median, '
-            f'{max(rmse):.3f} mm worst), the play read on {len(ok)} of {len(runs)} robots')
+    text = (f'the robot file calibrated (the fit\'s RMSE after: {np.median(rmse):.3f} mm '
+            f'median, {max(rmse):.3f} mm worst), the play read on {len(ok)} of {len(runs)} '
+            'robots')
     if ok:
         text += f' (off by {np.median(err):.0f} Pa median, {max(err):.0f} Pa worst)'
-    return text
+    return text + ' and compensated'
 
 
 def markdown(data: dict) -> str:
@@ -304,8 +305,7 @@ def markdown(data: dict) -> str:
             'pressure step and compensated (' + _identification(runs) + ')')
     if data.get('lab'):
         what = (f'the inverse node\'s defaults as a lab runs them after identifying its robot: '
-                f'{_lab(runs)}, both compensated, and the creep identified and compensated '
-                f'({_identification(runs)})')
+                f'{_lab(runs)}, the creep identified and compensated ({_identification(runs)})')
     out = [f'{data["robots_per_count"]} robots of the family per segment count (seeds 0-'
            f'{data["robots_per_count"] - 1}), {what}, targets not '
            'previewed; RMSE over the second period at full speed.', '',

@@ -130,8 +130,10 @@ def test_the_lab_table_says_what_was_identified():
                                 {'width_pa': None, 'error': 'no'})
     text = family_bench.markdown({'robots_per_count': 4, 'creep': 'identified', 'lab': True,
                                   'runs': runs})
-    assert ('calibrated robot files (the fit\'s RMSE after: 0.250 mm median, 0.400 mm worst), '
-            'the play read on 3 of 4 robots (off by 10 Pa median, 20 Pa worst)') in text
+    assert ('the robot file calibrated (the fit\'s RMSE after: 0.250 mm median, 0.400 mm '
+            'worst), the play read on 3 of 4 robots (off by 10 Pa median, 20 Pa worst) and '
+            'compensated, the creep identified and compensated (creep identified on 4 of '
+            '4') in text
     assert 'creep identified on 4 of 4 robots' in text
 
 

@@ -118,6 +118,20 @@ def test_dynamics_bench_rows_give_verdicts_and_simulates_ratio():
     assert lines[4] == '  modes    natural_modes (6 modes) median     25.0 ms, max     30.0 ms'
 
 
+def test_dynamics_bench_rows_of_the_public_api():
+    """SimulatedRobot and LoopSimulation: verdicts at simulate's goal, the robot's share."""
+    data = _dynamics()
+    data['robots'][0]['public'] = [
+        {'what': 'SimulatedRobot', 'rtf': [9.0, 11.0, 10.0], 'robot_share': [1.0] * 3},
+        {'what': 'LoopSimulation', 'rtf': [3.0, 4.0, 5.0], 'robot_share': [0.5, 0.6, 0.55]}]
+    lines = dynamics_bench.text(data).splitlines()
+    assert lines[4] == ('  SimulatedRobot  of one_segment_mismatched  RTF median   10.00x  lowest '
+                        '   9.00x  MISS (goal 30x)')
+    assert lines[5].endswith('MISS (goal 30x)  the robot 55 % of it (alone 7.27x), the '
+                             'controller the rest')
+    assert lines[6].startswith('  modes')
+
+
 def test_the_docs_show_the_dynamics_bench_of_the_last_run():
     with open(os.path.join(ROOT, 'bench', 'dynamics.json')) as f:
         data = json.load(f)
