@@ -57,8 +57,8 @@ from scipy.stats import spearmanr
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 from bellow_ancf_ros.core.sim import draw_robot
 from bellow_ancf_ros.core.loop import circle_case, default_loop, held_case, step_case
-from bellow_ancf_ros.core.fit import (calibrate, excitation_sequence, fit_creep, fit_play,
-                                      play_staircase, simulate_recording)
+from bellow_ancf_ros.core.fit import (CalibrationError, calibrate, excitation_sequence,
+                                      fit_creep, fit_play, play_staircase, simulate_recording)
 from update_readme import block, splice
 
 HERE = Path(__file__).resolve().parent
@@ -156,17 +156,22 @@ def identified_play(draw) -> dict:
 
 
 def calibrated_config(draw, base):
-    """``base`` calibrated on ``draw``'s robot (:func:`calibrate`) and the fit's RMSE after [mm].
+    """``base`` calibrated on ``draw``'s robot (:func:`calibrate`) and how it went.
 
     The robot's settled poses at :func:`excitation_sequence`'s pressures,
     with its motion capture's position and angle noise (seeded by the draw).
+    Returns ``(config, {'rmse_after_mm', 'error'})``: a refused calibration
+    (its reason in ``error``) leaves ``base``, as a lab keeps its file.
     """
     e = draw.effects
     rec, _, _ = simulate_recording(draw.config, excitation_sequence(base),
                                    position_noise_m=e.position_noise_m,
                                    angle_noise_rad=e.angle_noise_rad, seed=draw.seed)
-    cal = calibrate(base, rec)
-    return cal.config, cal.rmse_after_mm
+    try:
+        cal = calibrate(base, rec)
+    except CalibrationError as exc:
+        return base, {'rmse_after_mm': None, 'error': str(exc)}
+    return cal.config, {'rmse_after_mm': cal.rmse_after_mm, 'error': ''}
 
 
 def evaluate(robot: str, seed: int, slow: bool, creep: str = 'unknown',
@@ -185,8 +190,7 @@ def evaluate(robot: str, seed: int, slow: bool, creep: str = 'unknown',
     ident, play, calibration, loop = None, None, None, default_loop
     if lab:
         creep = 'identified'
-        cfg, rmse = calibrated_config(draw, base)
-        calibration = {'rmse_after_mm': rmse}
+        cfg, calibration = calibrated_config(draw, base)
         play = identified_play(draw)
         base = cfg
     model = RobotModel(base)
@@ -284,13 +288,17 @@ def _identification(runs: list) -> str:
 
 def _lab(runs: list) -> str:
     """How well the calibration and the play's reading went over ``runs`` (``--lab``)."""
-    rmse = [r['calibration']['rmse_after_mm'] for r in runs]
+    rmse = [r['calibration']['rmse_after_mm'] for r in runs
+            if r['calibration']['rmse_after_mm'] is not None]
     ok = [r for r in runs if r['play_identified']['width_pa'] is not None]
     err = [abs(r['play_identified']['width_pa'] - r['values']['regulator_hysteresis_pa'])
            for r in ok]
-    text = (f'the robot file calibrated (the fit\'s RMSE after: {np.median(rmse):.3f} mm '
-            f'median, {max(rmse):.3f} mm worst), the play read on {len(ok)} of {len(runs)} '
-            'robots')
+    text = f'the robot file calibrated on {len(rmse)} of {len(runs)} robots'
+    if rmse:
+        text += (f' (the fit\'s RMSE after: {np.median(rmse):.3f} mm median, {max(rmse):.3f} '
+                 'mm worst)')
+    text += (f', the others keep the nominal file; the play read on {len(ok)} of {len(runs)} '
+             'robots')
     if ok:
         text += f' (off by {np.median(err):.0f} Pa median, {max(err):.0f} Pa worst)'
     return text + ' and compensated'

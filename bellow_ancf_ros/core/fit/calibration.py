@@ -311,7 +311,14 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
         raise CalibrationError(f'the forward model does not converge for {prob.failed} '
                                'sample(s) at the '
                                'fitted parameters')
-    return _result(cal, prob, v, sol, before, nfev, time.perf_counter() - start)
+    res = _result(cal, prob, v, sol, before, nfev, time.perf_counter() - start)
+    if res.rmse_after_mm > res.rmse_before_mm and res.rmse_after_deg > res.rmse_before_deg:
+        raise CalibrationError(
+            f'the fit ended farther from the recording than the nominal robot file (position '
+            f'RMSE {res.rmse_before_mm:.3f} -> {res.rmse_after_mm:.3f} mm, z-axis '
+            f'{res.rmse_before_deg:.3f} -> {res.rmse_after_deg:.3f} deg): the robot differs in '
+            f'what the fitted keys {keys} cannot say (a mass, a length: free it)')
+    return res
 
 
 def _frame_jacobian(prob: _Problem, v, fws):

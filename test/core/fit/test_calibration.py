@@ -190,3 +190,23 @@ def test_pressures_outside_the_limits_are_refused(one_cfg):
     rec.pressures_pa[3, 1] = 200e3
     with pytest.raises(cal.CalibrationError, match='sample 4 .* outside the limits'):
         cal.calibrate(one_cfg, rec)
+
+
+def test_a_fit_that_ends_worse_than_the_nominal_file_is_refused():
+    """Never a silently wrong robot file: a robot the fitted keys cannot describe.
+
+    Robot 85 of the two-segment family carries 1.9 times the model's masses
+    (its first mode at 0.73 of the model's), which the default keys (pitch
+    radii, ``D_a``, ``D_eff``, stiffness) cannot say: the fit used to report
+    convergence at 21.4 mm against the nominal file's 10.0 mm.
+    """
+    from bellow_ancf_ros.core.fit import CalibrationError, simulate_recording
+    from bellow_ancf_ros.core.sim import draw_robot
+    base = load_robot('two_segment')
+    draw = draw_robot('two_segment', 85)
+    rec, _, _ = simulate_recording(draw.config, excitation_sequence(base),
+                                   position_noise_m=draw.effects.position_noise_m,
+                                   angle_noise_rad=draw.effects.angle_noise_rad, seed=85)
+    with pytest.raises(CalibrationError, match=r'farther from the recording than the nominal '
+                       r'robot file \(position RMSE 9\.9\d\d -> '):
+        cal.calibrate(base, rec)
