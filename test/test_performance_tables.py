@@ -119,7 +119,7 @@ def test_dynamics_bench_rows_give_verdicts_and_simulates_ratio():
 
 
 def test_dynamics_bench_rows_of_the_public_api():
-    """SimulatedRobot and LoopSimulation: verdicts at simulate's goal, the robot's share."""
+    """The rows of SimulatedRobot and LoopSimulation: verdicts at the goal, the robot's share."""
     data = _dynamics()
     data['robots'][0]['public'] = [
         {'what': 'SimulatedRobot', 'rtf': [9.0, 11.0, 10.0], 'robot_share': [1.0] * 3},
