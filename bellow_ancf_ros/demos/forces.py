@@ -199,6 +199,7 @@ class LoadRun:
         if self._hold is not None:
             self._hold.destroy()
         codes = stop_all(self.procs)   # the inverse node first: its vent reaches the others
+        self.rec.wait_for_vent()   # (its callback may run late on a busy machine)
         snap = self.rec.snapshot()
         self.rec.close()
         return {'codes': codes, 'rec': snap}

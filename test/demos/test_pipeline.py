@@ -88,3 +88,23 @@ def test_the_controller_stops_alone_before_the_others_so_its_vent_reaches_them()
     assert log[0] == ('stop', 'inverse')                  # exited (vented) first
     assert {e for e in log[1:3]} == {('interrupt', 'robot'), ('interrupt', 'forward')}
     assert [e for e in log[3:]] == [('stop', 'forward'), ('stop', 'robot')]
+
+
+def test_a_recorder_waits_for_the_vent_its_callback_may_take_late():
+    """``Recorder.wait_for_vent``: the newest command all zero, within the timeout."""
+    import threading
+    from types import SimpleNamespace
+
+    def rec(*commands):
+        return SimpleNamespace(lock=threading.Lock(), msgs={'pressure_command': [
+            (0.0, SimpleNamespace(data=list(c))) for c in commands]})
+    assert pipeline.Recorder.wait_for_vent(rec([10e3, 0.0, 5e3], [0.0, 0.0, 0.0]), timeout=0.1)
+    assert not pipeline.Recorder.wait_for_vent(rec([0.0, 0.0, 0.0], [1.0, 0.0, 0.0]),
+                                               timeout=0.1)
+    assert not pipeline.Recorder.wait_for_vent(rec(), timeout=0.05)
+    late = rec([20e3, 1e3, 0.0])
+    t0 = time.monotonic()
+    threading.Timer(0.2, lambda: late.msgs['pressure_command'].append(
+        (0.3, SimpleNamespace(data=[0.0, 0.0, 0.0])))).start()
+    assert pipeline.Recorder.wait_for_vent(late, timeout=5.0)
+    assert 0.15 < time.monotonic() - t0 < 2.0
