@@ -68,6 +68,11 @@ _SIGMA_FLOOR = 1e-9
 PRIOR_SIGMA = 0.2
 
 
+#: A fit whose position and z-axis RMSEs both end more than this factor above the nominal
+#: file's is refused (a file already right at the noise may end a little either side of it).
+WORSE_THAN_NOMINAL = 1.1
+
+
 class CalibrationError(ValueError):
     """The data cannot be calibrated (too few samples, failed solves, ...): one line."""
 
@@ -312,7 +317,8 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
                                'sample(s) at the '
                                'fitted parameters')
     res = _result(cal, prob, v, sol, before, nfev, time.perf_counter() - start)
-    if res.rmse_after_mm > res.rmse_before_mm and res.rmse_after_deg > res.rmse_before_deg:
+    if (res.rmse_after_mm > WORSE_THAN_NOMINAL * res.rmse_before_mm
+            and res.rmse_after_deg > WORSE_THAN_NOMINAL * res.rmse_before_deg):
         raise CalibrationError(
             f'the fit ended farther from the recording than the nominal robot file (position '
             f'RMSE {res.rmse_before_mm:.3f} -> {res.rmse_after_mm:.3f} mm, z-axis '
