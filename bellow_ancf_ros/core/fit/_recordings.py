@@ -71,6 +71,8 @@ __all__ = [
 ]
 
 PRESSURE_TOPIC = 'pressure_command'
+#: The topic a regulator driver publishes its pressure sensors' readings on.
+MEASURED_PRESSURE_TOPIC = 'measured_pressure'
 POSE_TOPIC = 'measured_pose'
 FLOAT64_MULTI_ARRAY = 'std_msgs/msg/Float64MultiArray'
 POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
@@ -414,7 +416,7 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
 def write_bag(path, commands: Sequence, poses: Sequence, storage: str = 'sqlite3',
               pressure_topic: str = '/' + PRESSURE_TOPIC, pose_topic: str = '/' + POSE_TOPIC,
               unit: str = 'Pa', frame_id: str = 'mocap', measured: Sequence = (),
-              measured_topic: str = '/' + 'measured_pressure') -> None:
+              measured_topic: str = '/' + MEASURED_PRESSURE_TOPIC) -> None:
     """Write a rosbag2 directory (``storage`` 'sqlite3' or 'mcap') without ROS.
 
     ``commands``: ``(t_s, pressures_pa)`` pairs; ``poses``: ``(t_s, position_m,
@@ -686,8 +688,6 @@ def read_pose_stream(csv_path=None, bag_path=None, **bag_options) -> PoseStream:
 
 
 # ------------------------------------------------------- pressure recordings
-#: The topic a regulator driver publishes its pressure sensors' readings on.
-MEASURED_PRESSURE_TOPIC = 'measured_pressure'
 
 
 @dataclass
