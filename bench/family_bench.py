@@ -58,7 +58,8 @@ from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
 from bellow_ancf_ros.core.sim import draw_robot
 from bellow_ancf_ros.core.loop import circle_case, default_loop, held_case, step_case
 from bellow_ancf_ros.core.fit import (CalibrationError, calibrate, excitation_sequence,
-                                      fit_creep, fit_play, play_staircase, simulate_recording)
+                                      fit_creep, fit_play, play_staircase, simulate_recording,
+                                      staircase_recording)
 from update_readme import block, splice
 
 HERE = Path(__file__).resolve().parent
@@ -136,20 +137,10 @@ def identified_play(draw) -> dict:
     twice, each held 1 s) sent to the robot's regulators, their pressure
     sensors sampled at 100 Hz.  ``width_pa`` is None when the fit refused.
     """
-    regulators = draw.robot().regulators
-    starts, levels = play_staircase(10e3, 40e3)
-    dt, t, k = 0.01, 0.0, 0
-    times, sent, measured = [], [], []
-    while t < starts[-1] + 1.0 - 1e-9:
-        if k < len(starts) and t >= starts[k] - 1e-9:
-            regulators.set_command(np.full(regulators.n, levels[k]))
-            k += 1
-        measured.append(regulators.step(dt)[0])
-        t += dt
-        times.append(t)
-        sent.append(levels[k - 1])
+    times, sent, measured = staircase_recording(draw.robot().regulators,
+                                                *play_staircase(10e3, 40e3))
     try:
-        fit = fit_play(times, sent, measured)
+        fit = fit_play(times, sent, measured[:, 0])
     except ValueError as exc:
         return {'width_pa': None, 'error': str(exc)}
     return {'width_pa': fit.width_pa, 'error': ''}

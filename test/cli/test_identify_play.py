@@ -11,7 +11,8 @@ import json
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core.fit import play_staircase, pressure_csv_header, write_bag
+from bellow_ancf_ros.core.fit import (play_staircase, pressure_csv_header, staircase_recording,
+                                      write_bag)
 from bellow_ancf_ros.core.sim import PressureRegulators
 from test_cli import assert_one_line_error, run   # (the CLI tests' helpers)
 
@@ -22,21 +23,12 @@ CLOCK_S = 100.0
 def record(plays=PLAY_PA, moving=(True, True, True)):
     """``(t, set-points (n, 3), measured (n, 3))``: the staircase through three regulators."""
     starts, levels = play_staircase(10e3, 40e3)
-    regs = [PressureRegulators(1, -50e3, 150e3, 0.07, dead_time_s=0.02, hysteresis_pa=h)
-            for h in plays]
-    t, k, dt = 0.0, 0, 0.01
-    times, sent, measured = [], [], []
-    while t < starts[-1] + 1.0 - 1e-9:
-        if k < len(starts) and t >= starts[k] - 1e-9:
-            for reg, moves in zip(regs, moving):
-                reg.set_command([levels[k] if moves else 20e3])
-            k += 1
-        p = [reg.step(dt)[0] for reg in regs]
-        t += dt
-        times.append(CLOCK_S + t)
-        sent.append([levels[k - 1] if moves else 20e3 for moves in moving])
-        measured.append(p)
-    return np.array(times), np.array(sent), np.array(measured)
+    runs = [staircase_recording(
+        PressureRegulators(1, -50e3, 150e3, 0.07, dead_time_s=0.02, hysteresis_pa=h),
+        starts, levels if moves else np.full_like(levels, 20e3))
+        for h, moves in zip(plays, moving)]
+    return (CLOCK_S + runs[0][0], np.column_stack([r[1] for r in runs]),
+            np.column_stack([r[2][:, 0] for r in runs]))
 
 
 def write_csv(path, t, sent, measured):

@@ -25,7 +25,7 @@ from ._cantilever import Cantilever, CantileverResult
 from ._creep import CreepFit, fit_creep, pressure_step_time
 from ._excitation import excitation_sequence, random_pressures, simulate_recording
 from ._regulator_play import SETTLE_S as PLAY_SETTLE_S
-from ._regulator_play import PlayFit, fit_play, play_staircase
+from ._regulator_play import PlayFit, fit_play, play_staircase, staircase_recording
 from ._recordings import (FLOAT64_MULTI_ARRAY, POSE_STAMPED, POSE_STREAM_COLUMNS, POSE_TOPIC,
                           PRESSURE_TOPIC, BagWriter, PoseStream, Recording, RecordingError,
                           csv_header, numeric_csv_rows, pressure_unit, read_bag, read_csv,
@@ -43,6 +43,7 @@ __all__ = [
     "fit_free_vibration", "identify_damping", "RingdownWindow", "ringdown_window",
     "CalibrationResult", "Cantilever", "CreepFit", "fit_creep", "pressure_step_time",
     "CantileverResult", "PLAY_SETTLE_S", "PlayFit", "fit_play", "play_staircase",
+    "staircase_recording",
     "MEASURED_PRESSURE_TOPIC",
     "PressureRecording", "pressure_csv_header", "read_pressure_recording",
     "FLOAT64_MULTI_ARRAY", "POSE_STAMPED", "POSE_STREAM_COLUMNS", "POSE_TOPIC",

@@ -23,8 +23,9 @@ driver publishes):
   comes from the spread of the offsets (1.4826 times their median absolute
   deviation).
 
-:func:`play_staircase` makes such a recording's set-points.  Every failure
-is a ``ValueError`` with a one-line reason.
+:func:`play_staircase` makes such a recording's set-points and
+:func:`staircase_recording` plays them to simulated regulators.  Every
+failure is a ``ValueError`` with a one-line reason.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['PlayFit', 'fit_play', 'play_staircase']
+__all__ = ['PlayFit', 'fit_play', 'play_staircase', 'staircase_recording']
 
 #: Default time after a set-point step before its pressure counts as settled [s]: five
 #: time constants of the slowest regulators the project knows (0.12 s) and their dead time.
@@ -66,6 +67,30 @@ def play_staircase(low_pa: float, high_pa: float, steps: int = 5, cycles: int = 
     up = np.linspace(low_pa, high_pa, steps + 1)
     levels = np.concatenate([up] + [np.concatenate((up[-2::-1], up[1:]))] * cycles)
     return np.arange(len(levels)) * float(hold_s), levels
+
+
+def staircase_recording(regulators, starts_s, levels_pa, dt_s: float = 0.01):
+    """The staircase ``(starts_s, levels_pa)`` sent to ``regulators``, their sensors sampled.
+
+    ``regulators``: anything with ``n``, ``set_command(p)`` and ``step(dt) ->
+    pressures`` (:class:`~bellow_ancf_ros.core.sim.PressureRegulators`); every
+    set-point gets each level, held until the next start (the last one as
+    long as the one before it).  Returns ``(times (m,),
+    set-point in effect (m,), measured (m, n))``, one row every ``dt_s``.
+    """
+    starts = np.asarray(starts_s, dtype=float)
+    hold = starts[-1] - starts[-2] if len(starts) > 1 else 1.0
+    t, k = 0.0, 0
+    times, sent, measured = [], [], []
+    while t < starts[-1] + hold - 1e-9:
+        if k < len(starts) and t >= starts[k] - 1e-9:
+            regulators.set_command(np.full(regulators.n, levels_pa[k]))
+            k += 1
+        measured.append(regulators.step(dt_s))
+        t += dt_s
+        times.append(t)
+        sent.append(levels_pa[k - 1])
+    return np.array(times), np.array(sent), np.array(measured)
 
 
 def fit_play(times_s, command_pa, measured_pa, settle_s: float = SETTLE_S) -> PlayFit:

@@ -3,28 +3,17 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core.fit import fit_play, play_staircase
+from bellow_ancf_ros.core.fit import fit_play, play_staircase, staircase_recording
 from bellow_ancf_ros.core.sim import PressureRegulators
 
 
 def _record(width_pa, tau=0.08, dead=0.03, noise_pa=0.0, offset_pa=0.0, hold_s=1.0, seed=0):
     """The staircase sent to a simulated regulator, its sensor sampled at 100 Hz."""
-    starts, levels = play_staircase(10e3, 40e3, steps=5, cycles=2, hold_s=hold_s)
     reg = PressureRegulators(3, -50e3, 150e3, tau, dead_time_s=dead, hysteresis_pa=width_pa)
-    rng = np.random.default_rng(seed)
-    dt, t, k = 0.01, 0.0, 0
-    times, sent, measured = [], [], []
-    end = starts[-1] + hold_s
-    while t < end - 1e-9:
-        if k < len(starts) and t >= starts[k] - 1e-9:
-            reg.set_command(np.full(3, levels[k]))
-            k += 1
-        p = reg.step(dt)
-        t += dt
-        times.append(t)
-        sent.append(levels[k - 1])
-        measured.append(p[0] + offset_pa + rng.normal(0.0, noise_pa))
-    return np.array(times), np.array(sent), np.array(measured)
+    times, sent, measured = staircase_recording(
+        reg, *play_staircase(10e3, 40e3, steps=5, cycles=2, hold_s=hold_s))
+    noise = np.random.default_rng(seed).normal(0.0, noise_pa, size=len(times))
+    return times, sent, measured[:, 0] + offset_pa + noise
 
 
 @pytest.mark.parametrize("width_pa", [0.0, 500.0, 1574.0, 2000.0])
