@@ -614,6 +614,9 @@ def test_small_budget_far_target_converges_through_continuation_slices(h, one, t
     np.testing.assert_allclose(pos, fw.position, atol=1e-7)
     if model.A > 3:
         assert geometry.angle_between(geometry.z_axis_from_quaternion(quat), fw.z_axis) < 1e-6
+    # the heartbeat reports the answer on its own period, after the last command went out
+    wait_for(lambda: any(s.message == 'target reached' for s in diag_statuses(h, 'inverse')),
+             what="the heartbeat's 'target reached'")
     ok = [s for s in diag_statuses(h, 'inverse') if s.message == 'target reached']
     assert ok and kv(ok[-1])['reachable'] == 'true'
 
