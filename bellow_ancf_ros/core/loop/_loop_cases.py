@@ -44,7 +44,7 @@ __all__ = ['STEP_M', 'circle_case', 'default_loop', 'held_case',
 STEP_M = 0.010
 #: A settled command: its mean over the last second of the step case.
 _SETTLED_S = 1.0
-#: Smallest change a command's excess is measured against [Pa] (a command that barely moves).
+#: Smallest command change a step's excess is measured against [Pa] (a step that barely moves them).
 _MIN_CHANGE_PA = 1.0e3
 
 Loop = Callable[[RobotModel, SimulatedRobot, float], LoopSimulation]
@@ -105,9 +105,14 @@ def _step_figures(rec, ts: float, start, goal, before_pa) -> dict:
     ``overshoot_mm`` (and ``overshoot_frac`` of the step): the largest
     excursion past ``goal`` along the step; ``late_mm``: the largest distance
     from it from 1.5 s after the step on (NaN if the run ends before);
-    ``command_excess``: the largest
-    command change beyond the settled one (mean over the last second), as a
-    fraction of that settled change (at least 1 kPa).
+    ``command_excess``: how far any command went beyond its settled change
+    (its mean over the last second), as a fraction of the step's command
+    change (the largest settled change of an actuator, at least 1 kPa), and
+    ``command_beyond_kpa`` the same in kPa.  Measured against the step's
+    change, not each actuator's own: an actuator that barely moves (a step
+    along one actuator's plane leaves it within a few kPa) would read any
+    ripple of the loop as hundreds of percent (as overshoot is a fraction of
+    the step, not of each axis's share of it).
     """
     a = rec.arrays()
     t = a['t']
@@ -119,10 +124,12 @@ def _step_figures(rec, ts: float, start, goal, before_pa) -> dict:
     late = float(np.linalg.norm(tail - goal, axis=1).max()) if len(tail) else math.nan
     cmd = a['command_pa']
     change = cmd[t > t[-1] - _SETTLED_S].mean(axis=0) - before_pa
-    beyond = (cmd[after] - before_pa) * np.sign(change) - np.abs(change)
-    excess = float(np.max(beyond.max(axis=0) / np.maximum(np.abs(change), _MIN_CHANGE_PA)))
+    past = cmd[after] - before_pa - change   # past the settled command: along its change
+    beyond = max(float(np.max(np.where(change != 0.0, past * np.sign(change), np.abs(past)))),
+                 0.0)
+    scale = max(float(np.max(np.abs(change))), _MIN_CHANGE_PA)
     return {'overshoot_mm': over * 1e3, 'overshoot_frac': over / size, 'late_mm': late * 1e3,
-            'command_excess': max(excess, 0.0)}
+            'command_excess': beyond / scale, 'command_beyond_kpa': beyond * 1e-3}
 
 
 def held_case(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,

@@ -95,3 +95,41 @@ def test_a_step_is_not_shifted_by_the_dynamic_feedforward(model):
                     after_s=2.0, loop=lambda m, rb, pl: default_loop(m, rb, pl,
                                                                      dynamic_feedforward=False))
     assert on['overshoot_mm'] == pytest.approx(off['overshoot_mm'], abs=1e-6)
+
+
+class _Record:
+    """A recording as :class:`LoopSimulation` keeps it: times, true positions, commands."""
+
+    def __init__(self, t, true_p, command_pa):
+        self._a = {'t': t, 'true_p': true_p, 'command_pa': command_pa}
+
+    def arrays(self):
+        return self._a
+
+
+def test_command_excess_is_a_fraction_of_the_steps_command_change():
+    """50 kPa and -20 kPa settled, one actuator still: its 2 kPa blip is 4 % of the step.
+
+    Against the still actuator's own change (none: the 1 kPa floor) the same
+    blip would read 200 %; the largest excursion past a settled change counts
+    (here the 54 kPa peak of the first actuator, 4 kPa past its 50).
+    """
+    from bellow_ancf_ros.core.loop._loop_cases import _step_figures
+    t = np.linspace(0.0, 3.0, 301)
+    after = t >= 1.0
+    cmd = np.zeros((t.size, 3))
+    cmd[after, 0] = 50e3
+    cmd[after, 1] = -20e3
+    cmd[(t >= 1.1) & (t < 1.2), 0] = 54e3
+    cmd[(t >= 1.1) & (t < 1.2), 2] = 2e3
+    p = np.zeros((t.size, 3))
+    p[after, 1] = STEP_M
+    r = _step_figures(_Record(t, p, cmd), 1.0, np.zeros(3), np.array([0.0, STEP_M, 0.0]),
+                      np.zeros(3))
+    assert r['command_beyond_kpa'] == pytest.approx(4.0)
+    assert r['command_excess'] == pytest.approx(4.0 / 50.0)
+    cmd[(t >= 1.1) & (t < 1.2), 0] = 50e3   # only the still actuator's blip is left
+    r = _step_figures(_Record(t, p, cmd), 1.0, np.zeros(3), np.array([0.0, STEP_M, 0.0]),
+                      np.zeros(3))
+    assert r['command_excess'] == pytest.approx(2.0 / 50.0)
+    assert r['overshoot_mm'] == 0.0 and r['late_mm'] == pytest.approx(0.0)
