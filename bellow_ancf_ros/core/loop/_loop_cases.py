@@ -44,7 +44,7 @@ __all__ = ['STEP_M', 'circle_case', 'default_loop', 'held_case',
 STEP_M = 0.010
 #: A settled command: its mean over the last second of the step case.
 _SETTLED_S = 1.0
-#: Smallest command change a step's excess is measured against [Pa] (a step that barely moves them).
+#: Smallest command change a step's excess is measured against [Pa] (a step that barely moves).
 _MIN_CHANGE_PA = 1.0e3
 
 Loop = Callable[[RobotModel, SimulatedRobot, float], LoopSimulation]
