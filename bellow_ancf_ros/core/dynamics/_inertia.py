@@ -113,7 +113,9 @@ class Inertia:
                 u = model.plates[model.seg_plates[j - 1][-1]]["unknown"]
                 self._point(add, u, 0.5 * seg.connector_height, seg.connector_mass)
         self._base = (np.concatenate(rows), np.concatenate(cols), np.concatenate(vals))
-        self._mass_cache = {}
+        # the mass matrices are the model's (the damping settings do not enter them): kept
+        # with it, so a new integrator of the same robot does not assemble them again
+        self._mass_cache = model.cached(("mass matrices",), lambda _: {})
 
     @staticmethod
     def _point(add, u, h, m):

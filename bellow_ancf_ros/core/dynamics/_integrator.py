@@ -214,7 +214,9 @@ class GeneralizedAlpha:
             np.ascontiguousarray(st1.dk_coefficients, dtype=float), float(cfg.l0),
             float(model.n), float(cfg.d_a), float(cfg.rho0),
             np.asarray(model.gravity, dtype=float) * 1.0)
-        self._mass_cache, self._load_cache = {}, {}
+        # the mass's CSR arrays and map into the chord pattern, per payload: the model's
+        self._mass_cache = model.cached(("chord mass", self._key.tobytes()), lambda _: {})
+        self._load_cache = {}
         self._mass_values = (None, None)
         self._hist = None   # the predictor's history (_history)
         self._stretch_kept = None   # (pressures, their stretches): _stretch_input
