@@ -6,7 +6,8 @@
   stability margins with the loop's lag and delay and the robot's modes,
   :func:`safe_gain`: the largest gain that keeps the documented margins;
   :class:`ModeCheck`: those margins with the model's first mode at the held
-  equilibrium, recomputed as it moves;
+  equilibrium, recomputed as it moves; :class:`MocapNoise`: the motion
+  capture's noise read from its samples, which holds the automatic gain down;
 * :class:`JumpTransition`: a jump of the target stream becomes a
   minimum-jerk move over two periods of the slowest mode the robot may have
   (``target_shaping: smooth``, the default; the closed loop holds through
@@ -42,14 +43,16 @@ from ._command_output import CommandOutput, CreepCompensation
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._target_filter import TARGET_SHAPINGS, TargetFilter
 from ._jumps import JumpTransition
+from ._mocap_noise import NOISE_BUDGET_M, MocapNoise
 from ._watchdog import OscillationWatchdog, WatchdogTrip
 
 __all__ = [
     "AUTO_GAIN", "ESTIMATOR_MODES", "FEEDBACK_MODES", "GAIN_RANGE_PER_S", "LOOP_DELAY_S",
-    "LOOP_LAG_S", "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "RETUNE_FRACTION", "SHAPERS",
+    "LOOP_LAG_S", "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "NOISE_BUDGET_M", "RETUNE_FRACTION",
+    "SHAPERS",
     "TARGET_SHAPINGS", "CommandOutput", "CreepCompensation", "DynamicFeedforward",
     "FeedbackSettings", "ForceEstimate", "IntegralFeedback", "JumpTransition", "LoopMargins",
-    "ModeCheck", "ModeCheckResult", "OscillationWatchdog", "PlayCompensation",
+    "MocapNoise", "ModeCheck", "ModeCheckResult", "OscillationWatchdog", "PlayCompensation",
     "StreamFeedforward", "TargetFilter", "TargetShaper", "TipForceEstimator", "WatchdogTrip",
     "dynamic_path", "gain_setting", "loop_delay_s", "loop_margins", "safe_gain", "shaped",
     "shaper_impulses",

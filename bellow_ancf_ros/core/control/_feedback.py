@@ -114,6 +114,7 @@ import numpy as np
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ..history import bracket
 from ._median_gate import WINDOW, MedianGate
+from ._mocap_noise import MocapNoise
 from ._watchdog import OscillationWatchdog
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
@@ -205,6 +206,8 @@ class IntegralFeedback:
         self.rejected = 0
         self.watchdog: OscillationWatchdog | None = None
         self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
+        self._automatic = False     # set_gain was called: the motion capture's noise caps it
+        self.noise = MocapNoise()   # of the accepted positions (the automatic gain's cap)
         self.gain_scale = 1.0       # cut by the watchdog on every trip
         self._hold_until = -math.inf
         self._move_until = -math.inf   # a jump's move (and its settling) ends then
@@ -283,17 +286,28 @@ class IntegralFeedback:
     def set_gain(self, gain_per_s: float) -> None:
         """Integrate with this gain from now on (an automatic gain that follows the mode).
 
-        The watchdog's cuts still apply on top of it.
+        The motion capture's noise holds it down (:attr:`gain_per_s`); the
+        watchdog's cuts still apply on top of it.
         """
         k = float(gain_per_s)
         if not (math.isfinite(k) and k > 0):
             raise ValueError(f'gain_per_s must be > 0, got {gain_per_s!r}')
         self.base_gain_per_s = k
+        self._automatic = True
 
     @property
     def gain_per_s(self) -> float:
-        """The integral gain in use: the set gain times the watchdog's cuts."""
-        return self.base_gain_per_s * self.gain_scale
+        """The integral gain in use: the set gain times the watchdog's cuts.
+
+        An automatic gain (:meth:`set_gain`) is at most the gain at which the
+        motion capture's noise, estimated from the accepted samples, moves
+        the robot by 0.05 mm RMS (:class:`~._mocap_noise.MocapNoise`); the
+        settings' fixed gain is used as it is.
+        """
+        k = self.base_gain_per_s
+        if self._automatic:
+            k = min(k, self.noise.gain_cap())
+        return k * self.gain_scale
 
     def measurement(self, t: float, position: Any, z_axis: Any = None) -> bool:
         """Record a pose captured at time ``t``; False if refused as an outlier.
@@ -317,6 +331,7 @@ class IntegralFeedback:
             return False
         self._meas_t, self._meas_p, self._meas_z = float(t), p, z
         self._pending.append((float(t), p, z))
+        self.noise.add(float(t), p)
         if len(self._pending) > MAX_PENDING:   # (no control step for a while: the newest)
             del self._pending[0]
         if self.watchdog is not None and self._history:
@@ -514,6 +529,7 @@ class IntegralFeedback:
             'measured_pose_age_s': 'none' if age is None else f'{age:.3f}',
             'measured_poses_outliers': self.rejected,
             'feedback_gain_per_s': f'{self.gain_per_s:.4g}',
+            **self.noise.status(),
             'oscillation_trips': 0 if self.watchdog is None else self.watchdog.trips,
             'oscillation_seen': ('none' if self.watchdog is None or self.watchdog.last_trip is None
                                  else self.watchdog.last_trip.message),
