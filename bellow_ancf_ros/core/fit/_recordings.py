@@ -354,10 +354,16 @@ def pressure_unit(msg, label: str) -> float:
                          f'(expected actuator_pressure_gauge_pa or actuator_pressure_gauge_kpa)')
 
 
-def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_TOPIC,
-             settle_s: float = 0.5, n_actuators: int | None = None,
-             drift_tol_m: float = 0.5e-3) -> Recording:
-    """Read a rosbag2 directory (sqlite3 or mcap) into settled samples (module doc)."""
+def _bag_messages(path, wanted, handle) -> list:
+    """Feed ``handle`` the messages of the ``wanted`` topics of a rosbag2 directory, in order.
+
+    ``wanted``: ``(name, msgtype, option, required)`` per topic (``option``:
+    the command-line option that chooses it, for the error); ``handle(i,
+    topic, t_s, msg)`` gets each message of the ``i``-th with its receive
+    time [s].  Returns the topics found (None: an optional one missing).  A
+    missing directory, a missing or mistyped topic and a bag that cannot be
+    read raise :class:`RecordingError` naming the bag.
+    """
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
 
@@ -368,39 +374,66 @@ def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_
     try:
         with Reader(path) as reader:
             topics = {c.topic: c.msgtype for c in reader.connections}
-            p_topic = _find_topic(topics, pressure_topic, label, '--pressure-topic')
-            x_topic = _find_topic(topics, pose_topic, label, '--pose-topic')
-            for topic, want in ((p_topic, FLOAT64_MULTI_ARRAY), (x_topic, POSE_STAMPED)):
-                if topics[topic] != want:
+            found = []
+            for name, want, option, required in wanted:
+                try:
+                    topic = _find_topic(topics, name, label, option)
+                except RecordingError:
+                    if required:
+                        raise
+                    topic = None
+                if topic is not None and topics[topic] != want:
                     raise RecordingError(f'{label}: topic {topic} has type {topics[topic]}, '
                                          f'expected {want}')
-            cmd_t, cmd_p, pose_t, pose_x, pose_q = [], [], [], [], []
-            frames = {}   # pose frame_id -> count
-            conns = [c for c in reader.connections if c.topic in (p_topic, x_topic)]
+                found.append(topic)
+            index = {t: i for i, t in enumerate(found) if t is not None}
+            conns = [c for c in reader.connections if c.topic in index]
             for conn, stamp, raw in reader.messages(connections=conns):
-                msg = store.deserialize_cdr(raw, conn.msgtype)
-                if conn.topic == p_topic:
-                    values = np.asarray(msg.data, dtype=float)
-                    where = f'{label}: {p_topic} message {len(cmd_t) + 1}'
-                    if n_actuators is not None and values.size != n_actuators:
-                        raise RecordingError(f'{where}: {values.size} pressures, the robot has '
-                                             f'{n_actuators} actuators')
-                    if cmd_p and values.size != len(cmd_p[0]):
-                        raise RecordingError(f'{where}: {values.size} pressures, earlier '
-                                             f'messages had {len(cmd_p[0])}')
-                    cmd_t.append(stamp * 1e-9)
-                    cmd_p.append(values * pressure_unit(msg, where))
-                else:
-                    p, o = msg.pose.position, msg.pose.orientation
-                    frames[msg.header.frame_id] = frames.get(msg.header.frame_id, 0) + 1
-                    pose_t.append(stamp * 1e-9)
-                    pose_x.append((p.x, p.y, p.z))
-                    pose_q.append((o.x, o.y, o.z, o.w))
+                handle(index[conn.topic], conn.topic, stamp * 1e-9,
+                       store.deserialize_cdr(raw, conn.msgtype))
     except RecordingError:
         raise
     except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
         raise RecordingError(f'{label}: cannot read the bag: '
                              f'{type(exc).__name__}: {exc}') from None
+    return found
+
+
+def _pressures(msg, where: str, earlier: list) -> np.ndarray:
+    """A pressure message's values [Pa], as many as the ``earlier`` ones (RecordingError)."""
+    values = np.asarray(msg.data, dtype=float) * pressure_unit(msg, where)
+    if earlier and values.size != earlier[0].size:
+        raise RecordingError(f'{where}: {values.size} pressures, earlier messages had '
+                             f'{earlier[0].size}')
+    return values
+
+
+def read_bag(path, pressure_topic: str = PRESSURE_TOPIC, pose_topic: str = POSE_TOPIC,
+             settle_s: float = 0.5, n_actuators: int | None = None,
+             drift_tol_m: float = 0.5e-3) -> Recording:
+    """Read a rosbag2 directory (sqlite3 or mcap) into settled samples (module doc)."""
+    label = str(path)
+    cmd_t, cmd_p, pose_t, pose_x, pose_q = [], [], [], [], []
+    frames = {}   # pose frame_id -> count
+
+    def handle(i, topic, t, msg):
+        if i == 0:
+            where = f'{label}: {topic} message {len(cmd_t) + 1}'
+            if n_actuators is not None and len(msg.data) != n_actuators:
+                raise RecordingError(f'{where}: {len(msg.data)} pressures, the robot has '
+                                     f'{n_actuators} actuators')
+            cmd_t.append(t)
+            cmd_p.append(_pressures(msg, where, cmd_p))
+        else:
+            p, o = msg.pose.position, msg.pose.orientation
+            frames[msg.header.frame_id] = frames.get(msg.header.frame_id, 0) + 1
+            pose_t.append(t)
+            pose_x.append((p.x, p.y, p.z))
+            pose_q.append((o.x, o.y, o.z, o.w))
+
+    p_topic, x_topic = _bag_messages(
+        path, [(pressure_topic, FLOAT64_MULTI_ARRAY, '--pressure-topic', True),
+               (pose_topic, POSE_STAMPED, '--pose-topic', True)], handle)
     if not cmd_t:
         raise RecordingError(f'{label}: topic {p_topic} holds no messages')
     if not pose_t:
@@ -613,53 +646,25 @@ def read_pose_stream_csv(path) -> PoseStream:
 def read_pose_stream_bag(path, pose_topic: str = POSE_TOPIC,
                          pressure_topic: str = PRESSURE_TOPIC) -> PoseStream:
     """Read every pose (and pressure command, if any) of a rosbag2 directory (module doc)."""
-    from rosbags.rosbag2 import Reader
-    from rosbags.rosbag2.errors import ReaderError
-
     label = str(path)
-    if not Path(path).exists():
-        raise RecordingError(f'{label}: no such bag directory')
-    store = _typestore()
-    notes = []
-    try:
-        with Reader(path) as reader:
-            topics = {c.topic: c.msgtype for c in reader.connections}
-            x_topic = _find_topic(topics, pose_topic, label, '--pose-topic')
-            if topics[x_topic] != POSE_STAMPED:
-                raise RecordingError(f'{label}: topic {x_topic} has type {topics[x_topic]}, '
-                                     f'expected {POSE_STAMPED}')
-            try:
-                p_topic = _find_topic(topics, pressure_topic, label, '--pressure-topic')
-            except RecordingError:
-                p_topic = None
-                notes.append(f'no {pressure_topic} topic: no recorded pressures')
-            if p_topic is not None and topics[p_topic] != FLOAT64_MULTI_ARRAY:
-                raise RecordingError(f'{label}: topic {p_topic} has type {topics[p_topic]}, '
-                                     f'expected {FLOAT64_MULTI_ARRAY}')
-            recv, stamps, pos, cmd_t, cmd_p = [], [], [], [], []
-            frames = {}
-            conns = [c for c in reader.connections if c.topic in (p_topic, x_topic)]
-            for conn, stamp, raw in reader.messages(connections=conns):
-                msg = store.deserialize_cdr(raw, conn.msgtype)
-                if conn.topic == x_topic:
-                    p = msg.pose.position
-                    recv.append(stamp * 1e-9)
-                    stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
-                    pos.append((p.x, p.y, p.z))
-                    frames[msg.header.frame_id] = frames.get(msg.header.frame_id, 0) + 1
-                else:
-                    values = np.asarray(msg.data, dtype=float)
-                    where = f'{label}: {p_topic} message {len(cmd_t) + 1}'
-                    if cmd_p and values.size != len(cmd_p[0]):
-                        raise RecordingError(f'{where}: {values.size} pressures, earlier '
-                                             f'messages had {len(cmd_p[0])}')
-                    cmd_t.append(stamp * 1e-9)
-                    cmd_p.append(values * pressure_unit(msg, where))
-    except RecordingError:
-        raise
-    except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
-        raise RecordingError(f'{label}: cannot read the bag: '
-                             f'{type(exc).__name__}: {exc}') from None
+    recv, stamps, pos, cmd_t, cmd_p = [], [], [], [], []
+    frames = {}
+
+    def handle(i, topic, t, msg):
+        if i == 0:
+            p = msg.pose.position
+            recv.append(t)
+            stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+            pos.append((p.x, p.y, p.z))
+            frames[msg.header.frame_id] = frames.get(msg.header.frame_id, 0) + 1
+        else:
+            cmd_t.append(t)
+            cmd_p.append(_pressures(msg, f'{label}: {topic} message {len(cmd_t)}', cmd_p))
+
+    x_topic, p_topic = _bag_messages(
+        path, [(pose_topic, POSE_STAMPED, '--pose-topic', True),
+               (pressure_topic, FLOAT64_MULTI_ARRAY, '--pressure-topic', False)], handle)
+    notes = [] if p_topic is not None else [f'no {pressure_topic} topic: no recorded pressures']
     if not pos:
         raise RecordingError(f'{label}: topic {x_topic} holds no messages')
     stamps = np.array(stamps)
@@ -743,41 +748,18 @@ def _read_pressure_csv(path) -> PressureRecording:
 
 
 def _read_pressure_bag(path, command_topic: str, measured_topic: str) -> PressureRecording:
-    from rosbags.rosbag2 import Reader
-    from rosbags.rosbag2.errors import ReaderError
-
     label = str(path)
-    if not Path(path).exists():
-        raise RecordingError(f'{label}: no such bag directory')
-    store = _typestore()
-    got = {}
-    try:
-        with Reader(path) as reader:
-            topics = {c.topic: c.msgtype for c in reader.connections}
-            names = {_find_topic(topics, command_topic, label, '--pressure-topic'): 'command',
-                     _find_topic(topics, measured_topic, label, '--measured-topic'): 'measured'}
-            for topic in names:
-                if topics[topic] != FLOAT64_MULTI_ARRAY:
-                    raise RecordingError(f'{label}: topic {topic} has type {topics[topic]}, '
-                                         f'expected {FLOAT64_MULTI_ARRAY}')
-                got[names[topic]] = ([], [])
-            conns = [c for c in reader.connections if c.topic in names]
-            for conn, stamp, raw in reader.messages(connections=conns):
-                msg = store.deserialize_cdr(raw, conn.msgtype)
-                times, values = got[names[conn.topic]]
-                where = f'{label}: {conn.topic} message {len(times) + 1}'
-                v = np.asarray(msg.data, dtype=float) * pressure_unit(msg, where)
-                if values and v.size != values[0].size:
-                    raise RecordingError(f'{where}: {v.size} pressures, earlier messages had '
-                                         f'{values[0].size}')
-                times.append(stamp * 1e-9)
-                values.append(v)
-    except RecordingError:
-        raise
-    except (ReaderError, OSError, KeyError, ValueError, AssertionError) as exc:
-        raise RecordingError(f'{label}: cannot read the bag: '
-                             f'{type(exc).__name__}: {exc}') from None
-    (tc, pc), (tm, pm) = got['command'], got['measured']
+    got = (([], []), ([], []))   # (times, values) of the set-points and the measured pressures
+
+    def handle(i, topic, t, msg):
+        times, values = got[i]
+        values.append(_pressures(msg, f'{label}: {topic} message {len(times) + 1}', values))
+        times.append(t)
+
+    _bag_messages(path, [(command_topic, FLOAT64_MULTI_ARRAY, '--pressure-topic', True),
+                         (measured_topic, FLOAT64_MULTI_ARRAY, '--measured-topic', True)],
+                  handle)
+    (tc, pc), (tm, pm) = got
     if pc and pm and pc[0].size != pm[0].size:
         raise RecordingError(f'{label}: {pc[0].size} set-points but {pm[0].size} measured '
                              'pressures per message')
