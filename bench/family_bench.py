@@ -32,7 +32,9 @@ identified as above, the model is calibrated from the robot's settled poses
 at :func:`~bellow_ancf_ros.core.fit.excitation_sequence`'s pressures seen
 by its motion capture's noise (:func:`calibrated_config`, ``bellow-ancf
 calibrate``), and the play is read from a staircase of set-points and the
-regulators' own pressure sensors (:func:`identified_play`); the cases run
+regulators' own pressure sensors (:func:`identified_play`), and the damping
+is read from a released push (:func:`identified_damping`, ``bellow-ancf
+identify damping``) into the calibrated file; the cases run
 on the calibrated model with the creep and the play compensated (the
 inverse node's ``robot_config``, ``creep_fraction``,
 ``creep_time_constant_s``, ``regulator_play_kpa``); written to
@@ -42,6 +44,7 @@ inverse node's ``robot_config``, ``creep_fraction``,
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import math
@@ -55,11 +58,14 @@ from joblib import Parallel, delayed
 from scipy.stats import spearmanr
 
 from bellow_ancf_ros.core import RobotModel, limit_blas_threads, load_robot
+from bellow_ancf_ros.core.dynamics import natural_modes
 from bellow_ancf_ros.core.sim import draw_robot
 from bellow_ancf_ros.core.loop import circle_case, default_loop, held_case, step_case
 from bellow_ancf_ros.core.fit import (CalibrationError, calibrate, excitation_sequence,
-                                      fit_creep, fit_play, play_staircase, simulate_recording,
+                                      fit_creep, fit_free_vibration, fit_play, identify_damping,
+                                      play_staircase, ringdown_window, simulate_recording,
                                       staircase_recording)
+from bellow_ancf_ros.core.solve import solve_forward
 from update_readme import block, splice
 
 HERE = Path(__file__).resolve().parent
@@ -77,6 +83,8 @@ OUTPUTS = {
 START, END = OUTPUTS['unknown'][1:]
 #: How long the identification's pressure step is held [s] (the family's creep: up to 5 s).
 CREEP_HOLD_S = 25.0
+#: The ring-down recorded after the release: periods of the model's first mode.
+RINGDOWN_PERIODS = 8.0
 ROBOTS = ('one_segment', 'two_segment')
 #: goal -> (case, figure, limit for one segment, limit for two segments); None: not a goal there
 GOALS = {
@@ -146,6 +154,62 @@ def identified_play(draw) -> dict:
     return {'width_pa': fit.width_pa, 'error': ''}
 
 
+def identified_damping(draw, cfg) -> dict:
+    """The damping of ``draw``'s robot as ``bellow-ancf identify damping`` finds it, for ``cfg``.
+
+    The vented robot, held pushed sideways at its tip (about 3 % of its
+    height, a linear estimate on the robot) for 1 s, is released and
+    recorded by its own motion capture (noise, latency, outliers, dropouts)
+    for :data:`RINGDOWN_PERIODS` periods of ``cfg``'s first mode; a release
+    whose first four periods a dropout cut is done again (up to three
+    times, as a lab records again).  :func:`ringdown_window`
+    and :func:`fit_free_vibration` read the mode, :func:`identify_damping`
+    gives the retardation time with which ``cfg``'s model (the calibrated
+    file) has that damping at the vent.  ``damping_time_s`` is None when the
+    fit refused (its reason in ``error``).
+    """
+    robot = draw.robot()
+    m = robot.model
+    vent = np.zeros(m.A)
+    fw0 = solve_forward(m, vent, payload_kg=robot.payload_kg)
+    probe = solve_forward(m, vent, payload_kg=robot.payload_kg, tip_force_n=[0.01, 0.0, 0.0])
+    force = 0.03 * 0.01 * fw0.position[2] / max(abs(probe.position[0] - fw0.position[0]), 1e-12)
+    held = solve_forward(m, vent, payload_kg=robot.payload_kg, tip_force_n=[force, 0.0, 0.0])
+    model = RobotModel(cfg)
+    fw_cfg = solve_forward(model, np.zeros(model.A))
+    f_model = natural_modes(fw_cfg, 1).first.frequency_hz
+    dt = 1.0 / robot.auto_physics_rate_hz
+    for _ in range(3):
+        robot.set_tip_force([force, 0.0, 0.0])
+        robot.state = held
+        robot.dynamics.start(held, t0=robot.time_s)   # at rest where the push holds it
+        t_record, t_release = robot.time_s + 0.5, robot.time_s + 1.0
+        end = t_release + RINGDOWN_PERIODS / f_model
+        times, positions, next_mocap = [], [], t_record
+        while robot.time_s < end:
+            if robot.time_s >= t_release and robot.tip_force_n[0] != 0.0:
+                robot.set_tip_force([0.0, 0.0, 0.0])
+            robot.step(dt)
+            while next_mocap <= robot.time_s:
+                sample = robot.capture(next_mocap)
+                if sample is not None:
+                    times.append(sample.captured_s)
+                    positions.append(sample.position)
+                next_mocap += robot.mocap.period_s
+        t = np.array(times)
+        ring = t[(t >= t_release - 0.1) & (t <= t_release + 4.0 / f_model)]
+        if len(ring) > 2 and np.max(np.diff(ring)) < 3.0 * robot.mocap.period_s:
+            break   # (else a dropout cut the ring: push and release again)
+    x = np.array(positions)
+    try:
+        window = ringdown_window(t, x)
+        res = identify_damping(fit_free_vibration(t, x, window.t_start_s, window.t_end_s), fw_cfg)
+    except ValueError as exc:
+        return {'damping_time_s': None, 'damping_ratio': None, 'error': str(exc)}
+    return {'damping_time_s': res.damping_time_s, 'damping_ratio': res.fit.damping_ratio,
+            'error': ''}
+
+
 def calibrated_config(draw, base):
     """``base`` calibrated on ``draw``'s robot (:func:`calibrate`) and how it went.
 
@@ -179,10 +243,14 @@ def evaluate(robot: str, seed: int, slow: bool, creep: str = 'unknown',
     base = load_robot(robot)
     draw = draw_robot(robot, seed)
     ident, play, calibration, loop = None, None, None, default_loop
+    damping = None
     if lab:
         creep = 'identified'
         cfg, calibration = calibrated_config(draw, base)
         play = identified_play(draw)
+        damping = identified_damping(draw, cfg)
+        if damping['damping_time_s'] is not None:
+            cfg = dataclasses.replace(cfg, damping_time=damping['damping_time_s'])
         base = cfg
     model = RobotModel(base)
     if creep == 'identified':
@@ -203,7 +271,8 @@ def evaluate(robot: str, seed: int, slow: bool, creep: str = 'unknown',
     return {'robot': robot, 'seed': seed, 'values': draw.values,
             'first_mode_hz': draw.first_mode_hz, 'model_mode_hz': draw.model_mode_hz,
             'cases': cases, 'creep_identified': ident, 'play_identified': play,
-            'calibration': calibration, 'cpu_s': time.process_time() - t0}
+            'calibration': calibration, 'damping_identified': damping,
+            'cpu_s': time.process_time() - t0}
 
 
 def figure(run: dict, case: str | None, key: str) -> float | None:
@@ -295,6 +364,21 @@ def _lab(runs: list) -> str:
     return text + ' and compensated'
 
 
+def _damping(runs: list) -> str:
+    """How well the damping was read over ``runs`` (``--lab``; '' for a run file without it)."""
+    got = [r.get('damping_identified') for r in runs]
+    if any(g is None for g in got):
+        return ''
+    ok = [(g['damping_ratio'], r['values']['damping_ratio']) for g, r in zip(got, runs)
+          if g['damping_time_s'] is not None]
+    text = f'; the damping read from a released push on {len(ok)} of {len(runs)} robots'
+    if ok:
+        err = [abs(a / b - 1.0) for a, b in ok]
+        text += (f' (damping ratio off by {100 * np.median(err):.0f} % median, '
+                 f'{100 * max(err):.0f} % worst)')
+    return text + ", the others keep the file's"
+
+
 def markdown(data: dict) -> str:
     """The tables of a run file (``--out``) as markdown: what docs/closed_loop.md shows."""
     runs = data['runs']
@@ -304,7 +388,8 @@ def markdown(data: dict) -> str:
             'pressure step and compensated (' + _identification(runs) + ')')
     if data.get('lab'):
         what = (f'the inverse node\'s defaults as a lab runs them after identifying its robot: '
-                f'{_lab(runs)}, the creep identified and compensated ({_identification(runs)})')
+                f'{_lab(runs)}, the creep identified and compensated ({_identification(runs)})'
+                f'{_damping(runs)}')
     out = [f'{data["robots_per_count"]} robots of the family per segment count (seeds 0-'
            f'{data["robots_per_count"] - 1}), {what}, targets not '
            'previewed; RMSE over the second period at full speed.', '',
@@ -363,7 +448,7 @@ def main(argv=None) -> int:
     if kind != 'unknown':
         print(_identification(runs))
     if args.lab:
-        print(_lab(runs))
+        print(_lab(runs) + _damping(runs))
     data = {'robots_per_count': args.robots, 'slow': args.slow,
             'creep': 'identified' if args.lab else args.creep, 'lab': args.lab, 'runs': runs}
     out, start, end = OUTPUTS[kind]

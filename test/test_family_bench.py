@@ -105,6 +105,28 @@ def test_a_robots_play_is_read_from_a_staircase():
     assert got['width_pa'] == pytest.approx(draw.values['regulator_hysteresis_pa'], abs=20.0)
 
 
+def test_a_robots_damping_is_read_from_a_released_push():
+    """``--lab``: a lightly damped two-segment robot (damping ratio 0.074) rings after a push.
+
+    Read within 20 % (0.067), and the calibrated file given that damping;
+    a one-segment robot's mode (12 Hz, some six motion-capture samples a
+    period) is refused, one line, and its file keeps its damping.
+    """
+    import dataclasses
+    from bellow_ancf_ros.core.sim import draw_robot
+    from bellow_ancf_ros.core.sim._robot_family import first_mode
+    base = family_bench.load_robot('two_segment')
+    draw = draw_robot('two_segment', 3)
+    got = family_bench.identified_damping(draw, base)
+    assert got['error'] == ''
+    assert got['damping_ratio'] == pytest.approx(draw.values['damping_ratio'], rel=0.2)
+    cfg = dataclasses.replace(base, damping_time=got['damping_time_s'])
+    assert first_mode(cfg).damping_ratio == pytest.approx(got['damping_ratio'], rel=1e-3)
+    refused = family_bench.identified_damping(draw_robot('one_segment', 0),
+                                              family_bench.load_robot('one_segment'))
+    assert refused['damping_time_s'] is None and '\n' not in refused['error']
+
+
 def test_the_calibration_finds_the_drawn_robot():
     """``--lab``: the nominal file calibrated on a drawn robot predicts its poses far better."""
     from bellow_ancf_ros.core import solve_forward
@@ -136,7 +158,16 @@ def test_the_lab_table_says_what_was_identified():
             'median, 0.300 mm worst), the others keep the nominal file; the play read on 3 of 4 '
             'robots (off by 10 Pa median, 20 Pa worst) and compensated, the creep identified '
             'and compensated (creep identified on 4 of 4') in text
-    assert 'creep identified on 4 of 4 robots' in text
+    assert 'creep identified on 4 of 4 robots' in text and 'damping' not in text
+    for i, r in enumerate(runs):   # a run file with the damping read from a push
+        r['values']['damping_ratio'] = 0.1
+        r['damping_identified'] = ({'damping_time_s': 0.01, 'damping_ratio': 0.1 + 0.01 * i,
+                                    'error': ''} if i < 2 else
+                                   {'damping_time_s': None, 'damping_ratio': None, 'error': 'no'})
+    text = family_bench.markdown({'robots_per_count': 4, 'creep': 'identified', 'lab': True,
+                                  'runs': runs})
+    assert ("; the damping read from a released push on 2 of 4 robots (damping ratio off by 5 % "
+            "median, 10 % worst), the others keep the file's") in text
 
 
 def test_the_docs_show_the_lab_table_of_its_last_full_run():
