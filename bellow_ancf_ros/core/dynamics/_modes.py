@@ -293,6 +293,26 @@ class ReducedSystem:
         return float(abs(sc.imag) / (2 * np.pi)), float(-sc.real / abs(sc))
 
 
+def _null_space(C: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the null space of the constraint Jacobian ``C``.
+
+    LAPACK's divide-and-conquer SVD (``gesdd``, scipy's default) now and then
+    fails to converge on a finite matrix (once in a few hundred thousand
+    equilibria of the robot family's closed loops); the QR-iteration SVD
+    (``gesvd``) is then used.  A Jacobian that is not finite, or that neither
+    resolves, raises :class:`ModalError`.
+    """
+    if not np.all(np.isfinite(C)):
+        raise ModalError("the constraint Jacobian is not finite: no modes")
+    try:
+        return sla.null_space(C)
+    except np.linalg.LinAlgError:
+        try:
+            return sla.null_space(C, lapack_driver="gesvd")
+        except np.linalg.LinAlgError as exc:
+            raise ModalError(f"the constraints' null space: {exc}") from exc
+
+
 @one_thread_call
 def reduced_system(fw, inertia: Inertia | None = None, damping_time_s: float | None = None,
                    mass_damping_per_s: float | None = None) -> ReducedSystem:
@@ -312,7 +332,7 @@ def reduced_system(fw, inertia: Inertia | None = None, damping_time_s: float | N
     ev = model.evaluate(fw.x, lam, 1.0, load, jacobian=True)
     J = ev.jacobian.toarray()
     H = 0.5 * (J[:nq, :nq] + J[:nq, :nq].T)
-    Z = sla.null_space(J[nq:, :nq])
+    Z = _null_space(J[nq:, :nq])
     T = inertia.scale(lam)
     M = inertia.mass_matrix(load).toarray() * T[:, None] * T[None, :]
     # Kelvin-Voigt per unit retardation time, static coordinates: the element blocks
