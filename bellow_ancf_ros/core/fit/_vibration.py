@@ -154,17 +154,29 @@ class DampingIdentification:
                 "model_damping_ratio": self.model_damping_ratio}
 
 
+#: The fitted frequency over the model's first mode that is taken for that mode (a calibrated
+#: file is within a few percent; a fit that latched onto the noise read 15-40 times it).
+FIRST_MODE_RANGE = (0.5, 2.0)
+
+
 def identify_damping(fit: FreeVibrationFit, equilibrium, max_damping_time_s: float = 0.2
                      ) -> DampingIdentification:
     """The retardation time ``beta`` whose first mode at ``equilibrium`` has ``fit``'s damping.
 
     ``equilibrium``: the ForwardResult the robot rings about (its pressures,
     payload and tip force); the robot file's air damping is kept.  Raises
-    ValueError when no ``beta`` in ``[0, max_damping_time_s]`` gives that ratio.
+    ValueError when the fitted frequency is not the model's first mode
+    (outside :data:`FIRST_MODE_RANGE` of it: a fit of the noise, not of a
+    ring-down) or no ``beta`` in ``[0, max_damping_time_s]`` gives that ratio.
     """
     red = reduced_system(equilibrium)
     alpha = red.mass_damping
     target = fit.damping_ratio
+    f_model = float(np.sqrt(red.w2[0]) / (2 * np.pi))
+    if not FIRST_MODE_RANGE[0] <= fit.frequency_hz / f_model <= FIRST_MODE_RANGE[1]:
+        raise ValueError(f"the fitted oscillation ({fit.frequency_hz:.4g} Hz) is not the "
+                         f"model's first mode ({f_model:.4g} Hz at this equilibrium): no "
+                         "ring-down of it above the noise")
 
     def gap(beta):
         return red.damped_first(beta, alpha)[1] - target
@@ -176,7 +188,7 @@ def identify_damping(fit: FreeVibrationFit, equilibrium, max_damping_time_s: flo
                          f"({lo + target:.4g} to {hi + target:.4g})")
     beta = brentq(gap, 0.0, max_damping_time_s, xtol=1e-7)
     return DampingIdentification(fit=fit, damping_time_s=float(beta),
-                                 model_frequency_hz=float(np.sqrt(red.w2[0]) / (2 * np.pi)),
+                                 model_frequency_hz=f_model,
                                  model_damping_ratio=float(red.damped_first(beta, alpha)[1]))
 
 
