@@ -120,7 +120,7 @@ def test_the_docs_show_the_table():
 
 def test_an_svd_that_does_not_converge_falls_back_and_a_bad_jacobian_is_a_modal_error(
         monkeypatch):
-    """gesdd's rare non-convergence (seen once in the family's closed loops): gesvd instead."""
+    """The SVD of LAPACK's gesdd did not converge once in the family's loops: gesvd instead."""
     import scipy.linalg as sla
     from bellow_ancf_ros.core.dynamics import _modes
     model = RobotModel(load_robot('one_segment'))
