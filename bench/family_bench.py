@@ -104,6 +104,28 @@ GOALS = {
 }
 
 
+def _recorded(robot, from_s: float, at_s: float, act, until_s: float):
+    """``robot`` run at its physics rate to ``until_s``, ``act()`` once at ``at_s``.
+
+    Returns the capture times and positions (n,) and (n, 3) its motion
+    capture delivered from ``from_s`` on (a dropout delivers none).
+    """
+    dt = 1.0 / robot.auto_physics_rate_hz
+    times, positions, done, next_mocap = [], [], False, from_s
+    while robot.time_s < until_s:
+        if not done and robot.time_s >= at_s:
+            act()
+            done = True
+        robot.step(dt)
+        while next_mocap <= robot.time_s:
+            sample = robot.capture(next_mocap)
+            if sample is not None:
+                times.append(sample.captured_s)
+                positions.append(sample.position)
+            next_mocap += robot.mocap.period_s
+    return np.array(times), np.array(positions)
+
+
 def identified_creep(draw) -> dict:
     """The creep of ``draw``'s robot as ``bellow-ancf identify creep`` finds it.
 
@@ -116,22 +138,11 @@ def identified_creep(draw) -> dict:
     robot = draw.robot()
     p = np.zeros(robot.model.A)
     p[0] = 40e3
-    dt, t_step = 1.0 / robot.auto_physics_rate_hz, 1.0
-    times, positions, stepped = [], [], False
-    next_mocap = robot.time_s
-    while robot.time_s < t_step + CREEP_HOLD_S:
-        if not stepped and robot.time_s >= t_step:
-            robot.command(p)
-            stepped = True
-        robot.step(dt)
-        while next_mocap <= robot.time_s:
-            sample = robot.capture(next_mocap)
-            if sample is not None:
-                times.append(sample.captured_s)
-                positions.append(sample.position)
-            next_mocap += robot.mocap.period_s
+    t_step = 1.0
+    times, positions = _recorded(robot, robot.time_s, t_step, lambda: robot.command(p),
+                                 t_step + CREEP_HOLD_S)
     try:
-        fit = fit_creep(np.array(times), np.array(positions), t_step)
+        fit = fit_creep(times, positions, t_step)
     except ValueError as exc:
         return {'fraction': None, 'time_constant_s': None, 'error': str(exc)}
     return {'fraction': fit.creep_fraction, 'time_constant_s': fit.creep_time_constant_s,
@@ -178,29 +189,17 @@ def identified_damping(draw, cfg) -> dict:
     model = RobotModel(cfg)
     fw_cfg = solve_forward(model, np.zeros(model.A))
     f_model = natural_modes(fw_cfg, 1).first.frequency_hz
-    dt = 1.0 / robot.auto_physics_rate_hz
     for _ in range(3):
         robot.set_tip_force([force, 0.0, 0.0])
         robot.state = held
         robot.dynamics.start(held, t0=robot.time_s)   # at rest where the push holds it
-        t_record, t_release = robot.time_s + 0.5, robot.time_s + 1.0
-        end = t_release + RINGDOWN_PERIODS / f_model
-        times, positions, next_mocap = [], [], t_record
-        while robot.time_s < end:
-            if robot.time_s >= t_release and robot.tip_force_n[0] != 0.0:
-                robot.set_tip_force([0.0, 0.0, 0.0])
-            robot.step(dt)
-            while next_mocap <= robot.time_s:
-                sample = robot.capture(next_mocap)
-                if sample is not None:
-                    times.append(sample.captured_s)
-                    positions.append(sample.position)
-                next_mocap += robot.mocap.period_s
-        t = np.array(times)
+        t_release = robot.time_s + 1.0
+        t, x = _recorded(robot, robot.time_s + 0.5, t_release,
+                         lambda: robot.set_tip_force([0.0, 0.0, 0.0]),
+                         t_release + RINGDOWN_PERIODS / f_model)
         ring = t[(t >= t_release - 0.1) & (t <= t_release + 4.0 / f_model)]
         if len(ring) > 2 and np.max(np.diff(ring)) < 3.0 * robot.mocap.period_s:
             break   # (else a dropout cut the ring: push and release again)
-    x = np.array(positions)
     try:
         window = ringdown_window(t, x)
         res = identify_damping(fit_free_vibration(t, x, window.t_start_s, window.t_end_s), fw_cfg)
