@@ -297,8 +297,8 @@ def _null_space(C: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the null space of the constraint Jacobian ``C``.
 
     LAPACK's divide-and-conquer SVD (``gesdd``, scipy's default) now and then
-    fails to converge on a finite matrix (once in a few hundred thousand
-    equilibria of the robot family's closed loops); the QR-iteration SVD
+    fails to converge on a finite matrix (once in a 200-robot run of the
+    robot family's closed loops, from the mode check); the QR-iteration SVD
     (``gesvd``) is then used.  A Jacobian that is not finite, or that neither
     resolves, raises :class:`ModalError`.
     """
