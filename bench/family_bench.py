@@ -274,8 +274,38 @@ def evaluate(robot: str, seed: int, slow: bool, creep: str = 'unknown',
             'cpu_s': time.process_time() - t0}
 
 
+def evaluate_or_failure(robot: str, seed: int, *args) -> dict:
+    """:func:`evaluate`, or the robot's failure: an exception ends one robot, not the run.
+
+    A failed robot (``failed``: the exception in one line) counts as missing
+    every goal (:func:`figure`: inf) and is named under the tables.
+    """
+    try:
+        return evaluate(robot, seed, *args)
+    except Exception as exc:  # noqa: BLE001 - recorded, the family goes on
+        text = ' '.join(f'{type(exc).__name__}: {exc}'.split())
+        return {'robot': robot, 'seed': seed, 'failed': text[:300],
+                'values': draw_robot(robot, seed).values}
+
+
+def _done(runs: list) -> list:
+    """The runs that did not fail."""
+    return [r for r in runs if 'failed' not in r]
+
+
+def _failures(runs: list) -> str:
+    """One line naming the robots that raised ('' when none did)."""
+    bad = [f'{r["robot"].replace("_", " ")} seed {r["seed"]} ({r["failed"]})'
+           for r in runs if 'failed' in r]
+    if not bad:
+        return ''
+    return (f'{len(bad)} robot(s) raised and count as missing every goal: ' + '; '.join(bad))
+
+
 def figure(run: dict, case: str | None, key: str) -> float | None:
-    """One robot's figure of a goal (summed over the cases for trips and refusals)."""
+    """One robot's figure of a goal (summed over the cases for trips and refusals; inf: failed)."""
+    if 'failed' in run:
+        return math.inf
     if case is None:
         return float(sum(c[key] for c in run['cases'].values()))
     c = run['cases'].get(case)
@@ -297,7 +327,7 @@ def table(runs: list, robot: str) -> list:
         row = {'goal': goal, 'limit': limit, 'median': float(np.median(v)), 'p95': p95,
                'worst': float(v.max()), 'met': int(np.sum(v <= limit)), 'n': len(v),
                'driver': ''}
-        if p95 > limit and np.ptp(v) > 0:
+        if p95 > limit and np.ptp(v[np.isfinite(v)]) > 0:
             corr = {}
             for name in mine[0]['values']:
                 x = np.array([r['values'][name] for r in mine])
@@ -328,11 +358,14 @@ def render(runs: list) -> str:
             miss = r['driver'] if r['p95'] > r['limit'] else ''
             out.append(f'  {r["goal"]:34s} {r["limit"]:7.3g} {r["median"]:8.3f} '
                        f'{r["p95"]:8.3f} {r["worst"]:8.3f} {r["met"]:3d}/{r["n"]:<3d}  {miss}')
+    if _failures(runs):
+        out.append(_failures(runs))
     return '\n'.join(out)
 
 
 def _identification(runs: list) -> str:
     """How well the creep was identified over ``runs`` (``--creep identified``)."""
+    runs = _done(runs)
     ok = [r for r in runs if r['creep_identified']['fraction'] is not None]
     err_c = [abs(r['creep_identified']['fraction'] - r['values']['creep_fraction']) for r in ok]
     err_t = [abs(r['creep_identified']['time_constant_s'] / r['values']['creep_time_constant_s']
@@ -347,6 +380,7 @@ def _identification(runs: list) -> str:
 
 def _lab(runs: list) -> str:
     """How well the calibration and the play's reading went over ``runs`` (``--lab``)."""
+    runs = _done(runs)
     rmse = [r['calibration']['rmse_after_mm'] for r in runs
             if r['calibration']['rmse_after_mm'] is not None]
     ok = [r for r in runs if r['play_identified']['width_pa'] is not None]
@@ -365,6 +399,7 @@ def _lab(runs: list) -> str:
 
 def _damping(runs: list) -> str:
     """How well the damping was read over ``runs`` (``--lab``; '' for a run file without it)."""
+    runs = _done(runs)
     got = [r.get('damping_identified') for r in runs]
     if any(g is None for g in got):
         return ''
@@ -400,6 +435,8 @@ def markdown(data: dict) -> str:
             out.append(f'| {robot.replace("_", " ")} | {r["goal"]} | {r["limit"]:g} | '
                        f'{r["median"]:.3f} | {r["p95"]:.3f} | {r["worst"]:.3f} | '
                        f'{r["met"]}/{r["n"]} | {miss} |')
+    if _failures(runs):
+        out += ['', _failures(runs) + '.']
     return '\n'.join(out) + '\n'
 
 
@@ -437,10 +474,11 @@ def main(argv=None) -> int:
     t0 = time.monotonic()
     jobs = [(robot, seed) for robot in ROBOTS for seed in range(args.robots)]
     runs = Parallel(n_jobs=args.jobs, backend=args.backend)(
-        delayed(evaluate)(robot, seed, args.slow, args.creep, args.lab) for robot, seed in jobs)
+        delayed(evaluate_or_failure)(robot, seed, args.slow, args.creep, args.lab)
+        for robot, seed in jobs)
     wall = time.monotonic() - t0
     print(render(runs))
-    cpu = [r['cpu_s'] for r in runs]
+    cpu = [r['cpu_s'] for r in _done(runs)] or [0.0]
     print(f'{len(runs)} robots in {wall:.0f} s on {args.jobs} worker(s); CPU per robot: '
           f'median {np.median(cpu):.1f} s, p99 {np.percentile(cpu, 99):.1f} s')
     kind = 'lab' if args.lab else args.creep

@@ -41,6 +41,23 @@ def test_table_gives_median_p95_worst_and_the_driver_of_a_miss():
     assert 'one_segment: 20 robots' in text and 'regulator_time_constant_s' in text
 
 
+def test_a_robot_that_raises_misses_every_goal_and_the_family_goes_on(monkeypatch):
+    def boom(robot, seed, *args):
+        raise np.linalg.LinAlgError('SVD did not converge\n(in gesdd)')
+    monkeypatch.setattr(family_bench, 'evaluate', boom)
+    bad = family_bench.evaluate_or_failure('one_segment', 7, False)
+    assert bad['failed'] == 'LinAlgError: SVD did not converge (in gesdd)'
+    assert bad['values'] == family_bench.draw_robot('one_segment', 7).values
+    runs = [_run(i, 0.1, 0.05) for i in range(19)] + [bad]
+    rows = {r['goal']: r for r in family_bench.table(runs, 'one_segment')}
+    held = rows['held position RMSE [mm]']
+    assert held['n'] == 20 and held['met'] == 19 and held['worst'] == np.inf
+    assert held['median'] == pytest.approx(0.05)
+    line = 'robot(s) raised and count as missing every goal: one segment seed 7 (LinAlgError'
+    assert line in family_bench.render(runs)
+    assert line in family_bench.markdown({'robots_per_count': 20, 'runs': runs})
+
+
 def test_one_real_robot_of_the_family_runs_every_case():
     run = family_bench.evaluate('one_segment', 0, slow=False)
     assert set(run['cases']) == {'held', 'circle_10x', 'step'}

@@ -496,7 +496,11 @@ class Run:
         if getattr(self, '_targets', None) is not None:
             self._targets.close()   # its targets are owed no more
         codes = stop_all(self.procs)   # the inverse node first: its vent reaches the others
-        self.rec.wait_for_vent()   # (its callback may run late on a busy machine)
+        if not self.rec.wait_for_vent():   # (its callback may run late on a busy machine)
+            said = [ln for ln in self.procs['inverse'].tail(40).splitlines() if 'vent' in ln]
+            print(f'  {self.name}: the vent was not recorded; the inverse node logged: '
+                  + (' | '.join(said) if said else 'no vent line'))
+            self.ok = False
         bad = {k: c for k, c in codes.items() if c not in (0, None)}
         if bad:
             print(f'  {self.name}: nodes exited with non-zero codes: {bad}')

@@ -114,7 +114,7 @@ import numpy as np
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ..history import bracket
 from ._median_gate import WINDOW, MedianGate
-from ._mocap_noise import MocapNoise
+from ._mocap_noise import NOISE_GATE_S, MocapNoise
 from ._watchdog import OscillationWatchdog
 
 __all__ = ['FEEDBACK_MODES', 'FeedbackSettings', 'IntegralFeedback']
@@ -225,6 +225,7 @@ class IntegralFeedback:
         self._command_p = self._command_z = None
         self._saturated = False
         self._held = False
+        self._mean_error: np.ndarray | None = None   # over NOISE_GATE_S (the noise cap's gate)
         self.state = WAITING
 
     @property
@@ -299,14 +300,17 @@ class IntegralFeedback:
     def gain_per_s(self) -> float:
         """The integral gain in use: the set gain times the watchdog's cuts.
 
-        An automatic gain (:meth:`set_gain`) is at most the gain at which the
+        An automatic gain (:meth:`set_gain`) is held at the gain at which the
         motion capture's noise, estimated from the accepted samples, moves
-        the robot by 0.05 mm RMS (:class:`~._mocap_noise.MocapNoise`); the
-        settings' fixed gain is used as it is.
+        the robot by 0.05 mm RMS while the mean error is within its noise,
+        and is given in full when it is not
+        (:meth:`~._mocap_noise.MocapNoise.allowed_gain`); the settings'
+        fixed gain is used as it is.
         """
         k = self.base_gain_per_s
         if self._automatic:
-            k = min(k, self.noise.gain_cap())
+            e = None if self._mean_error is None else float(np.linalg.norm(self._mean_error))
+            k = self.noise.allowed_gain(k, e)
         return k * self.gain_scale
 
     def measurement(self, t: float, position: Any, z_axis: Any = None) -> bool:
@@ -468,6 +472,11 @@ class IntegralFeedback:
             self.state = TRACKING
             return
         e_p, e_r = errors
+        if self._mean_error is None:
+            self._mean_error = e_p
+        else:
+            self._mean_error = self._mean_error + (1.0 - math.exp(-dt / NOISE_GATE_S)) * (
+                e_p - self._mean_error)
         k = self.gain_per_s * dt
         c_new = _clamp(self.correction_m + k * e_p, s.max_correction_m)
         r_new = self.correction_rad

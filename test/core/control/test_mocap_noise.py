@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core.control._feedback import FeedbackSettings, IntegralFeedback
-from bellow_ancf_ros.core.control._mocap_noise import (NOISE_BUDGET_M, NOISE_GAIN_FLOOR_PER_S,
+from bellow_ancf_ros.core.control._mocap_noise import (GATE_NOISE_FACTOR, NOISE_BUDGET_M,
+                                                       NOISE_GAIN_FLOOR_PER_S, NOISE_GATE_S,
                                                        MocapNoise)
 
 
@@ -97,3 +98,79 @@ def test_the_noise_caps_the_automatic_gain_and_not_a_gain_set_by_hand():
     st = auto.status(200 / 66.0)
     assert float(st['mocap_noise_mm']) == pytest.approx(auto.noise.sigma_m * 1e3, abs=1e-3)
     assert float(st['noise_gain_cap_per_s']) == pytest.approx(auto.noise.gain_cap(), rel=1e-2)
+
+
+def _noisy(sigma=0.27e-3, rate_hz=66.0):
+    est = MocapNoise()
+    est.sigma_m, est.rate_hz = sigma, rate_hz
+    return est
+
+
+def test_the_mean_errors_noise_is_what_an_exponential_mean_of_white_noise_gives():
+    rng = np.random.default_rng(3)
+    est, dt = _noisy(), 1.0 / 66.0
+    a = 1.0 - math.exp(-dt / NOISE_GATE_S)
+    m, norms = np.zeros(3), []
+    for i in range(40000):
+        m = m + a * (rng.normal(0.0, est.sigma_m, 3) - m)
+        if i > 500:
+            norms.append(np.linalg.norm(m))
+    assert math.sqrt(np.mean(np.square(norms))) == pytest.approx(est.mean_error_noise_m(),
+                                                                 rel=0.1)
+
+
+def test_the_cap_holds_an_error_that_is_noise_and_not_one_the_robot_has():
+    est = _noisy()
+    cap, s = est.gain_cap(), est.mean_error_noise_m()
+    assert est.allowed_gain(6.4, None) == cap                      # nothing known: the cap
+    assert est.allowed_gain(6.4, 0.0) == cap
+    assert est.allowed_gain(6.4, GATE_NOISE_FACTOR * s) == pytest.approx(cap)
+    assert est.allowed_gain(6.4, 1.5 * GATE_NOISE_FACTOR * s) == pytest.approx(0.5 * (cap + 6.4))
+    assert est.allowed_gain(6.4, 2.0 * GATE_NOISE_FACTOR * s) == pytest.approx(6.4)
+    assert est.allowed_gain(6.4, 1e-3) == 6.4
+    assert est.allowed_gain(0.8 * cap, 0.0) == 0.8 * cap           # below the cap: as it is
+    assert MocapNoise().allowed_gain(6.4, 0.0) == 6.4               # noise unknown: no cap
+
+
+def _held(offset_m, seconds=6.0, seed=8):
+    """An integral loop on a robot off by ``offset_m`` (x), noisy 66 Hz mocap, 100 Hz steps.
+
+    The robot is where the corrected target says plus the offset (a model
+    mismatch).  Returns (times [s], error norms [m], gains [1/s]) per step.
+    """
+    rng = np.random.default_rng(seed)
+    fb = IntegralFeedback(FeedbackSettings())
+    fb.set_gain(6.4)
+    target = np.array([0.0, 0.0, 0.09])
+    command = target.copy()
+    ts, errs, gains = [], [], []
+    n_meas = 0
+    for i in range(int(seconds * 100)):
+        t = i / 100.0
+        while n_meas / 66.0 <= t:
+            robot = command + np.array([offset_m if n_meas / 66.0 >= 2.0 else 0.0, 0.0, 0.0])
+            fb.measurement(n_meas / 66.0, robot + rng.normal(0.0, 0.27e-3, 3))
+            n_meas += 1
+        command, _ = fb.corrected_target(t, target)
+        fb.report(True, False)
+        ts.append(t)
+        errs.append(np.linalg.norm(command + [offset_m if t >= 2.0 else 0.0, 0, 0] - target))
+        gains.append(fb.gain_per_s)
+    return np.array(ts), np.array(errs), np.array(gains)
+
+
+def test_a_real_error_is_corrected_at_the_full_gain_and_noise_held_at_the_cap():
+    """A 1 mm mismatch from 2 s on: corrected at about the full gain, then held at the cap.
+
+    The cap alone (1.5 /s) would take 1.5 s to bring 1 mm to 0.1 mm; the
+    full gain (6.4 /s) 0.36 s.
+    """
+    t, err, gain = _held(1e-3)
+    cap = 2 * 66.0 * NOISE_BUDGET_M ** 2 / (3 * 0.27e-3 ** 2)
+    assert np.all(gain[(t > 1.5) & (t < 2.0)] < 1.3 * cap)          # noise only: about the cap
+    assert gain[(t > 2.0) & (t < 2.2)].max() == pytest.approx(6.4)  # the mismatch: all of it
+    within = t[(t > 2.0) & (err < 0.1e-3)][0] - 2.0
+    assert within < 1.0   # (the cap alone: 1.53 s)
+    assert np.median(gain[t > 4.0]) < 1.3 * cap                     # corrected: the cap again
+    held = np.sqrt(np.mean(np.square(err[t > 4.0])))
+    assert held < 2 * NOISE_BUDGET_M

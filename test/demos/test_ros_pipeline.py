@@ -1,0 +1,46 @@
+"""The demos' in-process rclpy node (pipeline.SpunNode/Recorder) with real rclpy and topics."""
+
+import time
+
+import pytest
+
+pytest.importorskip('rclpy')
+
+from rclpy.context import Context  # noqa: E402
+import rclpy  # noqa: E402
+from std_msgs.msg import Float64MultiArray, Header  # noqa: E402
+
+from bellow_ancf_ros.demos.pipeline import Recorder, record_qos, wait_until  # noqa: E402
+from ros_domains import fresh_domain  # noqa: E402
+
+
+def test_a_recorder_records_on_after_its_node_destroyed_a_publisher_while_it_spun():
+    """An entity destroyed by another thread made rclpy's wait raise; the spin goes on.
+
+    With ``executor.spin()`` the recorder's thread ended there (238 publishers
+    into the loop below in one trial; a closed-loop run of ``make demo``
+    destroys one as it ends) and nothing more was recorded: a vent the
+    middleware had acknowledged never reached the recording.
+    """
+    domain = fresh_domain()
+    rec = Recorder(domain, {'pressure_command': Float64MultiArray})
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('commander', context=ctx)
+    pub = node.create_publisher(Float64MultiArray, 'pressure_command', record_qos())
+    try:
+        assert wait_until(lambda: rec.publishers('pressure_command') == 1, 10.0)
+        for _ in range(400):   # a publisher (its QoS events are waitables) made and destroyed
+            p = rec.node.create_publisher(Header, 'leave', 10)
+            time.sleep(0.001)
+            rec.node.destroy_publisher(p)
+        assert rec.thread.is_alive()
+        pub.publish(Float64MultiArray(data=[0.0, 0.0, 0.0]))
+        assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=4.0))
+        assert rec.wait_for_vent(timeout=5.0)    # acknowledged, and recorded
+        assert rec.count('pressure_command') == 1
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        rec.close()
+    assert not rec.thread.is_alive()   # close() ends the spin
