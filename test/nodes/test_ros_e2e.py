@@ -32,6 +32,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.core.experiments.trajectories import default_parameters  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+from ros_processes import spin_until_closed  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_TIMEOUT = 30.0
@@ -141,14 +142,10 @@ class Client:
             self._record(typ, topic, command_qos())
         self._record(DiagnosticArray, '/diagnostics', command_qos())
         self.target_pub = self.node.create_publisher(PoseStamped, 'target_pose', command_qos())
-        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.closed = threading.Event()
+        self.thread = threading.Thread(target=spin_until_closed,
+                                       args=(self.executor, self.ctx, self.closed), daemon=True)
         self.thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001
-            pass
 
     def _record(self, typ, topic, qos):
         self.msgs[topic] = []
@@ -171,6 +168,7 @@ class Client:
             return self.msgs[topic][-1]
 
     def close(self):
+        self.closed.set()
         self.executor.shutdown(timeout_sec=2.0)
         self.thread.join(5.0)
         self.node.destroy_node()

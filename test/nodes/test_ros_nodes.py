@@ -38,6 +38,7 @@ from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticN
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
+from ros_processes import spin_until_closed  # noqa: E402
 
 TIMEOUT = 10.0
 _ns_counter = itertools.count()
@@ -67,14 +68,10 @@ class Harness:
         self.executor.add_node(self.client)
         self.msgs = {}
         self.lock = threading.Lock()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._closed = threading.Event()
+        self._thread = threading.Thread(target=spin_until_closed,
+                                        args=(self.executor, ctx, self._closed), daemon=True)
         self._thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - executor shut down
-            pass
 
     def add(self, cls, *, name=None, remap=None, **params):
         if cls is InverseKinetostaticNode:
@@ -127,6 +124,7 @@ class Harness:
         for n in self.nodes:
             if isinstance(n, InverseKinetostaticNode):
                 n.vent_and_shutdown()
+        self._closed.set()
         self.executor.shutdown(timeout_sec=2.0)
         self._thread.join(5.0)
         for n in self.nodes:

@@ -9,12 +9,32 @@ from ros_domains import fresh_domain  # noqa: E402
 import signal
 import subprocess
 import threading
+import time
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
 REPO = Path(__file__).resolve().parents[2]
+
+
+def spin_until_closed(executor, ctx, closed: threading.Event) -> None:
+    """Spin ``executor`` until ``closed`` is set or ``ctx`` shuts down.
+
+    rclpy's wait raises when another thread destroys an entity it waits on
+    (a node's publisher with its QoS events, a lifecycle transition's
+    clean-up, a client): ``executor.spin()`` then ends for good, and what
+    the test waits for never comes.  The error is dropped and the next wait
+    is built without the entity (``bellow_ancf_ros.demos.pipeline`` does the
+    same for the demos' recorder).
+    """
+    while ctx.ok() and not closed.is_set():
+        try:
+            executor.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:
+            return
+        except Exception:  # noqa: BLE001 - see the docstring
+            time.sleep(0.001)
 
 
 def node_process_env() -> dict:
@@ -70,19 +90,16 @@ class SpunClient:
         self.setup(self.node)
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.closed = threading.Event()
+        self.thread = threading.Thread(target=spin_until_closed,
+                                       args=(self.executor, self.ctx, self.closed), daemon=True)
         self.thread.start()
 
     def setup(self, node) -> None:
         """Create the subscriptions and publishers (nothing here)."""
 
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - shut down
-            pass
-
     def close(self):
+        self.closed.set()
         self.executor.shutdown(timeout_sec=2.0)
         self.thread.join(5.0)
         self.node.destroy_node()
