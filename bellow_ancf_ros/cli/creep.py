@@ -150,7 +150,9 @@ def register_identify_creep(isub) -> None:
                     'exp(-t/T) decaying. The positions are projected on the motion (from '
                     'the median pose of the 0.5 s before the step to that of the last '
                     'second); y(t) = y_inf - B exp(-(t - t_step)/T) is fitted robustly '
-                    '(soft-l1 loss, outliers dropped) from --settle-s after the step; c is '
+                    '(soft-l1 loss, outliers dropped) from --settle-s after the step, with '
+                    "the first mode's ringing (a damped sinusoid) in the curve when the robot "
+                    'rang; c is '
                     "B at the fast move's mean time over the displacement. Record the "
                     'robot still before the step and for at least 4 time constants after '
                     'it (e.g. 20 s). CSV: columns t_s,x_m,y_m,z_m (optional p1_kpa,...; '
@@ -166,8 +168,10 @@ def register_identify_creep(isub) -> None:
     p.add_argument('--t-end-s', type=finite_float, default=None, metavar='T1',
                    help='end of the fitted window [s]; default: the last pose')
     p.add_argument('--settle-s', type=nonneg_float, default=None, metavar='S',
-                   help='start the fit this long after the step [s]; default: where the '
-                        "first mode's ringing has sunk into the noise (0.5 to 3 s)")
+                   help='start the fit of the creep alone this long after the step [s]; '
+                        "default: 0.5 with the first mode's ringing fitted where the robot "
+                        'rang, else (or when that fit is refused) where the ringing has sunk '
+                        'into the noise (0.5 to 3 s)')
     p.add_argument('--pressure-topic', default=fitting.PRESSURE_TOPIC, metavar='T',
                    help='bag topic of the pressure commands; default: %(default)s')
     p.add_argument('--pose-topic', default=fitting.POSE_TOPIC, metavar='T',
