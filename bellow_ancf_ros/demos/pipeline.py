@@ -257,7 +257,7 @@ class SpunNode:
         self.lock = threading.Lock()
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
-        self._closing = False
+        self._closed = threading.Event()
         self.spin_errors = 0   #: waits that raised (an entity destroyed meanwhile); spun on
         self.thread = threading.Thread(target=self._spin, daemon=True)
 
@@ -302,37 +302,26 @@ class SpunNode:
             self.node.destroy_client(cli)
 
     def _spin(self) -> None:
-        """Spin until :meth:`close`; an entity destroyed meanwhile does not end it.
+        """Spin until :meth:`close`; a wait that raises is counted in :attr:`spin_errors`.
 
-        rclpy's executor raises when a waitable it waits on is destroyed by
-        another thread (a publisher's QoS events, destroyed with it:
-        ``cannot use Destroyable because destruction was requested``); with
-        ``executor.spin()`` that ended this thread, and the recorder saw
-        nothing more (the lockstep's publisher destroyed at the end of a
-        closed-loop run: the vent, acknowledged to the controller by this
-        process's middleware, was never recorded: 5 of 18 short runs beside
-        two CPU-bound processes, each with rclpy's ``InvalidHandle`` where
-        instrumented; from :meth:`wait_for` the same death looks like a
-        clock that stands still, as one CI run's loads phase reported: not
-        reproduced, a likely cause).  Those errors are counted in
-        :attr:`spin_errors` and the next wait is built without the entity
-        (0 of 20 runs failed, 2 with the error caught).
+        (:func:`~..nodes.ros_util.spin_until_closed`: an entity the demo
+        destroyed as a closed-loop run ended made rclpy's wait raise, and
+        ``executor.spin()`` ended there; the recorder then missed the vent,
+        acknowledged by its middleware, in 5 of 18 short runs beside two
+        CPU-bound processes, 0 of 20 with the spin going on.  From
+        :meth:`wait_for` the same death looks like a clock that stands
+        still, as one CI run's loads phase reported: not reproduced, a
+        likely cause.)
         """
-        from rclpy.executors import ExternalShutdownException, ShutdownException
-        while not self._closing and self.ctx.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.1)
-            except (ShutdownException, ExternalShutdownException):
-                return
-            except Exception:  # noqa: BLE001 - see the docstring
-                if self._closing:
-                    return
-                self.spin_errors += 1
-                time.sleep(0.001)   # (never a busy loop)
+        from ..nodes.ros_util import spin_until_closed
+
+        def count(_exc) -> None:
+            self.spin_errors += 1
+        spin_until_closed(self.executor, self.ctx, self._closed, count)
 
     def close(self) -> None:
         """Stop spinning and shut the context down."""
-        self._closing = True
+        self._closed.set()
         self.executor.shutdown(timeout_sec=2.0)
         if self.thread.is_alive():
             self.thread.join(5.0)

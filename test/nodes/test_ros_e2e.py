@@ -31,8 +31,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.core.experiments.trajectories import default_parameters  # noqa: E402
-from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
-from ros_processes import spin_until_closed  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos, spin_until_closed  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_TIMEOUT = 30.0

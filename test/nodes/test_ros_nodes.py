@@ -36,9 +36,8 @@ from bellow_ancf_ros.core import geometry  # noqa: E402
 from bellow_ancf_ros.nodes import inverse_kinetostatic_node as inv_mod  # noqa: E402
 from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
-from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import command_qos, spin_until_closed  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
-from ros_processes import spin_until_closed  # noqa: E402
 
 TIMEOUT = 10.0
 _ns_counter = itertools.count()

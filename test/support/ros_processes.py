@@ -9,32 +9,14 @@ from ros_domains import fresh_domain  # noqa: E402
 import signal
 import subprocess
 import threading
-import time
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
+
+from bellow_ancf_ros.nodes.ros_util import spin_until_closed
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def spin_until_closed(executor, ctx, closed: threading.Event) -> None:
-    """Spin ``executor`` until ``closed`` is set or ``ctx`` shuts down.
-
-    rclpy's wait raises when another thread destroys an entity it waits on
-    (a node's publisher with its QoS events, a lifecycle transition's
-    clean-up, a client): ``executor.spin()`` then ends for good, and what
-    the test waits for never comes.  The error is dropped and the next wait
-    is built without the entity (``bellow_ancf_ros.demos.pipeline`` does the
-    same for the demos' recorder).
-    """
-    while ctx.ok() and not closed.is_set():
-        try:
-            executor.spin_once(timeout_sec=0.1)
-        except ExternalShutdownException:
-            return
-        except Exception:  # noqa: BLE001 - see the docstring
-            time.sleep(0.001)
 
 
 def node_process_env() -> dict:
