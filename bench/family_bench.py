@@ -366,8 +366,9 @@ def render(runs: list) -> str:
             miss = r['driver'] if r['p95'] > r['limit'] else ''
             out.append(f'  {r["goal"]:34s} {r["limit"]:7.3g} {r["median"]:8.3f} '
                        f'{r["p95"]:8.3f} {r["worst"]:8.3f} {r["met"]:3d}/{r["n"]:<3d}  {miss}')
-    if _failures(runs):
-        out.append(_failures(runs))
+    failures = _failures(runs)
+    if failures:
+        out.append(failures)
     return '\n'.join(out)
 
 
@@ -443,8 +444,9 @@ def markdown(data: dict) -> str:
             out.append(f'| {robot.replace("_", " ")} | {r["goal"]} | {r["limit"]:g} | '
                        f'{r["median"]:.3f} | {r["p95"]:.3f} | {r["worst"]:.3f} | '
                        f'{r["met"]}/{r["n"]} | {miss} |')
-    if _failures(runs):
-        out += ['', _failures(runs) + '.']
+    failures = _failures(runs)
+    if failures:
+        out += ['', failures + '.']
     return '\n'.join(out) + '\n'
 
 

@@ -1,5 +1,6 @@
 """The demos' in-process rclpy node (pipeline.SpunNode/Recorder) with real rclpy and topics."""
 
+from contextlib import contextmanager
 import time
 
 import pytest
@@ -14,6 +15,26 @@ from bellow_ancf_ros.demos.pipeline import Recorder, record_qos, wait_until  # n
 from ros_domains import fresh_domain  # noqa: E402
 
 
+@contextmanager
+def _commander(rec, domain):
+    """A ``pressure_command`` publisher in a context of its own, matched with ``rec`` both ways.
+
+    Yields the publisher; on the way out the commander goes and ``rec`` is closed.
+    """
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('commander', context=ctx)
+    pub = node.create_publisher(Float64MultiArray, 'pressure_command', record_qos())
+    try:
+        assert wait_until(lambda: rec.publishers('pressure_command') == 1
+                          and pub.get_subscription_count() == 1, 10.0)
+        yield pub
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        rec.close()
+
+
 def test_a_recorder_records_on_after_its_node_destroyed_a_publisher_while_it_spun():
     """An entity destroyed by another thread made rclpy's wait raise; the spin goes on.
 
@@ -24,13 +45,7 @@ def test_a_recorder_records_on_after_its_node_destroyed_a_publisher_while_it_spu
     """
     domain = fresh_domain()
     rec = Recorder(domain, {'pressure_command': Float64MultiArray})
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('commander', context=ctx)
-    pub = node.create_publisher(Float64MultiArray, 'pressure_command', record_qos())
-    try:
-        assert wait_until(lambda: rec.publishers('pressure_command') == 1
-                          and pub.get_subscription_count() == 1, 10.0)   # (both ways)
+    with _commander(rec, domain) as pub:
         for _ in range(400):   # a publisher (its QoS events are waitables) made and destroyed
             p = rec.node.create_publisher(Header, 'leave', 10)
             time.sleep(0.001)
@@ -40,10 +55,6 @@ def test_a_recorder_records_on_after_its_node_destroyed_a_publisher_while_it_spu
         assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=4.0))
         assert rec.wait_for_vent(timeout=5.0)    # acknowledged, and recorded
         assert rec.count('pressure_command') == 1
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
-        rec.close()
     assert not rec.thread.is_alive()   # close() ends the spin
 
 
@@ -66,20 +77,10 @@ def test_a_wait_that_raises_does_not_end_the_recorders_spin():
             raise RuntimeError('cannot use Destroyable because destruction was requested')
         return real(*args, **kwargs)
     rec.executor.wait_for_ready_callbacks = wait_for_ready_callbacks
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('commander', context=ctx)
-    pub = node.create_publisher(Float64MultiArray, 'pressure_command', record_qos())
-    try:
-        assert wait_until(lambda: rec.publishers('pressure_command') == 1
-                          and pub.get_subscription_count() == 1, 10.0)   # (both ways)
+    with _commander(rec, domain) as pub:
         pub.publish(Float64MultiArray(data=[1.0, 1.0, 1.0]))   # (wakes a blocking spin too)
         assert wait_until(lambda: raised, 5.0)
         time.sleep(0.3)
         assert rec.thread.is_alive() and rec.spin_errors == 1
         pub.publish(Float64MultiArray(data=[0.0, 0.0, 0.0]))
         assert rec.wait_for_vent(timeout=5.0)
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
-        rec.close()
