@@ -124,6 +124,8 @@ def test_rotation_vector_inverts_rotation_from_vector_and_agrees_with_scipy():
                              rng.uniform(0.0, math.pi, 194)])
     for axis, angle in zip(axes, angles):
         R = geometry.rotation_from_vector(axis * angle)
+        np.testing.assert_allclose(R, Rotation.from_rotvec(axis * angle).as_matrix(),
+                                   atol=1e-15)
         v = geometry.rotation_vector(R)
         np.testing.assert_allclose(geometry.rotation_from_vector(v), R, atol=1e-12)
         assert np.linalg.norm(v) == pytest.approx(angle, abs=1e-9)

@@ -94,10 +94,10 @@ class PressureRegulators:
             return
         p, w = self.pressures_pa, self.setpoint_pa
         decay = math.exp(-dt / self.time_constant_s) if self.time_constant_s > 0 else 0.0
-        target = w + (p - w) * decay
         max_step = self.slew_rate_pa_per_s * dt
-        self.pressures_pa = np.clip(p + np.clip(target - p, -max_step, max_step),
-                                    self.p_min, self.p_max)
+        # (ufuncs, not np.clip: at a robot's few actuators its Python wrapper cost more)
+        move = np.minimum(np.maximum((w - p) * (1.0 - decay), -max_step), max_step)
+        self.pressures_pa = np.minimum(np.maximum(p + move, self.p_min), self.p_max)
         self.time_s += dt
 
     def step(self, dt: float) -> np.ndarray:
