@@ -210,7 +210,7 @@ def register(subparsers) -> None:
     p.add_argument('--fit', nargs='+', action='extend', metavar='NAME',
                    help="robot-file keys to fit instead of the default, e.g. actuator.d_a_mm "
                         "'segments[0].pitch_radius_mm' 'segments[*].top_plate_mass_kg' "
-                        'stiffness_scale')
+                        'stiffness_scale mass_scale (factors on k(lam) and on every mass)')
     p.add_argument('--settle-s', type=nonneg_float, default=0.5, metavar='S',
                    help='bag: drop poses within this time after a command change; '
                         'default: %(default)s')

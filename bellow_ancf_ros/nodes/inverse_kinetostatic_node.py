@@ -237,7 +237,7 @@ class InverseKinetostaticNode(LifecycleNode):
         if self._feedback.wanted or self._targets.wanted:
             self._modes = ModeWatch(self, self._feedback.mode_check())
             self._modes.start(start)   # the first answer now, at the start equilibrium
-        self._feedback.configure(cfg, self._worker.submit, self._modes)
+        self._feedback.configure(model, self._worker.submit, self._modes)
         self._targets.configure(self._modes, self._worker.submit,
                                 float(self.get_parameter('feedback_loop_lag_s').value))
         self._configured = True
@@ -497,7 +497,8 @@ class InverseKinetostaticNode(LifecycleNode):
             # (which measures against the shaped pose wanted, not the shifted command)
             cmd, ref = self._targets.targets(item, control_clock(self).time_of(stamp, True))
             pos, z = self._feedback.correct(ref[0], ref[1], stamp, command=cmd,
-                                            hold_until=self._targets.hold_until())
+                                            hold_until=self._targets.hold_until(),
+                                            move=self._targets.move())
             with self._solve_lock:
                 inv = solve_inverse(model, pos, z, payload_kg=payload, warm_start=warm,
                                     time_budget_s=self._time_budget(), tip_force_n=force)

@@ -51,7 +51,8 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, LOOP_DELAY_S, LOOP_LAG_S,
-                            FeedbackSettings, IntegralFeedback, ModeCheck, gain_setting)
+                            FeedbackSettings, IntegralFeedback, MismatchTransfer, ModeCheck,
+                            gain_setting)
 from ..core import geometry
 from . import lockstep
 from .diagnostics import Refusals
@@ -100,9 +101,12 @@ FEEDBACK_PARAMETER_TABLE = (
      'control and half a measurement period [s].', 0.0, 10.0))) + (
     Param('feedback_correction_frame', _DEF.correction_frame, descriptor(
         "Frame the correction is integrated in: 'azimuthal' (turns with the target about "
-        "the base z-axis: a symmetric robot's mismatch is constant in it) or 'base' (an "
-        "error fixed in the base frame, e.g. one stiffer actuator). Read on configure.", _S,
-        constraints="one of: 'azimuthal', 'base'")),
+        "the base z-axis: a symmetric robot's mismatch is constant in it), 'base' (an "
+        "error fixed in the base frame, e.g. one stiffer actuator) or 'model' (azimuthal, "
+        "and at every target jump read as a mismatch of the robot file's parameters and "
+        "carried to the new target through the model; for a robot whose play and creep "
+        "are compensated or negligible). Read on configure.", _S,
+        constraints="one of: 'azimuthal', 'base', 'model'")),
 )
 #: Their names.
 FEEDBACK_PARAMETERS = tuple(p.name for p in FEEDBACK_PARAMETER_TABLE)
@@ -175,8 +179,11 @@ class FeedbackLink:
         gain = self._read_gain() if self.wanted else AUTO_GAIN
         return ModeCheck(gain, g('feedback_loop_lag_s').value, g('feedback_loop_delay_s').value)
 
-    def configure(self, cfg, resubmit: Callable[[Any], None], modes=None) -> None:
+    def configure(self, model, resubmit: Callable[[Any], None], modes=None) -> None:
         """Read the parameters; with feedback on, subscribe and start the re-solve timer.
+
+        ``model``: the controller's model (a jump's move carries the correction
+        to its goal through it, :class:`~bellow_ancf_ros.core.control.MismatchTransfer`).
 
         ``modes``: the node's :class:`~.mode_watch.ModeWatch` (its check is
         :meth:`mode_check`); on ``feedback_gain_per_s: auto`` the gain is its
@@ -187,6 +194,7 @@ class FeedbackLink:
         self.release()
         if g('feedback').value == 'none':
             return
+        cfg = model.cfg
         self._gain_setting = gain = self._read_gain()
         s = FeedbackSettings(
             gain_per_s=_DEF.gain_per_s if gain == AUTO_GAIN else gain,
@@ -199,7 +207,8 @@ class FeedbackLink:
         self._frame = g('base_frame').value
         self._frames = PoseFrames(self.node, self._frame, cfg.mocap_frame)
         with self._lock:
-            self._law = IntegralFeedback(s, self._use_orientation)
+            self._law = IntegralFeedback(s, self._use_orientation, (
+                MismatchTransfer(model) if s.correction_frame == 'model' else None))
         self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
                                                   self._on_measured, measured_pose_qos())
 
@@ -283,14 +292,16 @@ class FeedbackLink:
         return self._control_time(stamp, future=False)
 
     def correct(self, position: np.ndarray, z_axis: np.ndarray | None, stamp=None,
-                command: tuple | None = None, hold_until: float | None = None):
+                command: tuple | None = None, hold_until: float | None = None,
+                move: tuple | None = None):
         """The target to hand to the inverse (``command``, or the target, when feedback is off).
 
         ``stamp``: the target's stamp, the time it is wanted at (zero: now; in
         the future: a target that previews the robot's lag).  ``command``:
         the target to correct when it is not the pose wanted (a dynamic
         feedforward's shift).  ``hold_until``: the correction is held for
-        measurements captured before it (control time [s]; a jump's move).  A
+        measurements captured before it (control time [s]; a jump's move,
+        ``move``, whose goal the correction is carried to).  A
         change between integrating and holding the
         correction through a dropout is logged, not only reported on
         ``/diagnostics``.
@@ -300,7 +311,8 @@ class FeedbackLink:
                 return (position, z_axis) if command is None else command
             out = self._law.corrected_target(self._clock.now(), position, z_axis,
                                              wanted_at=self._control_time(stamp, future=True),
-                                             command=command, hold_until=hold_until)
+                                             command=command, hold_until=hold_until,
+                                             move=move)
             degraded, state = self._law.blind, self._law.state
             wd = self._law.watchdog
             trip = None
@@ -343,7 +355,7 @@ class FeedbackLink:
         with self._lock:
             if self._law is not None and fw is not None:
                 self._law.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
-                                 fw.position, fw.z_axis)
+                                 fw.position, fw.z_axis, inverse=inv)
 
     # ------------------------------------------------------------ margins
     def _on_mode(self, before, res) -> None:

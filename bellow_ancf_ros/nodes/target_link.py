@@ -243,6 +243,11 @@ class TargetLink:
         with self._lock:
             return None if self._filter is None else self._filter.hold_until
 
+    def move(self) -> tuple | None:
+        """The newest jump's move, as ``TargetFilter.move`` gives it (control time); or None."""
+        with self._lock:
+            return None if self._filter is None else self._filter.move
+
     def status(self) -> dict:
         """Diagnostics values."""
         with self._lock:

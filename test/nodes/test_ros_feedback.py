@@ -227,6 +227,45 @@ def test_closed_loop_in_process_reaches_held_target(h, one, clock):
         assert 0.0 < stamp.sec + 1e-9 * stamp.nanosec <= sim.clock.time_s + 1e-9
 
 
+def test_the_model_frame_carries_the_correction_to_a_step_target(h, one):
+    """``feedback_correction_frame: model``: a jump's goal gets the carried correction.
+
+    The node hands the jump's move to the law and the answers of its
+    commands; after a held target and a 10 mm step, the transfer ran once
+    and the robot reaches the new target.
+    """
+    h.record(Float64MultiArray, 'pressure_command')
+    h.record(PoseStamped, 'true_pose')
+    h.add(SimulatedRobotNode, seed=9, mocap_dropout_every_s=0.0, mocap_dropout_duration_s=0.0)
+    node = h.add(InverseKinetostaticNode, feedback='integral',
+                 feedback_correction_frame='model')
+    law = node._feedback._law
+    assert law.transfer is not None and law.transfer.model is node._model
+    pub = h.publisher(PoseStamped, 'target_pose')
+    held = solve_forward(one, [70e3, 10e3, -30e3]).position
+    goal = held + np.array([0.0, 0.01, 0.0])
+
+    def near(target, n=20):
+        def check():
+            return (h.count('true_pose') >= 60 and np.linalg.norm(
+                positions(h, 'true_pose', n).mean(axis=0) - target) < 0.3e-3)
+        return check
+
+    pub.publish(target_msg(held))
+    wait_for(lambda: near(held)() and np.linalg.norm(law.correction_m) > 0.2e-3, timeout=30.0,
+             what='a correction learned, the true pose within 0.3 mm of the held target')
+    assert law.transfer.transfers == 0   # (the first target's move: nothing learned to carry)
+    pub.publish(target_msg(goal))
+    wait_for(lambda: law.transfer.transfers + law.transfer.refused >= 1, timeout=10.0,
+             what='the correction carried to the step target')
+    assert law.transfer.transfers == 1 and law.transfer.refused == 0
+    wait_for(near(goal), timeout=30.0, what='true pose within 0.3 mm of the step target')
+    cfg = load_robot('one_segment')
+    with h.lock:
+        for _, m in h.msgs['pressure_command']:
+            assert_safe(m.data, cfg)
+
+
 def test_feedback_refuses_bad_poses_ignores_outliers_and_holds_through_a_dropout(h, one):
     h.record(Float64MultiArray, 'pressure_command')
     h.record(PoseStamped, 'commanded_pose')

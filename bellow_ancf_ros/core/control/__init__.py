@@ -43,6 +43,7 @@ from ._command_output import CommandOutput, CreepCompensation
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._target_filter import TARGET_SHAPINGS, TargetFilter
 from ._jumps import JumpTransition
+from ._mismatch import MismatchTransfer
 from ._mocap_noise import NOISE_BUDGET_M, MocapNoise
 from ._watchdog import OscillationWatchdog, WatchdogTrip
 
@@ -52,7 +53,8 @@ __all__ = [
     "SHAPERS",
     "TARGET_SHAPINGS", "CommandOutput", "CreepCompensation", "DynamicFeedforward",
     "FeedbackSettings", "ForceEstimate", "IntegralFeedback", "JumpTransition", "LoopMargins",
-    "MocapNoise", "ModeCheck", "ModeCheckResult", "OscillationWatchdog", "PlayCompensation",
+    "MismatchTransfer", "MocapNoise", "ModeCheck", "ModeCheckResult", "OscillationWatchdog",
+    "PlayCompensation",
     "StreamFeedforward", "TargetFilter", "TargetShaper", "TipForceEstimator", "WatchdogTrip",
     "dynamic_path", "gain_setting", "loop_delay_s", "loop_margins", "safe_gain", "shaped",
     "shaper_impulses",

@@ -121,6 +121,17 @@ class JumpTransition:
                 p - old[1], None if z is None or old[2] is None else z - old[2], dt)
         self._newest = (float(t), p, z)
 
+    @property
+    def move(self):
+        """The newest move: ``(start time, start position, goal position, goal z-axis or None)``.
+
+        None before the first jump.  The goal is the newest target (a move's
+        end follows the targets that come during it).
+        """
+        if self._move is None:
+            return None
+        return self._move[0], self._move[2], self._newest[1], self._newest[2]
+
     def busy(self, t: float) -> bool:
         """True while a move runs at time ``t``."""
         return self._move is not None and t < self._move[0] + self._move[1]

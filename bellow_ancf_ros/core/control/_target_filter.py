@@ -104,6 +104,11 @@ class TargetFilter:
                 if h is not None]
         return max(ends) if ends else None
 
+    @property
+    def move(self):
+        """The newest jump's move, as :attr:`JumpTransition.move` gives it (or None)."""
+        return None if self.jumps is None else self.jumps.move
+
     def reset(self, start=None) -> None:
         """Forget the stream (the next target is taken as it is).
 

@@ -53,7 +53,8 @@ Loop = Callable[[RobotModel, SimulatedRobot, float], LoopSimulation]
 def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0.0,
                  dynamic_feedforward: bool = True, smooth_jumps: bool = True,
                  creep_compensation: tuple[float, float] | None = None,
-                 play_compensation_pa: float = 0.0) -> LoopSimulation:
+                 play_compensation_pa: float = 0.0,
+                 correction_frame: str = FeedbackSettings.correction_frame) -> LoopSimulation:
     """The inverse node's closed loop at its defaults around ``robot`` (targets not previewed).
 
     ``dynamic_feedforward``: as the node's ``dynamic_feedforward`` (default
@@ -62,10 +63,12 @@ def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0
     ``none``); ``creep_compensation``: ``(fraction, time_constant_s)``, as its
     ``creep_fraction`` and ``creep_time_constant_s`` (None: off, the default);
     ``play_compensation_pa``: the regulators' play, as its ``regulator_play_kpa``
-    (0: off, the default).
+    (0: off, the default); ``correction_frame``: as its
+    ``feedback_correction_frame``.
     """
     ff = (StreamFeedforward(1.0, 0.0, lag_s=LOOP_LAG_S) if dynamic_feedforward else None)
-    return LoopSimulation(model, robot, FeedbackSettings(), preview_s=0.0,
+    return LoopSimulation(model, robot, FeedbackSettings(correction_frame=correction_frame),
+                          preview_s=0.0,
                           physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=payload_kg,
                           mode_check=ModeCheck(AUTO_GAIN, LOOP_LAG_S, LOOP_DELAY_S),
                           feedforward=ff, jumps=JumpTransition() if smooth_jumps else None,

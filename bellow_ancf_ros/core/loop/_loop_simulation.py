@@ -32,7 +32,8 @@ import numpy as np
 from ..geometry import angle_between
 from ..model import RobotModel
 from ..solve import solve_forward, solve_inverse
-from ..control import CommandOutput, FeedbackSettings, IntegralFeedback, TargetFilter
+from ..control import (CommandOutput, FeedbackSettings, IntegralFeedback, MismatchTransfer,
+                       TargetFilter)
 from ..sim import SimulatedRobot
 
 __all__ = ['LoopRecord', 'LoopSimulation']
@@ -151,7 +152,9 @@ class LoopSimulation:
         self.model, self.robot = model, robot
         self.use_orientation = model.cfg.n_segments >= 2
         self.feedback = (None if feedback is None
-                         else IntegralFeedback(feedback, self.use_orientation))
+                         else IntegralFeedback(feedback, self.use_orientation, (
+                             MismatchTransfer(model) if feedback.correction_frame == 'model'
+                             else None)))
         self.control_dt = 1.0 / control_rate_hz
         self.physics_dt = 1.0 / physics_rate_hz
         self.preview_s = float(preview_s)
@@ -196,17 +199,17 @@ class LoopSimulation:
             ref = target(t) or (p, z)
             self._last = (p, z)
         ref_p, ref_z = ref
-        command, hold = None, None
+        command, hold, move = None, None, None
         if self.targets is not None:   # a jump becomes a move, a stream is shifted: the
             if new is not None:            # loop compares the move (wanted)
                 self.targets.push(t + self.preview_s, p, z)
             shifted, (p, z) = self.targets.targets(t)
             command = shifted if self.feedforward is not None else None
-            hold = self.targets.hold_until
+            hold, move = self.targets.hold_until, self.targets.move
         fb = self.feedback
         if fb is not None:
             p, z = fb.corrected_target(t, p, z, wanted_at=t + self.preview_s, command=command,
-                                       hold_until=hold)
+                                       hold_until=hold, move=move)
         elif command is not None:
             p, z = command
         inv = solve_inverse(self.model, p, z, payload_kg=self.payload_kg,
@@ -227,7 +230,7 @@ class LoopSimulation:
             self._check_modes(t, fw)
             if fb is not None:
                 fb.report(bool(inv.reachable), bool(np.any(inv.active_limits)),
-                          fw.position, fw.z_axis)
+                          fw.position, fw.z_axis, inverse=inv)
         else:
             if self.output.timed and self.output.wanted is not None:   # (as the node's
                 self.sent = self.output.again(t)                        # republishing)

@@ -6,7 +6,9 @@ uses: ``actuator.d_a_mm``, ``segments[0].pitch_radius_mm``,
 ``actuator.stiffness_coeffs_n_per_m[1]``, ``model.tool_length_mm``,
 ``payload_kg``.  ``segments[*].top_plate_mass_kg`` ties one value to every
 segment that has the key.  The virtual key ``stiffness_scale`` (nominal 1)
-multiplies every coefficient of the stiffness polynomial ``k(lam)``.
+multiplies every coefficient of the stiffness polynomial ``k(lam)``;
+``mass_scale`` (nominal 1) every mass of the robot (the actuators' linear
+density, the plates and connectors; not the payload).
 
 Counts (``n_actuators``, ``n_elements``), the name, the pressure limits and
 gravity are not parameters.  No ROS import.
@@ -18,10 +20,15 @@ import copy
 import re
 from typing import Any, Sequence
 
-__all__ = ['ParameterKeyError', 'STIFFNESS_SCALE', 'default_keys', 'parameter_keys', 'get_value',
-           'with_values', 'key_scale', 'check_keys']
+__all__ = ['MASS_SCALE', 'ParameterKeyError', 'STIFFNESS_SCALE', 'default_keys', 'parameter_keys',
+           'get_value', 'with_values', 'key_scale', 'check_keys']
 
 STIFFNESS_SCALE = 'stiffness_scale'
+MASS_SCALE = 'mass_scale'
+_VIRTUAL = (STIFFNESS_SCALE, MASS_SCALE)
+#: The masses ``mass_scale`` multiplies: the actuators' and each segment's.
+_ACTUATOR_MASSES = ('linear_density_kg_per_m',)
+_SEGMENT_MASSES = ('constraint_plate_mass_kg', 'top_plate_mass_kg', 'connector_mass_kg')
 _NOT_PARAMETERS = ('name', 'n_actuators', 'n_elements', 'pressure_limits', 'gravity_m_per_s2')
 _PART = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+|\*)\])?$')
 
@@ -51,7 +58,7 @@ def parameter_keys(d: dict) -> list[str]:
         elif isinstance(node, float):
             out.append(path)
     walk(d, '')
-    return out + [STIFFNESS_SCALE]
+    return out + list(_VIRTUAL)
 
 
 def _locations(d: dict, key: str) -> list[tuple[Any, Any]]:
@@ -93,7 +100,7 @@ def check_keys(d: dict, keys: Sequence[str]) -> list[str]:
     """The keys, validated (unknown or repeated keys raise :class:`ParameterKeyError`)."""
     seen = []
     for key in keys:
-        if key != STIFFNESS_SCALE:
+        if key not in _VIRTUAL:
             _locations(d, key)
         if key in seen:
             raise ParameterKeyError(f'--fit {key!r} is given twice')
@@ -102,21 +109,29 @@ def check_keys(d: dict, keys: Sequence[str]) -> list[str]:
 
 
 def get_value(d: dict, key: str) -> float:
-    """Value of ``key`` in ``d`` (file units; the stiffness scale of a file is 1)."""
-    if key == STIFFNESS_SCALE:
+    """Value of ``key`` in ``d`` (file units; the stiffness and mass scales of a file are 1)."""
+    if key in _VIRTUAL:
         return 1.0
     container, index = _locations(d, key)[0]
     return float(container[index])
 
 
 def with_values(d: dict, keys: Sequence[str], values: Sequence[float]) -> dict:
-    """A deep copy of ``d`` with ``keys`` set to ``values`` (the scale multiplies ``k(lam)``)."""
+    """A deep copy of ``d`` with ``keys`` set to ``values`` (the scales multiply)."""
     out = copy.deepcopy(d)
     for key, value in zip(keys, values):
         if key == STIFFNESS_SCALE:
             act = out['actuator']
             coeffs = act['stiffness_coeffs_n_per_m']
             act['stiffness_coeffs_n_per_m'] = [float(value) * c for c in coeffs]
+            continue
+        if key == MASS_SCALE:
+            for part, names in ([out['actuator']], _ACTUATOR_MASSES), (out['segments'],
+                                                                       _SEGMENT_MASSES):
+                for node in part:
+                    for name in names:
+                        if name in node:
+                            node[name] = float(value) * node[name]
             continue
         for container, index in _locations(out, key):
             container[index] = float(value)

@@ -441,3 +441,68 @@ def test_a_shifted_command_is_corrected_but_the_pose_wanted_is_measured_against(
         p, _ = fb.corrected_target(t, wanted, command=(wanted + shift, None))
     assert fb.correction_m[0] > 0.5e-3 and abs(fb.correction_m[1]) < 1e-12
     np.testing.assert_allclose(p, wanted + shift + fb.correction_m)
+
+
+def test_a_jump_carries_the_correction_to_its_goal_along_the_move(one):
+    """The transfer's correction is reached with the goal, in proportion to the way there.
+
+    Asked once per move, from the answer of the last command that went out
+    and the model's answer for the goal with the correction as it was; none
+    before a command's answer was reported.
+    """
+    c_old, c_goal = np.array([1e-3, 0.0, 0.0]), np.array([2e-3, 1e-3, 0.0])
+    calls = []
+
+    class Transfer:
+        model = one
+
+        def transfer(self, held, c, r, new):
+            calls.append((held, c.copy(), new.position.copy()))
+            return c_goal, None
+
+    fb = IntegralFeedback(FeedbackSettings(correction_frame='base'), transfer=Transfer())
+    a = solve_forward(one, [30e3, 0.0, 0.0]).position
+    b = a + np.array([0.0, 0.01, 0.0])
+    fb.measurement(0.0, a)
+    fb.corrected_target(0.0, a)
+    fb.correction_m = c_old
+    fb.corrected_target(0.5, a, move=(0.5, a, b, None), hold_until=2.0)
+    assert calls == []                       # no command's answer yet: nothing to carry from
+    inv = solve_inverse(one, a + c_old)
+    fb.report(True, False, inv.forward.position, inv.forward.z_axis, inverse=inv)
+    move = (1.0, a, b, None)
+    p, _ = fb.corrected_target(1.0, a, move=move, hold_until=3.0)
+    assert p == pytest.approx(a + c_old, abs=1e-12)
+    assert len(calls) == 1 and calls[0][0] is inv.forward
+    assert calls[0][2] == pytest.approx(b + c_old, abs=1e-8)   # the goal, corrected as it was
+    p, _ = fb.corrected_target(1.5, 0.5 * (a + b), move=move, hold_until=3.0)
+    assert p == pytest.approx(0.5 * (a + b) + 0.5 * (c_old + c_goal), abs=1e-12)
+    p, _ = fb.corrected_target(2.0, b, move=move, hold_until=3.0)
+    assert p == pytest.approx(b + c_goal, abs=1e-12)
+    fb.corrected_target(2.1, b, move=move, hold_until=3.0)
+    assert len(calls) == 1                   # one move, one transfer
+
+
+def test_a_carried_correction_stays_within_its_share_of_the_move(one):
+    """A transfer that asks for much more is held to CARRY_SHARE of the move's length."""
+    from bellow_ancf_ros.core.control._feedback import CARRY_SHARE
+
+    class Transfer:
+        model = one
+
+        def transfer(self, held, c, r, new):
+            return c + np.array([0.0, -0.02, 0.0]), None   # 20 mm: a fit gone wrong
+
+    fb = IntegralFeedback(FeedbackSettings(correction_frame='base'), transfer=Transfer())
+    a = solve_forward(one, [30e3, 0.0, 0.0]).position
+    b = a + np.array([0.0, 0.01, 0.0])
+    c_old = np.array([1e-3, 0.0, 0.0])
+    fb.measurement(0.0, a)
+    fb.corrected_target(0.0, a)
+    fb.correction_m = c_old
+    inv = solve_inverse(one, a + c_old)
+    fb.report(True, False, inv.forward.position, inv.forward.z_axis, inverse=inv)
+    move = (1.0, a, b, None)
+    fb.corrected_target(1.0, a, move=move, hold_until=3.0)
+    p, _ = fb.corrected_target(2.0, b, move=move, hold_until=3.0)
+    assert p - b == pytest.approx(c_old + [0.0, -CARRY_SHARE * 0.01, 0.0], abs=1e-12)

@@ -7,7 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import calibration_data as cd
-from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
+from bellow_ancf_ros.core import (RobotModel, load_robot, natural_modes, robot_from_dict,
+                                  solve_forward)
 from bellow_ancf_ros.core import calibration as cal
 from bellow_ancf_ros.core import parameter_keys as pk
 from bellow_ancf_ros.core.fit._excitation import excitation_sequence, random_pressures
@@ -52,6 +53,30 @@ def test_parameter_keys_address_the_robot_file(two_cfg):
             pk.check_keys(d, [bad])
     with pytest.raises(pk.ParameterKeyError, match='twice'):
         pk.check_keys(d, ['actuator.d_a_mm', 'actuator.d_a_mm'])
+
+
+def test_the_mass_scale_multiplies_every_mass_and_slows_the_first_mode(two_cfg):
+    """Twice every mass (not the payload): the first mode at 1/sqrt(2) of its frequency.
+
+    Exactly so without gravity (the stiffness is the same, the mass matrix
+    twice as large); with gravity the heavier robot sags further and its
+    lateral stiffness drops too (0.58 instead of 0.71 for two segments).
+    """
+    d = two_cfg.to_dict()
+    assert pk.get_value(d, pk.MASS_SCALE) == 1.0 and pk.MASS_SCALE in pk.parameter_keys(d)
+    e = pk.with_values(d, [pk.MASS_SCALE], [2.0])
+    act = 'linear_density_kg_per_m'
+    assert e['actuator'][act] == 2.0 * d['actuator'][act]
+    for a, b in zip(d['segments'], e['segments']):
+        for key in ('constraint_plate_mass_kg', 'top_plate_mass_kg', 'connector_mass_kg'):
+            assert b.get(key) == (None if key not in a else 2.0 * a[key])
+    assert e['payload_kg'] == d['payload_kg']
+    f = []
+    for desc in (d, e):
+        desc = {**desc, 'model': {**desc['model'], 'gravity_m_per_s2': [0.0, 0.0, 0.0]}}
+        m = RobotModel(robot_from_dict(desc))
+        f.append(natural_modes(solve_forward(m, np.zeros(m.A)), 1).first.frequency_hz)
+    assert f[1] / f[0] == pytest.approx(2 ** -0.5, rel=1e-6)
 
 
 @pytest.mark.parametrize('name, keys', [
