@@ -167,7 +167,8 @@ def markdown(runs: list) -> str:
                 f'ZVD-shaped {fig("zvd", "swing_mm")} mm (goal {goals["swing_mm"]["limit"]:g} '
                 'mm)')
         if 'overshoot_mm' in goals:
-            text += (f'; closed loop at its defaults, overshoot {fig("closed", "overshoot_mm")} '
+            text += (f'; closed loop, the correction carried to the goal, overshoot '
+                     f'{fig("closed", "overshoot_mm")} '
                      f'mm (goal {goals["overshoot_mm"]["limit"]:g} mm), error from 1.5 s after '
                      f'the step {fig("closed", "late_mm")} mm (goal '
                      f'{goals["late_mm"]["limit"]:g} mm)')

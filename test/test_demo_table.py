@@ -40,8 +40,9 @@ def test_one_run_gives_its_figures_goals_and_misses():
     assert row[4] == '0.610 mm / 0.183 deg'
     assert row[5:7] == ['1.5 mm / 0.75 deg', '0.5 mm / 0.5 deg']
     assert row[-1] == '**MISSED**: held 0.610 > 0.500 mm'
-    assert ('ZVD-shaped 0.038 mm (goal 0.1 mm); closed loop at its defaults, overshoot 0.210 mm '
-            '(goal 0.5 mm), error from 1.5 s after the step 0.120 mm (goal 0.2 mm): met.') in table
+    assert ('ZVD-shaped 0.038 mm (goal 0.1 mm); closed loop, the correction carried to the goal, '
+            'overshoot 0.210 mm (goal 0.5 mm), error from 1.5 s after the step 0.120 mm (goal '
+            '0.2 mm): met.') in table
     assert 'finite and within the limits: yes; every run ended with the vent: yes' in table
 
 

@@ -57,8 +57,8 @@ at :data:`LEAD_IN_AT_S`, the spin-down's and the hold's on the clock's ticks,
 each holding the simulation until it is out (``TargetSender.every``).  Then
 the step phase (:mod:`.step_target`): a
 10 mm step target, two segments, feedforward unshaped and ZVD-shaped (the
-residual swing 1-2 s after it) and the closed loop at its defaults (its
-overshoot and its error from 1.5 s after the step).
+residual swing 1-2 s after it) and the closed loop, its correction carried
+to the step's goal (its overshoot and its error from 1.5 s after the step).
 
 Evaluated: the robot's true pose (``true_pose``, the simulator's ground
 truth; the motion capture's samples carry its noise and outliers) against

@@ -219,12 +219,15 @@ def hardware_parameters(plant: str) -> dict:
     The regulators' play (``regulator_play_kpa``: a lab takes it from their
     data sheet) and the bellows' creep (``creep_fraction``,
     ``creep_time_constant_s``: a lab identifies them from a recorded pressure
-    step, ``bellow-ancf identify creep``).
+    step, ``bellow-ancf identify creep``); with both compensated, the
+    correction the closed loop holds is the robot's static mismatch, which
+    ``feedback_correction_frame: model`` carries to a jump's goal.
     """
     e = plant_effects(plant)
     return {'regulator_play_kpa': e.regulator_hysteresis_pa / 1e3,
             'creep_fraction': e.creep_fraction,
-            'creep_time_constant_s': e.creep_time_constant_s}
+            'creep_time_constant_s': e.creep_time_constant_s,
+            'feedback_correction_frame': 'model'}
 
 
 def record_qos():

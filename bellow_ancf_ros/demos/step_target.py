@@ -7,8 +7,9 @@ documented 1 kPa play and the bellows' creep:
 jumps 10 mm sideways, published once (nobody previewed it).  The inverse
 node runs with feedforward alone, ``target_shaping: none`` and ``zvd`` (the
 shaper at the model's first mode at the held equilibrium), and closed on
-the measured poses at its defaults (``feedback: integral``,
-``target_shaping: smooth``).  Measured on the robot's true pose: the
+the measured poses (``feedback: integral``, ``target_shaping: smooth``, the
+correction carried to the step's goal: ``feedback_correction_frame:
+model``).  Measured on the robot's true pose: the
 overshoot along the step, the largest error from 1.5 s after it, and the residual swing from
 1 s to 2 s after the step was published, the largest distance from a
 quadratic fitted over that second (the bellows' creep moves the robot slowly
@@ -165,9 +166,9 @@ def step_phase(args, domains: list, log_dir: Path) -> dict:
     """
     poses = _targets()
     print(f'\n10 mm step target, two segments (robot: {ROBOT}_mismatched, {args.plant} plant), '
-          'published once: feedforward unshaped and ZVD-shaped, and the closed loop at its '
-          'defaults (true pose; residual swing 1-2 s after the step with a quadratic drift '
-          'taken out)')
+          'published once: feedforward unshaped and ZVD-shaped, and the closed loop with the '
+          'correction carried to the goal (true pose; residual swing 1-2 s after the step '
+          'with a quadratic drift taken out)')
     todo = [(k, domains.pop()) for k in RUNS]
     # on simulation time side by side (each on its own clock, in lockstep: the cores'
     # sharing slows the runs, never changes them), else one after the other
