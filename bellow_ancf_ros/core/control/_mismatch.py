@@ -169,8 +169,11 @@ class MismatchTransfer:
         for _ in range(1 + REFINE):
             b = np.concatenate([w * (e - off), -SIGMA_M / self._prior * d])
             d = d + np.linalg.lstsq(A, b, rcond=None)[0]
-            fit = self.fitted(d)
-            off = self._offset(fit, held)
+            try:
+                fit = self.fitted(d)
+            except ValueError:   # (a ConfigError: the fit left the robot file's ranges)
+                fit = None
+            off = None if fit is None else self._offset(fit, held)
             if off is None:
                 self.refused += 1
                 return None

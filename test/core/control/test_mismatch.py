@@ -91,3 +91,10 @@ def test_a_robot_that_is_its_model_keeps_a_zero_correction_and_a_failed_solve_re
     assert np.all(c == 0.0) and r is None
     bad = dataclasses.replace(fw, pressures_pa=np.full(one.A, np.nan))
     assert tr.transfer(fw, np.ones(3) * 1e-3, None, bad) is None and tr.refused == 1
+
+
+def test_a_fit_that_leaves_the_robot_files_ranges_is_refused(one):
+    """A correction no plausible robot explains: the fitted file is invalid, nothing is carried."""
+    fw = solve_forward(one, [30e3, 0.0, 0.0])
+    tr = MismatchTransfer(one, keys=['actuator.d_eff_mm'])
+    assert tr.transfer(fw, np.array([0.0, 0.0, -5.0]), None, fw) is None and tr.refused == 1
