@@ -477,11 +477,12 @@ class IntegralFeedback:
         if not (np.any(c_old) or np.any(r_old)):
             return
         _, start, goal, goal_z = move
+        start, goal = np.asarray(start, float), np.asarray(goal, float)
         z = None
         if self.use_orientation and goal_z is not None:
             z = rotation_from_vector(r_old) @ (goal_z / np.linalg.norm(goal_z))
         load = held.forward.load
-        new = solve_inverse(tr.model, np.asarray(goal, float) + c_old, z,
+        new = solve_inverse(tr.model, goal + c_old, z,
                             payload_kg=load.payload_kg, tip_force_n=load.force_n,
                             warm_start=held, time_budget_s=CARRY_BUDGET_S)
         if new.forward is None or not new.forward.success:
@@ -491,16 +492,15 @@ class IntegralFeedback:
             return
         s = self.settings
         # at most CARRY_SHARE of the way from where the azimuthal frame turns the correction
-        turned = rotation_z(self._azimuth(np.asarray(goal, float)) - self._phi)
+        turned = rotation_z(self._azimuth(goal) - self._phi)
         c_az, r_az = turned @ c_old, turned @ r_old
-        room = CARRY_SHARE * float(np.linalg.norm(np.asarray(goal, float) - start))
+        room = CARRY_SHARE * float(np.linalg.norm(goal - start))
         c_new = _clamp(c_az + _clamp(got[0] - c_az, room), s.max_correction_m)
         r_new = r_az
         if got[1] is not None:
             r_new = _clamp(r_az + _clamp(got[1] - r_az, room / ROTATION_LENGTH_M),
                            s.max_correction_rad)
-        self._carry = ((c_old, r_old), (c_new, r_new), np.asarray(start, float),
-                       np.asarray(goal, float), self._move_until)
+        self._carry = ((c_old, r_old), (c_new, r_new), start, goal, self._move_until)
 
     def _carry_along(self, t: float, p_t: np.ndarray) -> None:
         """The carried correction at the target ``p_t``: in proportion to the way to the goal.

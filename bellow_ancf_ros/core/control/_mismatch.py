@@ -25,8 +25,9 @@ model's own solution)::
 
     robot(P) - model(P) = S(P) d          (to first order in the mismatch d)
     at the held target:  S(P_old) d = -c_old      (a few equations, more unknowns)
-    d = argmin |W (S(P_old) d + c_old)|^2 + |d / PRIOR|^2
-    at the new target:   c_new = -S(P_new) d
+    d = argmin |W (S(P_old) d + c_old)|^2 + |SIGMA d / PRIOR|^2
+    then REFINE Gauss-Newton steps with the model moved by d itself (F_d)
+    at the new target:   c_new = -(F_d(P_new) - model(P_new))
 
 ``W`` weighs the z-axis's rotation by :data:`ROTATION_LENGTH_M` against the
 position; ``PRIOR`` (10 %) is the size a file's parameters are off by
@@ -36,7 +37,7 @@ The offset's share that no parameter explains (a motion-capture offset,
 the play a regulator stopped in) is carried as it is.  The transfer is a
 first-order guess that the loop then refines (the prior bounds it: a
 mismatch the offset does not ask for is not invented); it is refused
-(None) when a sensitivity solve fails.
+(None) when a solve fails or the fit leaves the robot file's ranges.
 """
 
 from __future__ import annotations
@@ -96,22 +97,13 @@ class MismatchTransfer:
         Per relative change of the key; None when a
         moved model's solve at ``fw``'s pressures fails.
         """
-        rows = 6 if self.use_orientation else 3
-        S = np.empty((rows, len(self.keys)))
-        load = fw.load
-        for i in range(len(self.keys)):
-            try:
-                moved = solve_forward(self._models[i], fw.pressures_pa,
-                                      payload_kg=load.payload_kg, tip_force_n=load.force_n,
-                                      warm_start=fw, check_stability=False)
-            except ValueError:   # (pressures a moved model refuses)
+        columns = []
+        for moved in self._models:
+            off = self._offset(moved, fw)
+            if off is None:
                 return None
-            if not moved.converged:
-                return None
-            S[:3, i] = (moved.position - fw.position) / _STEP
-            if self.use_orientation:
-                S[3:, i] = rotation_between(fw.z_axis, moved.z_axis) / _STEP
-        return S
+            columns.append(off / _STEP)
+        return np.column_stack(columns)
 
     def _offset(self, model: RobotModel, fw: ForwardResult) -> np.ndarray | None:
         """``model``'s pose minus ``fw``'s at ``fw``'s pressures and load; None if it fails.
@@ -152,15 +144,14 @@ class MismatchTransfer:
         caller keeps the old correction).
         """
         S = self.sensitivity(held)
-        c_old = np.asarray(correction_m, dtype=float).reshape(3)
-        e = -c_old                          # the robot's pose minus the model's, at held
+        if S is None:
+            self.refused += 1
+            return None
+        e = -np.asarray(correction_m, dtype=float).reshape(3)   # robot minus model, at held
         w = np.ones(3)
         if self.use_orientation:
             e = np.concatenate([e, -np.asarray(correction_rad, dtype=float).reshape(3)])
             w = np.concatenate([w, np.full(3, ROTATION_LENGTH_M)])
-        if S is None:
-            self.refused += 1
-            return None
         n = len(self.keys)
         # weighted least squares with the prior (d: relative changes of the keys)
         A = np.vstack([w[:, None] * S, np.diag(SIGMA_M / self._prior)])
