@@ -121,3 +121,17 @@ def test_main_prints_each_miss_and_writes_what_it_printed(tmp_path, monkeypatch,
             assert f'{r["rmse_mm"]:6.3f} mm (max {r["max_mm"]:5.2f})' in out
     assert sorted(p.name for p in tmp_path.glob('*.png')) == ['p.png', 'p_1seg.png',
                                                               'p_2seg.png']
+
+
+def test_command_steps_are_per_control_period():
+    # commands every 20 ms ramping 4 kPa each; one comes 35 ms after the one before (late)
+    # and 15 ms after an outlier: its 7 kPa step spans 1.75 periods, 4 kPa per period
+    times = [0.02 * k for k in range(10)] + [0.18 + 0.035, 0.18 + 0.055]
+    cmds = [(t, np.array([4e3 * t / 0.02, 0.0])) for t in times]
+    after, normal = demo.command_steps(cmds, outliers=[0.2])
+    assert after == pytest.approx([4.0, 4.0])   # the two commands within 0.1 s of it
+    assert normal == pytest.approx([4.0] * 9)
+    # a step the outlier made: 6 kPa more within one period stands out
+    cmds[-1] = (cmds[-1][0], cmds[-1][1] + 6e3)
+    after, _ = demo.command_steps(cmds, outliers=[0.22])
+    assert after == [pytest.approx(10.0)]
