@@ -187,6 +187,7 @@ class Stage1:
                 self._k1sq = math.inf
             # Closed form when h is at most quadratic (k at most linear).
             self._quadratic = self._kx.size <= 2
+            self._c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0   # h's x**2 term
 
             # Rounding-error bound of the computed residual h(x) - t (see _noise).
             self._kl_abs = np.abs(self._k) * np.arange(1, self._k.size + 1)   # (1 + i) |c_i|
@@ -490,8 +491,8 @@ class Stage1:
         step.  None (a pressure not finite or beyond the branch) leaves the
         checks and their messages to :meth:`stretch`.
         """
-        c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0
-        k1, k1sq, pph, lo, hi = self._k1, self._k1sq, self._p_per_h, self._h_lo, self._h_hi
+        c1, k1, k1sq, pph = self._c1, self._k1, self._k1sq, self._p_per_h
+        lo, hi = self._h_lo, self._h_hi
         out = []
         for v in a.tolist():
             t = v / pph
