@@ -139,7 +139,7 @@ def test_constant_pressures_are_mapped_once_and_follow_a_change(one):
 
 @pytest.mark.parametrize("settings", [{}, {"tol": 1e-12, "max_iter": 3}])
 def test_a_pressure_ramp_is_the_same_function_of_time(one, settings):
-    """PressureRamp (its table: one call per run) gives the steps its values as a function give.
+    """A PressureRamp (its table: one call per run) gives the steps its values as a function do.
 
     ``tol 1e-12, max_iter 3``: steps that fail and are halved (the ramp asked between steps).
     """
