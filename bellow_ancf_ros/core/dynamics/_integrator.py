@@ -66,7 +66,8 @@ from ._inertia import Inertia
 from ._kernels import (NEED_FACTOR, compact_factors, refactor, run_steps, split_factors,
                        state_checks, symbolic_factors)
 
-__all__ = ["DynamicState", "GeneralizedAlpha", "Passage", "StepReport", "DynamicsError",
+__all__ = ["DynamicState", "GeneralizedAlpha", "Passage", "PressureRamp", "StepReport",
+           "DynamicsError",
            "STEPS_PER_PERIOD", "MIN_STEPS_PER_PERIOD", "MAX_DEFAULT_STEP_S", "default_step",
            "warm_up_dynamics"]
 
@@ -104,6 +105,11 @@ class DynamicState:
     ``q, v, acc``: coordinates, velocities, accelerations; ``aux``: the
     generalized-alpha acceleration-like variable; ``mu``: multipliers;
     ``stretch``: stage-1 stretches; ``load``: payload and tip force.
+
+    The integrator replaces its state whole after a run (``q`` to ``mu``:
+    views of one block of their own) and keeps what it knows of it (the
+    predictor's history, its working copy) by identity: a state is changed
+    by assigning a new one, or new arrays, not in place.
     """
 
     t: float
@@ -155,6 +161,43 @@ class Passage:
     pressures_pa: np.ndarray | None
 
 
+class PressureRamp:
+    """Pressures linear in time from ``p0`` at ``t0`` to ``p1`` at ``t1``, held at ``p1`` after.
+
+    A ``pressures_pa`` function of time for :meth:`GeneralizedAlpha.advance`
+    (``ramp(t)``: ``p0 + (min(t, t1) - t0) / span * (p1 - p0)``, ``span`` at
+    least 1e-12 s) whose values at many times :meth:`table` computes in one
+    go, with the same arithmetic: the integrator asks for it instead of
+    calling the function at every step (a simulated robot's physics tick).
+    """
+
+    __slots__ = ("t0", "t1", "span", "p0", "p1")
+
+    def __init__(self, t0: float, t1: float, p0, p1):
+        self.t0, self.t1 = float(t0), float(t1)
+        self.span = max(self.t1 - self.t0, 1e-12)
+        self.p0 = np.asarray(p0, dtype=float)
+        self.p1 = np.asarray(p1, dtype=float)
+
+    def __call__(self, t: float) -> np.ndarray:
+        return self.p0 + (min(t, self.t1) - self.t0) / self.span * (self.p1 - self.p0)
+
+    def table(self, times: np.ndarray) -> np.ndarray:
+        """The pressures at each time of ``times`` (n,): an (n, A) array.
+
+        With plain floats (a physics tick's few steps and actuators), the
+        operations of :meth:`__call__` in the same order.
+        """
+        t0, t1, span = self.t0, self.t1, self.span
+        p0 = self.p0.ravel().tolist()
+        dp = (self.p1 - self.p0).ravel().tolist()
+        rows = []
+        for t in times.tolist():
+            f = (min(t, t1) - t0) / span
+            rows.append([a + f * d for a, d in zip(p0, dp)])
+        return np.array(rows).reshape(len(rows), len(p0))
+
+
 class GeneralizedAlpha:
     """Generalized-alpha integrator of one robot (module docstring).
 
@@ -202,8 +245,14 @@ class GeneralizedAlpha:
         # factors of the identity: for the call that runs the predictor alone
         self._lu_dummy = split_factors(spla.splu(sp.identity(model.N, format="csc")))
         self._work = tuple(np.empty(model.N) for _ in range(4))
-        self._cur = tuple(np.empty(k) for k in (model.nq,) * 4 + (model.nc,))  # run_steps'
+        # run_steps' state: five views of one block (a state after a run copies it in one go)
+        ends = np.cumsum((0,) + (model.nq,) * 4 + (model.nc,))
+        self._cur_parts = tuple(slice(a, b) for a, b in zip(ends[:-1], ends[1:]))
+        self._cur_block = np.empty(ends[-1])
+        self._cur = tuple(self._cur_block[part] for part in self._cur_parts)
         self._nxt = tuple(np.empty(k) for k in (model.nq,) * 4 + (model.nc,))
+        # (state, its five arrays) when self._cur holds that state's values (_run), else None
+        self._cur_of = None
         self._no_record = ((np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.bool_),
                             np.zeros(12, dtype=np.int64)), (np.zeros((1, 12)), np.zeros((1, 3))))
         st1, cfg = model.stage1, model.cfg
@@ -435,9 +484,13 @@ class GeneralizedAlpha:
         """
         n, st, stage1 = len(times), self.state, self.model.stage1
         pres = None
-        if pressures_pa is not None and callable(pressures_pa):
-            pres = np.array([np.asarray(pressures_pa(t), dtype=float) for t in times.tolist()],
-                            dtype=float).reshape(n, -1) if n else np.zeros((0, self.model.A))
+        if callable(pressures_pa):
+            if isinstance(pressures_pa, PressureRamp):   # all the steps' pressures at once
+                pres = pressures_pa.table(times)
+            else:
+                pres = np.array([np.asarray(pressures_pa(t), dtype=float)
+                                 for t in times.tolist()],
+                                dtype=float).reshape(n, -1) if n else np.zeros((0, self.model.A))
             lams = np.asarray(stage1.stretch(pres.ravel()), dtype=float).reshape(n, self.model.A)
         else:
             if pressures_pa is not None:   # constant pressures: mapped once, kept
@@ -468,7 +521,8 @@ class GeneralizedAlpha:
         """The state after step ``k`` of a run: ``self._cur`` copied (``k < 0``: unchanged)."""
         if k < 0:
             return self.state
-        q, v, acc, aux, mu = (a.copy() for a in self._cur)
+        block = self._cur_block.copy()   # (the new state's arrays: views of its own block)
+        q, v, acc, aux, mu = (block[part] for part in self._cur_parts)
         return DynamicState(float(times[k]), q, v, acc, aux, mu, lams[k].copy(), load)
 
     def _run(self, times, steps, lams, load, stretch_at, load_at, rep, rec, deadline,
@@ -497,8 +551,13 @@ class GeneralizedAlpha:
         while k < n:
             st = self.state
             cur = self._cur
-            for a, b in zip(cur, (st.q, st.v, st.acc, st.aux, st.mu)):
-                a[:] = b
+            arrays = (st.q, st.v, st.acc, st.aux, st.mu)
+            held = self._cur_of
+            if held is None or held[0] is not st or any(
+                    a is not b for a, b in zip(held[1], arrays)):
+                for a, b in zip(cur, arrays):
+                    a[:] = b
+            self._cur_of = None   # run_steps moves cur on
             hist = self._history()
             resume = (True, 0, math.inf, False)
             first = k
@@ -515,7 +574,8 @@ class GeneralizedAlpha:
                                else (self._lu, self._lu_key[0]))
                 before = k
                 code, k, it, last, its = run_steps(
-                    cur, self._nxt, hist, steps[:stop], lams[:stop], k, resume, coef,
+                    cur, self._nxt, hist, steps if stop == n else steps[:stop],
+                    lams if stop == n else lams[:stop], k, resume, coef,
                     self._stage1_args, qpoint, kargs, mass, lu,
                     ctl + (lu_step,), self._work, rec_in, out)
                 self.counters["iterations"] += its
@@ -534,8 +594,9 @@ class GeneralizedAlpha:
                 if code != 0:
                     break
             if k > first:
-                self.state = self._state_after(k - 1, times, lams, load)
-                self._hist = (self.state, hist)
+                st = self.state = self._state_after(k - 1, times, lams, load)
+                self._hist = (st, hist)
+                self._cur_of = (st, (st.q, st.v, st.acc, st.aux, st.mu))
             if code == -1:
                 return failed, k
             if code == 5:

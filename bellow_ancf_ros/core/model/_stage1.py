@@ -173,6 +173,7 @@ class Stage1:
         # Coefficients too large for floating point overflow here: _find_branch refuses them.
         with np.errstate(over='ignore', invalid='ignore'):
             self._k = npoly.polytrim(c, tol=0)          # k(lam), ascending in lam
+            self._k_list = self._k.tolist()
             self._dk = npoly.polyder(self._k)
             # k about lam = 1:  kx(x) = k(1 + x)
             self._kx = npoly.polytrim(np.polynomial.Polynomial(self._k)(
@@ -186,6 +187,7 @@ class Stage1:
                 self._k1sq = math.inf
             # Closed form when h is at most quadratic (k at most linear).
             self._quadratic = self._kx.size <= 2
+            self._c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0   # h's x**2 term
 
             # Rounding-error bound of the computed residual h(x) - t (see _noise).
             self._kl_abs = np.abs(self._k) * np.arange(1, self._k.size + 1)   # (1 + i) |c_i|
@@ -419,8 +421,18 @@ class Stage1:
         ``lam`` (no branch check).
         """
         a = np.asarray(lam, dtype=float)
+        if a.ndim == 1 and a.size <= _SMALL:   # a robot's few actuators: plain floats
+            return np.array([self._p_per_h * (self._k_of(v) * (v - 1.0)) for v in a.tolist()])
         g = _horner(a, self._k) * (a - 1.0)
         return _as_output(self._p_per_h * g, a.ndim == 0)
+
+    def _k_of(self, lam: float) -> float:
+        """``k(lam)`` of one stretch with plain floats: :func:`_horner`'s operations, in order."""
+        k = self._k_list
+        out = k[-1]
+        for c in k[-2::-1]:
+            out = out * lam + c
+        return out
 
     def dpressure(self, lam: Any) -> Any:
         """``dP/dlam`` [Pa] = ``l0 * (k'(lam) (lam - 1) + k(lam)) / (pi/4 D_eff**2)``."""
@@ -479,8 +491,8 @@ class Stage1:
         step.  None (a pressure not finite or beyond the branch) leaves the
         checks and their messages to :meth:`stretch`.
         """
-        c1 = float(self._kx[1]) if self._kx.size > 1 else 0.0
-        k1, k1sq, pph, lo, hi = self._k1, self._k1sq, self._p_per_h, self._h_lo, self._h_hi
+        c1, k1, k1sq, pph = self._c1, self._k1, self._k1sq, self._p_per_h
+        lo, hi = self._h_lo, self._h_hi
         out = []
         for v in a.tolist():
             t = v / pph

@@ -70,9 +70,9 @@ class PressureRegulators:
         arr = np.array(p, dtype=float).ravel()
         if arr.size != self.n:
             raise ValueError(f'expected {self.n} pressures (one per actuator), got {arr.size}')
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise ValueError('pressures must be finite numbers')
-        return np.clip(arr, self.p_min, self.p_max)
+        return np.minimum(np.maximum(arr, self.p_min), self.p_max)   # (np.clip: slower)
 
     def set_command(self, p: Any, after_s: float = 0.0) -> None:
         """New set-points [Pa] (clipped into the hardware limits; NaN/inf raise ``ValueError``).
@@ -92,12 +92,16 @@ class PressureRegulators:
         """Follow the current set-point for ``dt`` (exact lag, slew-limited, clipped)."""
         if dt <= 0:
             return
-        p, w = self.pressures_pa, self.setpoint_pa
         decay = math.exp(-dt / self.time_constant_s) if self.time_constant_s > 0 else 0.0
+        gain = 1.0 - decay
         max_step = self.slew_rate_pa_per_s * dt
-        # (ufuncs, not np.clip: at a robot's few actuators its Python wrapper cost more)
-        move = np.minimum(np.maximum((w - p) * (1.0 - decay), -max_step), max_step)
-        self.pressures_pa = np.minimum(np.maximum(p + move, self.p_min), self.p_max)
+        lo, hi = self.p_min, self.p_max
+        # (plain floats: at a robot's few actuators numpy's per-call cost was most of the step)
+        out = []
+        for p, w in zip(self.pressures_pa.tolist(), self.setpoint_pa.tolist()):
+            move = min(max((w - p) * gain, -max_step), max_step)
+            out.append(min(max(p + move, lo), hi))
+        self.pressures_pa = np.array(out)
         self.time_s += dt
 
     def step(self, dt: float) -> np.ndarray:
@@ -112,8 +116,8 @@ class PressureRegulators:
             self._advance(t_on - self.time_s)
             # play operator: the valve moves only when the set-point leaves the band; the
             # vent (0 Pa gauge) opens the exhaust to atmosphere instead: no play
-            self.setpoint_pa = np.where(c == 0.0, 0.0,
-                                        np.clip(self.setpoint_pa, c - half, c + half))
+            self.setpoint_pa = np.where(c == 0.0, 0.0, np.minimum(
+                np.maximum(self.setpoint_pa, c - half), c + half))
         self._advance(end - self.time_s)
         self.time_s = end
         return self.pressures_pa.copy()
@@ -148,7 +152,15 @@ class BellowCreep:
         p = np.asarray(pressures_pa, dtype=float)
         if self.fraction == 0.0:
             return p.copy()
-        x = np.asarray(self.stage1.stretch(p), dtype=float) - 1.0
-        self.slow = x + (self.slow - x) * math.exp(-float(dt) / self.time_constant_s)
-        x_eff = (1.0 - self.fraction) * x + self.fraction * self.slow
-        return np.asarray(self.stage1.pressure(1.0 + x_eff), dtype=float)
+        decay = math.exp(-float(dt) / self.time_constant_s)
+        f = self.fraction
+        # (plain floats: at a robot's few actuators numpy's per-call cost was most of the step)
+        slow, lam_eff = [], []
+        for lam, s in zip(np.asarray(self.stage1.stretch(p), dtype=float).ravel().tolist(),
+                          self.slow.ravel().tolist()):
+            x = lam - 1.0
+            s = x + (s - x) * decay
+            slow.append(s)
+            lam_eff.append(1.0 + ((1.0 - f) * x + f * s))
+        self.slow = np.array(slow)
+        return np.asarray(self.stage1.pressure(np.array(lam_eff)), dtype=float)

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from ..dynamics import GeneralizedAlpha, default_step, natural_modes
+from ..dynamics._integrator import PressureRamp
 from ..geometry import rotation_from_vector, rotation_vector
 from ..history import bracket
 from ..model import RobotConfig, RobotModel, TipLoad, load_robot, tip_load
@@ -223,7 +224,7 @@ class SimulatedRobot:
             st = self._move(t0, self._p_eff, p)
             pos, rot = self.dynamics.end_effector()
             pose = _Pose(pos, rot)
-        self._p_eff = np.asarray(p, dtype=float).copy()
+        self._p_eff = p   # (a new array: the regulators' and the creep's outputs are)
         self._pose = pose
         with self._lock:
             self._history.append((self.time_s, pose))
@@ -235,8 +236,7 @@ class SimulatedRobot:
         """Integrate the dynamics over ``[t0, self.time_s]``, pressures linear from p0 to p1."""
         ig = self.dynamics
         t1 = self.time_s
-        span = max(t1 - t0, 1e-12)
-        rep = ig.advance(t1, pressures_pa=lambda t: p0 + (min(t, t1) - t0) / span * (p1 - p0),
+        rep = ig.advance(t1, pressures_pa=PressureRamp(t0, t1, p0, p1),
                          load=TipLoad(self.payload_kg, tuple(self.tip_force_n)))
         if not rep.success:
             self.failures += 1

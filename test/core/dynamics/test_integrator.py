@@ -9,6 +9,7 @@ import pytest
 
 from bellow_ancf_ros.core import DynamicsStatus, TipLoad, solve_forward
 from bellow_ancf_ros.core.dynamics import GeneralizedAlpha, default_step
+from bellow_ancf_ros.core.dynamics._integrator import PressureRamp
 
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -134,6 +135,39 @@ def test_constant_pressures_are_mapped_once_and_follow_a_change(one):
         assert b.advance(0.004 * k, pressures_pa=lambda t, q=q: q).success
     np.testing.assert_array_equal(a.state.q, b.state.q)
     np.testing.assert_array_equal(a.state.stretch, one.stage1.stretch(p2))
+
+
+@pytest.mark.parametrize("settings", [{}, {"tol": 1e-12, "max_iter": 3}])
+def test_a_pressure_ramp_is_the_same_function_of_time(one, settings):
+    """A PressureRamp (its table: one call per run) gives the steps its values as a function do.
+
+    ``tol 1e-12, max_iter 3``: steps that fail and are halved (the ramp asked between steps).
+    """
+    fw = solve_forward(one, np.zeros(3), tip_force_n=[0.1, 0.0, 0.0])
+    a = GeneralizedAlpha(one, step_s=0.002, **settings)
+    b = GeneralizedAlpha(one, step_s=0.002, **settings)
+    a.start_released(fw)
+    b.start_released(fw)
+    p0 = np.zeros(3)
+    halved = 0
+    for k, t1 in enumerate([0.0045, 0.009, 0.0101, 0.02, 0.02, 0.031]):
+        p1 = np.array([20e3 * (1.0 - np.cos(40.0 * t1)), 3e3 * k, 0.0])
+        t0 = a.state.t
+        ramp = PressureRamp(t0, t1, p0, p1)
+        span = max(t1 - t0, 1e-12)
+        ra = a.advance(t1, pressures_pa=ramp)
+        rb = b.advance(t1, pressures_pa=lambda t: p0 + (min(t, t1) - t0) / span * (p1 - p0))
+        assert ra.success and rb.success and (ra.steps, ra.halvings) == (rb.steps, rb.halvings)
+        halved += ra.halvings
+        for name in ("q", "v", "acc", "aux", "mu", "stretch"):
+            np.testing.assert_array_equal(getattr(a.state, name), getattr(b.state, name))
+        assert a.state.t == b.state.t
+        times = np.array([t0, 0.5 * (t0 + t1), t1, t1 + 1.0])
+        np.testing.assert_array_equal(ramp.table(times), np.array([ramp(t) for t in times]))
+        p0 = p1
+    assert a.counters == b.counters and (halved > 0) == bool(settings)
+    _, run = a.advance_through([0.035, 0.04], pressures_pa=PressureRamp(0.031, 0.04, p0, 2 * p0))
+    np.testing.assert_array_equal(run.pressures_pa[1], 2 * p0)
 
 
 @pytest.mark.parametrize("settings", [{}, {"tol": 1e-12, "max_iter": 3}])
