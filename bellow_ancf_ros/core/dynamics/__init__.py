@@ -17,14 +17,14 @@ docs/dynamics.md states the model and its sources.
 
 from ._inertia import Inertia
 from ._integrator import (MAX_DEFAULT_STEP_S, MIN_STEPS_PER_PERIOD, STEPS_PER_PERIOD,
-                          DynamicsError, DynamicState, GeneralizedAlpha, Passage, StepReport,
-                          default_step, warm_up_dynamics)
+                          DynamicsError, DynamicState, GeneralizedAlpha, Passage, PressureRamp,
+                          StepReport, default_step, warm_up_dynamics)
 from ._modes import (ModalAnalysis, ModalError, Mode, ReducedSystem, natural_modes,
                      reduced_system)
 from ._sampling import SampledMotion, piecewise_linear, sample_motion, sampling_step
 
 __all__ = ["DynamicState", "DynamicsError", "GeneralizedAlpha", "Inertia",
            "MAX_DEFAULT_STEP_S", "MIN_STEPS_PER_PERIOD", "ModalAnalysis", "ModalError", "Mode",
-           "Passage", "ReducedSystem", "STEPS_PER_PERIOD", "SampledMotion", "StepReport",
-           "default_step", "natural_modes", "piecewise_linear", "reduced_system",
+           "Passage", "PressureRamp", "ReducedSystem", "STEPS_PER_PERIOD", "SampledMotion",
+           "StepReport", "default_step", "natural_modes", "piecewise_linear", "reduced_system",
            "sample_motion", "sampling_step", "warm_up_dynamics"]

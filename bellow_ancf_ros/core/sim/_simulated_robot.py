@@ -36,8 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics import GeneralizedAlpha, default_step, natural_modes
-from ..dynamics._integrator import PressureRamp
+from ..dynamics import GeneralizedAlpha, PressureRamp, default_step, natural_modes
 from ..geometry import rotation_from_vector, rotation_vector
 from ..history import bracket
 from ..model import RobotConfig, RobotModel, TipLoad, load_robot, tip_load

@@ -9,7 +9,7 @@ import pytest
 
 from bellow_ancf_ros.core import DynamicsStatus, TipLoad, solve_forward
 from bellow_ancf_ros.core.dynamics import GeneralizedAlpha, default_step
-from bellow_ancf_ros.core.dynamics._integrator import PressureRamp
+from bellow_ancf_ros.core.dynamics import PressureRamp
 
 
 ROOT = Path(__file__).resolve().parents[3]
