@@ -124,3 +124,38 @@ def test_a_free_swing_dying_out_is_no_trip_a_limit_cycle_is():
             e = 0.02 * math.exp(-decay * t) * math.sin(2 * math.pi * f * t)
             trips.append(wd.feed(t, [e, 0.0, 0.0]))
         assert any(trips) == tripped
+
+
+def _growing_during(fb, t_end, hold_until=None):
+    """A swing near the mode growing 1.5x per window until ``t_end``; the trips counted."""
+    target = np.array([0.0, 0.0, 0.1])
+    window = 2.0 / F
+    for i in range(int(t_end * RATE)):
+        t = i / RATE
+        swing = 0.05e-3 * 1.5 ** (t / window) * math.sin(2 * math.pi * 1.6 * t)
+        fb.measurement(t, target + np.array([swing, 0.0, 0.0]))
+        fb.corrected_target(t, target, hold_until=hold_until)
+    return fb.watchdog.trips
+
+
+def test_a_move_of_its_own_is_not_watched_a_ringing_loop_after_it_is():
+    """A move holds the correction: the loop is open, its transient grows and is no trip."""
+    settings = FeedbackSettings(gain_per_s=2.5, correction_frame='base')
+    unheld = IntegralFeedback(settings)
+    unheld.watch(F)
+    assert _growing_during(unheld, 12 / F) == 1   # the same swing without the move trips
+    held = IntegralFeedback(settings)
+    held.watch(F)
+    assert _growing_during(held, 12 / F, hold_until=12 / F) == 0
+    assert not held.watchdog.amplitudes   # its windows start again after the move
+    # after the move, a loop that rings up is caught within a few periods
+    t0 = 12 / F
+    target = np.array([0.0, 0.0, 0.1])
+    for i in range(int(12 / F * RATE)):
+        t = t0 + i / RATE
+        swing = 0.2e-3 * math.exp(0.5 * (t - t0)) * math.sin(2 * math.pi * 1.6 * t)
+        held.measurement(t, target + np.array([swing, 0.0, 0.0]))
+        held.corrected_target(t, target)
+        if held.watchdog.trips:
+            break
+    assert held.watchdog.trips == 1 and t - t0 < 6 * held.watchdog.window_s
