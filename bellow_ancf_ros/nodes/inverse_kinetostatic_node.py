@@ -49,6 +49,7 @@ from .external_force import ExternalForce
 from .measured_feedback import FEEDBACK_PARAMETER_TABLE, FeedbackLink
 from .mode_watch import ModeWatch
 from .target_link import TARGET_PARAMETER_TABLE, TargetLink
+from .target_sources import TargetSources, publisher_names
 from .ownership import TopicOwner
 from .diagnostics import Heartbeat, Refusals, ThrottledStatus, inverse_values, solve_values
 from .inverse_interface import CONFIGURE_PARAMETERS, PARAMETERS, TOPICS
@@ -96,8 +97,8 @@ class InverseKinetostaticNode(LifecycleNode):
         self._worker: worker.LatestWorker | None = None
         self._pub_cmd = self._pub_pose = self._sub = self._force = self._owner = None
         self._owner_timer = self._republish_timer = self._lockstep = None
-        self._yield_requested = False
-        self._said_orientation_ignored = False
+        self._yield_requested = self._said_orientation_ignored = False
+        self._sources = TargetSources(lambda: publisher_names(self, self._sub.topic_name))
         self._refusals = Refusals(self, 'targets', self._publish_diag)
         self.last_command_pa: np.ndarray | None = None
         self.last_refusal_reason = ''
@@ -383,11 +384,14 @@ class InverseKinetostaticNode(LifecycleNode):
         return self.get_parameter('pressure_unit').value
 
     # ---------------------------------------------------------- input
-    def _on_target(self, msg: PoseStamped) -> None:
-        self._take_target(msg)   # then counted: on simulation time, after its solve is queued
+    def _on_target(self, msg: PoseStamped, info) -> None:   # (with info: rclpy passes it)
+        self._take_target(msg, info)   # then counted: on simulation time, after its solve queued
         self._lockstep.received(self._sub.topic_name)
 
-    def _take_target(self, msg: PoseStamped) -> None:
+    def _take_target(self, msg: PoseStamped, info=None) -> None:
+        held = self._sources.holds(info, time.monotonic())   # one publisher at a time
+        if held:
+            return self._refuse(held)
         with self._lock:
             active, cfg = self._active, self._cfg
         if not active or cfg is None:

@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip('rclpy')
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 
 from bellow_ancf_ros.core import solve_forward  # noqa: E402
@@ -225,3 +225,49 @@ def test_creep_is_led_by_the_commands_which_relax_onto_the_pressures_wanted(h, o
     assert np.all(np.diff(sent, axis=0) <= 1e-6)             # monotonically, on its way
     node.trigger_deactivate()
     wait_for(lambda: not np.any(np.asarray(h.last('pressure_command').data)), what='vent')
+
+
+def test_a_second_publisher_on_target_pose_holds_the_targets_until_it_stops(h, one):
+    """Two publishers at 50 Hz, 10 mm apart: no command for the second, a WARN naming both.
+
+    Before, the node took their targets in turn (commands up to 100 kPa
+    apart, a 20 mm swing on the simulated robot).
+    """
+    import rclpy   # (the harness's context)
+    h.record(PoseStamped, 'commanded_pose')
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, name='sources')
+    a = solve_forward(one, [40e3, 20e3, 0.0]).position
+    b = a + np.array([0.01, 0.0, 0.0])
+    planner = h.publisher(PoseStamped, 'target_pose')
+
+    def at(p):
+        return h.count('commanded_pose') and np.linalg.norm(
+            pose_of(h.last('commanded_pose'))[0] - p) < 1e-6
+    planner.publish(target_msg(a))
+    wait_for(lambda: at(a), what='at the planner target')
+    other = rclpy.create_node('teleop', namespace=h.ns, context=h.ctx)
+    try:
+        teleop = other.create_publisher(PoseStamped, 'target_pose', command_qos())
+        wait_for(lambda: teleop.get_subscription_count() >= 1, what='teleop subscribed')
+        n1 = h.count('commanded_pose')
+        for _ in range(50):   # both for a second
+            planner.publish(target_msg(a))
+            teleop.publish(target_msg(b))
+            time.sleep(0.02)
+    finally:
+        other.destroy_node()
+    with h.lock:
+        got = [pose_of(m)[0] for _, m in h.msgs['commanded_pose'][n1:]]
+    assert all(np.linalg.norm(p - a) < 1e-6 for p in got), node.stats   # never the teleop's
+    assert node.stats['refused'] >= 40, node.stats
+    warns = [s for s in diag_statuses(h, 'sources') if 'more than one publisher' in s.message]
+    assert warns and warns[-1].level == DiagnosticStatus.WARN
+    assert 'teleop' in warns[-1].message and 'test_client' in warns[-1].message
+    # the planner alone again: its next target is taken once it has sent alone for a while
+    c = a + np.array([0.0, 0.005, 0.0])
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 5.0 and not at(c):
+        planner.publish(target_msg(c))
+        time.sleep(0.02)
+    assert at(c) and time.monotonic() - t0 < 2.0
