@@ -98,7 +98,6 @@ class InverseKinetostaticNode(LifecycleNode):
         self._pub_cmd = self._pub_pose = self._sub = self._force = self._owner = None
         self._owner_timer = self._republish_timer = self._lockstep = None
         self._yield_requested = self._said_orientation_ignored = False
-        self._sources = TargetSources(lambda: publisher_names(self, self._sub.topic_name))
         self._refusals = Refusals(self, 'targets', self._publish_diag)
         self.last_command_pa: np.ndarray | None = None
         self.last_refusal_reason = ''
@@ -225,6 +224,7 @@ class InverseKinetostaticNode(LifecycleNode):
         self._owner_timer = self.create_timer(OWNER_CHECK_PERIOD_S, self._watch_owner)
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
+        self._sources = TargetSources(lambda: publisher_names(self, self._sub.topic_name))
         self._force = ExternalForce(
             self, self.get_parameter('base_frame').value,
             self.get_parameter('external_force_timeout_s').value,

@@ -7,9 +7,11 @@ each, 10 and 14 mm apart, made consecutive commands differ by up to 100 kPa
 and swung the robot by 20 mm, with no log line.  A message does not say
 which publisher sent it in every middleware, but its *publication sequence
 number* (``MessageInfo['publication_sequence_number']``: each publisher
-counts its own messages from 1) does: one publisher's numbers only grow,
-two publishers' interleave, so one of them goes back at least every other
-message.  :class:`TargetSources` holds the targets while that happens (the
+counts its own messages from 1) does: one publisher's numbers grow by one
+(a few more where a message was lost), two publishers' interleave, so the
+numbers go back, or leap ahead, at least every other message (a publisher
+that sends rarely with higher numbers than the other leaps ahead, and is
+refused too).  :class:`TargetSources` holds the targets while that happens (the
 node keeps its last target and says so: a throttled WARN and a WARN
 diagnostic naming the publishers) and takes them again once the numbers
 have only grown for :data:`HOLD_S`: the other publisher stopped, or a
@@ -24,6 +26,9 @@ __all__ = ['HOLD_S', 'TargetSources', 'publisher_names']
 
 #: Targets are held until the sequence numbers have only grown for this long [s].
 HOLD_S = 0.5
+#: A number this far ahead of the last one is another publisher's (messages lost in between
+#: are at most a few; a target stream at 100 Hz sends this many in a second).
+MAX_LEAP = 100
 
 
 def publisher_names(node, topic: str) -> list:
@@ -58,7 +63,7 @@ class TargetSources:
         sequence = None if info is None else info.get('publication_sequence_number')
         if not isinstance(sequence, int) or sequence <= 0:
             return None
-        if self._last is not None and sequence <= self._last:
+        if self._last is not None and not self._last < sequence <= self._last + MAX_LEAP:
             self.interleavings += 1
             if now >= self._until and self.names is not None:   # a new episode: who is there
                 self.publishers = ', '.join(self.names())
