@@ -224,7 +224,8 @@ class InverseKinetostaticNode(LifecycleNode):
         self._owner_timer = self.create_timer(OWNER_CHECK_PERIOD_S, self._watch_owner)
         self._pub_pose = self.create_publisher(PoseStamped, 'commanded_pose', qos)
         self._sub = self.create_subscription(PoseStamped, 'target_pose', self._on_target, qos)
-        self._sources = TargetSources(lambda: publisher_names(self, self._sub.topic_name))
+        self._sources = TargetSources(lambda: self.count_publishers(self._sub.topic_name),
+                                      lambda: publisher_names(self, self._sub.topic_name))
         self._force = ExternalForce(
             self, self.get_parameter('base_frame').value,
             self.get_parameter('external_force_timeout_s').value,
@@ -384,14 +385,11 @@ class InverseKinetostaticNode(LifecycleNode):
         return self.get_parameter('pressure_unit').value
 
     # ---------------------------------------------------------- input
-    def _on_target(self, msg: PoseStamped, info) -> None:   # (with info: rclpy passes it)
-        self._take_target(msg, info)   # then counted: on simulation time, after its solve queued
+    def _on_target(self, msg: PoseStamped) -> None:
+        self._take_target(msg)   # then counted: on simulation time, after its solve is queued
         self._lockstep.received(self._sub.topic_name)
 
-    def _take_target(self, msg: PoseStamped, info=None) -> None:
-        held = self._sources.holds(info, time.monotonic())   # one publisher at a time
-        if held:
-            return self._refuse(held)
+    def _take_target(self, msg: PoseStamped) -> None:
         with self._lock:
             active, cfg = self._active, self._cfg
         if not active or cfg is None:
@@ -412,8 +410,10 @@ class InverseKinetostaticNode(LifecycleNode):
                 (o.x, o.y, o.z, o.w), msg.header.frame_id,
                 self.get_parameter('base_frame').value, use_orientation)
         except contract.InputError as exc:
-            self._refuse(str(exc))
-            return
+            return self._refuse(str(exc))
+        held = self._sources.holds(pos, time.monotonic())   # one publisher at a time
+        if held:
+            return self._refuse(held)
         item = (pos, z, msg.header.stamp, self._now())
         with self._lock:
             self._last_target = (pos, z)

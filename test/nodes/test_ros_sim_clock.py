@@ -204,9 +204,9 @@ def test_the_trajectory_publisher_holds_the_simulation_to_its_ticks_and_leaves_w
                  use_sim_time=True)
     late, take = [], node._take_target
 
-    def timed(msg, info=None):   # the clock the node sees when it takes a target, vs its stamp
+    def timed(msg):   # the clock the node sees when it takes a target, against its stamp
         late.append(node.get_clock().now().nanoseconds * 1e-9 - seconds(msg.header.stamp))
-        take(msg, info)
+        take(msg)
     node._take_target = timed
     traj = h.add(TrajectoryPublisher, trajectory='planar_circle', rate_hz=50.0, period_s=2.0,
                  start_delay_s=0.0, ramp_in_s=0.0, controller_node='', use_sim_time=True)
