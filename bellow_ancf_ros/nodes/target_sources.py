@@ -12,10 +12,12 @@ carries each publisher's sequence numbers, but the EventsExecutor the nodes
 spin in does not deliver it), so :class:`TargetSources` reads the stream
 itself: a target that jumps away from the one before (more than
 :data:`JUMP_M`) and back near the one before that is two streams taking
-turns, when the ROS graph shows more than one publisher on the topic.  It
-then holds the targets (the node keeps the last one taken and says so: a
-throttled WARN and a WARN diagnostic naming the publishers) until no such
-turn has come for :data:`HOLD_S`.  One publisher (the graph's count) is never
+turns, when the ROS graph shows more than one publisher on the topic.  That
+first turn back is taken (the jump away was the other stream's first
+target: the move towards it has barely begun), and the targets after it
+are held (the node keeps the last one taken and says so: a throttled WARN
+and a WARN diagnostic naming the publishers) until no turn has come for
+:data:`HOLD_S`.  One publisher (the graph's count) is never
 held, whatever it sends; two whose targets do not take turns (a lead-in
 publisher handing over to a path that starts where it held, a planner idle
 beside a teleoperator) are not either.
@@ -77,9 +79,12 @@ class TargetSources:
         self._recent.append(p)
         if turn and (self.count is None or self.count() > 1):
             self.turns += 1
-            if now >= self._until and self.names is not None:   # a new episode: who is there
-                self.publishers = ', '.join(self.names())
+            new = now >= self._until
             self._until = now + self.hold_s
+            if new:   # an episode begins: the turn back is taken, who is there is asked
+                if self.names is not None:
+                    self.publishers = ', '.join(self.names())
+                return None
         if now >= self._until:
             return None
         who = f' ({self.publishers})' if self.publishers else ''

@@ -262,7 +262,7 @@ def test_a_second_publisher_on_target_pose_holds_the_targets_until_it_stops(h, o
     with h.lock:
         got = np.array([pose_of(m)[0] for _, m in h.msgs['commanded_pose'][n1:]])
     along = (got - a) @ (b - a) / np.linalg.norm(b - a) ** 2   # 0: planner's, 1: teleop's
-    assert np.all(np.abs(np.diff(along)) < 0.25), along   # no flips, at most a smooth move
+    assert np.all(along < 0.05), along   # held at the planner's (the teleop's first: a blip)
     assert node.stats['refused'] >= 40, node.stats
     warns = [s for s in diag_statuses(h, 'sources') if 'more than one publisher' in s.message]
     assert warns and warns[-1].level == DiagnosticStatus.WARN
