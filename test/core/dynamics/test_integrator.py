@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core import DynamicsStatus, TipLoad, solve_forward
-from bellow_ancf_ros.core.dynamics import GeneralizedAlpha, default_step
-from bellow_ancf_ros.core.dynamics import PressureRamp
+from bellow_ancf_ros.core.dynamics import GeneralizedAlpha, PressureRamp, default_step
 
 
 ROOT = Path(__file__).resolve().parents[3]
