@@ -42,10 +42,6 @@ def publisher_names(node, topic: str) -> list:
             for i in node.get_publishers_info_by_topic(topic)]
 
 
-def _dist(a, b) -> float:
-    return math.dist(a, b)
-
-
 class TargetSources:
     """Whether a target may be taken, from the targets received before it (module docstring).
 
@@ -73,9 +69,9 @@ class TargetSources:
         turn = False
         if len(self._recent) == 2:
             older, last = self._recent
-            jump = _dist(p, last)
-            turn = (jump > JUMP_M and _dist(older, last) > JUMP_M
-                    and _dist(p, older) < 0.5 * jump)
+            jump = math.dist(p, last)
+            turn = (jump > JUMP_M and math.dist(older, last) > JUMP_M
+                    and math.dist(p, older) < 0.5 * jump)
         self._recent.append(p)
         if turn and (self.count is None or self.count() > 1):
             self.turns += 1

@@ -376,15 +376,16 @@ class IntegralFeedback:
         self.noise.add(float(t), p)
         if len(self._pending) > MAX_PENDING:   # (no control step for a while: the newest)
             del self._pending[0]
-        if self.watchdog is not None and self._history and float(t) < self._move_until:
-            # a move of the controller's own holds the correction: the loop is open, nothing
-            # of it can ring, and the move's own transient (the robot lagging the move, its
-            # residual swing) grew from window to window as the move went on (the shipped
-            # one-segment robot's 10 mm step on the wall clock: 0.40 mm at 10 Hz "growing
-            # 3 times in a row" 0.39 s after the step, in two runs of three): its windows
-            # start again after it
-            self.watchdog.reset()
-        elif self.watchdog is not None and self._history:
+        if self.watchdog is not None and self._history:
+            if float(t) < self._move_until:
+                # a move of the controller's own holds the correction: the loop is open,
+                # nothing of it can ring, and the move's own transient (the robot lagging the
+                # move, its residual swing) grew from window to window as the move went on
+                # (the shipped one-segment robot's 10 mm step on the wall clock: 0.40 mm at
+                # 10 Hz "growing 3 times in a row" 0.39 s after the step, in two runs of
+                # three): its windows start again after it
+                self.watchdog.reset()
+                return True
             # every accepted sample, at the measurements' rate: a control step is too slow
             # to see a swing near a stiff robot's mode
             then = self._target_at(float(t))
