@@ -148,7 +148,7 @@ def circle_10x(name, dynamic):
     eff = PlantEffects(creep_fraction=0.0, regulator_hysteresis_pa=0.0)
     tau = eff.regulator_time_constant_s
     robot = SimulatedRobot(name, seed=1, effects=eff)
-    ff = StreamFeedforward(mode.frequency_hz, mode.damping_ratio, lag_s=tau, window_s=0.1)
+    ff = StreamFeedforward(mode.frequency_hz, mode.damping_ratio, lag_s=tau)
     sim = LoopSimulation(model, robot, None, physics_rate_hz=robot.auto_physics_rate_hz,
                          preview_s=eff.preview_s(50.0) - (tau if dynamic else 0.0),
                          feedforward=ff if dynamic else None)

@@ -25,11 +25,31 @@ as the quasi-static feedforward does.
 
 :func:`dynamic_path` shifts a known path (a function of time: the
 derivatives by central differences).  :class:`StreamFeedforward` shifts a
-stream of stamped targets (a trajectory publisher's preview): the
-derivatives of the newest samples by a local quadratic fit; a jump (a step
-target) is passed unshifted, since its derivatives are not a motion the
-robot can follow (input shaping is the remedy for steps).  Every shift is
-clipped to ``max_shift_m`` (and ``max_shift_rad``).
+stream of stamped targets (a planner's stream, a trajectory publisher's
+preview): the derivatives at the newest target by polynomials fitted to the
+targets before it; a jump (a step target) is passed unshifted, since its
+derivatives are not a motion the robot can follow (input shaping is the
+remedy for steps).  Every shift is clipped to ``max_shift_m`` (and
+``max_shift_rad``).
+
+A stream's stamps need not be its poses' times: a planner that stamps a
+pose when it sends it, 0.2 ms after it computed it for its own clock (a
+lab-style trial's planner, 50 Hz, quiet computer; 2.8 ms at the 99th
+percentile with two CPU-bound processes beside it), puts each target off
+its path by the speed times that difference.  The second and third
+derivatives of a cubic over 0.1 s (five targets, :data:`FITS`) multiply
+that into the shift: on the two-segment bending circle at 10x, 0.2 ms RMS
+of stamp jitter moved the shift by 3.9 mm from one target to the next (99th
+percentile), 1 ms by 15 mm, and the commands by 10-60 kPa.  A stream whose
+targets lie more than :data:`NOISE_M` off that cubic is therefore read with
+longer fits (:data:`NOISY_FITS`, for :data:`NOISY_HOLD_S` after the last
+such target): the same jitter then moves the shift by 0.4 and 0.8 mm (the
+circle alone turns it by 0.4 mm per target), at a cost of 0.27 mm of the
+shift on that circle and up to 1 mm while a path speeds up
+(``test_stream_shift_survives_jittered_stamps``).  A stream whose stamps
+are its poses' times keeps the short fit (0.05 mm on that circle): the
+long one, on every stream, made two-segment robots of the family ring at
+the end of the circle's spin-up (watchdog trips in 3 of 40 more).
 """
 
 from __future__ import annotations
@@ -47,6 +67,18 @@ MAX_SHIFT_M = 0.01
 MAX_SHIFT_RAD = math.radians(10.0)
 #: A stopped stream slower than this over its brake time is not braked [m], [rad].
 _STILL_M, _STILL_RAD = 1.0e-5, 1.0e-4
+#: ``(window [s], polynomial degree)`` of the fits that give the velocity, the acceleration
+#: and the jerk at the newest target (module docstring); fewer targets than ``degree + 2`` in
+#: a window: the degree they allow, at least 2 (three targets).  ``FITS``: a stream whose
+#: targets lie on a smooth path by their stamps; ``NOISY_FITS``: one whose do not.
+FITS = ((0.1, 3),) * 3
+NOISY_FITS = ((0.3, 3), (0.4, 3), (0.6, 4))
+#: A stream whose targets leave more than this [m] RMS off the cubic of its last
+#: ``FITS`` window is read with ``NOISY_FITS`` for :data:`NOISY_HOLD_S` [s] from then on.
+NOISE_M = 2.0e-6
+NOISY_HOLD_S = 2.0
+#: A target this close to the newest one [m], [rad] repeats it: the stream stands still.
+_REPEAT_M, _REPEAT_RAD = 1.0e-9, 1.0e-9
 
 
 class DynamicFeedforward:
@@ -166,33 +198,44 @@ class StreamFeedforward:
     """:class:`DynamicFeedforward` on a stream of stamped targets.
 
     :meth:`push` each target with the time it is wanted at; :meth:`target`
-    gives the newest one shifted by the derivatives of a quadratic fitted to
-    the targets of the last ``window_s`` (at least three).  A target farther
-    than ``jump_m`` from the one before (a step), a gap longer than
-    ``window_s``, or too few samples: the newest target unshifted.
+    gives the newest one shifted by the derivatives of polynomials fitted to
+    the targets before it (:data:`FITS`; at least three targets).  A target
+    farther than ``jump_m`` from the one before (a step), a gap longer than
+    ``gap_s``, or too few samples: the newest target unshifted.
 
-    **A stream that stops** (no target for ``stale_periods`` of its own
-    intervals, at least ``window_s`` / 2) while it was moving: the robot,
-    led by the shift, is moving at the stream's speed.  Holding the shifted
-    target would drive it on by the shift and leave its mode ringing; dropping
-    the shift, a velocity step, rings it too.  Instead the wanted pose (the
-    *reference*, :meth:`reference`) continues from the newest target along a
+    **A stream that stops** while it was moving, either by no target for
+    ``stale_periods`` of its own intervals (at least ``gap_s`` / 2) or by
+    repeating its newest target (a planner that holds the path's last pose
+    and keeps publishing it): the robot, led by the shift, is moving at the
+    stream's speed.  Holding the shifted target would drive it on by the
+    shift and leave its mode ringing; dropping the shift, a velocity step,
+    rings it too; and fitting the repeated targets reads the stop as an
+    acceleration of metres per second squared (a lab-style trial: the shift
+    flipped between +10 and -10 mm from one 20 ms target to the next, the
+    commands by 40-90 kPa).  Instead the wanted pose (the *reference*,
+    :meth:`reference`) continues from the last moving target along a
     quintic that starts with the stream's velocity and acceleration and
-    comes back to rest at that target after one brake time (``brake_periods``
-    of the mode, at least ``4 lag_s``), shifted as any path: the robot
-    follows it and comes to rest at the last target, no shift left in the
-    command (:meth:`busy` while braking; the closed loop holds its integral
-    then).  An abrupt stop at speed still swings the robot at its mode.
+    comes back to rest at that target after one brake time
+    (``brake_periods`` of the mode, at least ``4 lag_s``), shifted as any
+    path: the robot follows it and comes to rest at the last target, no
+    shift left in the command (:meth:`busy` while braking; the closed loop
+    holds its integral then).  Repeated targets are not fitted: when the
+    stream moves again, its fit starts at the pose it stood at.  An abrupt
+    stop at speed still swings the robot at its mode.
     """
 
-    def __init__(self, frequency_hz: float, damping_ratio: float, window_s: float = 0.08,
+    def __init__(self, frequency_hz: float, damping_ratio: float, gap_s: float = 0.1,
                  jump_m: float = 0.005, stale_periods: float = 3.0, brake_periods: float = 1.0,
                  **kw) -> None:
         self.ff = DynamicFeedforward(frequency_hz, damping_ratio, **kw)
-        self.window_s, self.jump_m = float(window_s), float(jump_m)
+        self.gap_s, self.jump_m = float(gap_s), float(jump_m)
         self.stale_periods, self.brake_periods = float(stale_periods), float(brake_periods)
+        self._keep_s = max(w for w, _ in FITS + NOISY_FITS)
         self._hist: deque = deque()
         self._brake = None   # the stop of the stream, once seen: (t1, T, p1, dp, z1, dz)
+        self._repeated = False   # the newest targets repeat the one before them
+        self._repeat_t = 0.0     # the newest repeat's time
+        self._noisy_until = -math.inf   # read with NOISY_FITS until then
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shift for this mode from now on."""
@@ -202,19 +245,45 @@ class StreamFeedforward:
         """Forget the stream (the next target starts unshifted)."""
         self._hist.clear()
         self._brake = None
+        self._repeated = False
+        self._noisy_until = -math.inf
 
     def push(self, t: float, position, z_axis=None) -> None:
         """A target wanted at time ``t`` (a time that goes back starts the stream again)."""
         p = np.asarray(position, float).reshape(3)
         z = None if z_axis is None else np.asarray(z_axis, float).reshape(3)
         h = self._hist
-        if h and (t <= h[-1][0] or t - h[-1][0] > self.window_s
+        if h and t > h[-1][0] and float(np.linalg.norm(p - h[-1][1])) <= _REPEAT_M and (
+                z is None or h[-1][2] is None
+                or float(np.linalg.norm(z - h[-1][2])) <= _REPEAT_RAD):
+            self._repeated, self._repeat_t = True, float(t)   # standing still: not fitted
+            return
+        if self._repeated:   # moving again: from the pose it stood at, when it last said so
+            stood = (self._repeat_t, h[-1][1], h[-1][2])
+            h.clear()
+            h.append(stood)
+        if h and (t <= h[-1][0] or t - h[-1][0] > self.gap_s
                   or np.linalg.norm(p - h[-1][1]) > self.jump_m):
             h.clear()
         h.append((float(t), p, z))
-        while len(h) > 3 and h[0][0] < t - self.window_s:
+        while len(h) > 3 and h[0][0] < t - self._keep_s:
             h.popleft()
         self._brake = None
+        self._repeated = False
+        if self._off_path() > NOISE_M:
+            self._noisy_until = float(t) + NOISY_HOLD_S
+
+    def _off_path(self) -> float:
+        """RMS distance [m] of the targets in the first fit's window from their cubic (0: few)."""
+        h = self._hist
+        window = FITS[0][0]
+        sel = [s for s in h if s[0] >= h[-1][0] - window]
+        if len(sel) < 6:   # (a cubic through five leaves one degree of freedom: too few to judge)
+            return 0.0
+        t = np.array([s[0] for s in sel]) - h[-1][0]
+        V = np.column_stack([t ** n for n in range(4)])
+        P = np.array([s[1] for s in sel])
+        return float(np.sqrt(np.mean((V @ np.linalg.lstsq(V, P, rcond=None)[0] - P) ** 2) * 3))
 
     @property
     def brake_s(self) -> float:
@@ -224,28 +293,44 @@ class StreamFeedforward:
     def stale_s(self) -> float:
         """How long after its newest target the stream counts as stopped [s]."""
         t = [s[0] for s in self._hist]
-        step = float(np.median(np.diff(t))) if len(t) >= 2 else self.window_s
-        return max(self.stale_periods * step, 0.5 * self.window_s)
+        step = float(np.median(np.diff(t))) if len(t) >= 2 else self.gap_s
+        return max(self.stale_periods * step, 0.5 * self.gap_s)
 
     def _fit(self):
-        """The derivatives at the newest target, ``(dp, dz or None)``: rows v, a[, j]."""
+        """The derivatives at the newest target, ``(dp, dz or None)``: rows v, a[, j].
+
+        Each from its own polynomial fit (:data:`FITS`, or :data:`NOISY_FITS`
+        for a noisy stream); the jerk only with the regulators' lag
+        (``c3 > 0``) and enough targets for a cubic.
+        """
         h = self._hist
         if len(h) < 3:
             return None
+        fits = NOISY_FITS if h[-1][0] <= self._noisy_until else FITS
         t = np.array([s[0] for s in h]) - h[-1][0]
-        cols = [np.ones_like(t), t, 0.5 * t * t]   # value, slope, curvature (and jerk)
-        if len(h) >= 5 and self.ff.c3 > 0:
-            cols.append(t ** 3 / 6)
-        V = np.column_stack(cols)
-        dp = np.linalg.lstsq(V, np.array([s[1] for s in h]), rcond=None)[0][1:]
-        if h[-1][2] is None:
-            return dp, None
-        return dp, np.linalg.lstsq(V, np.array([s[2] for s in h]), rcond=None)[0][1:]
+        P = np.array([s[1] for s in h])
+        Z = None if h[-1][2] is None else np.array([s[2] for s in h])
+        rows_p, rows_z = [], []
+        for order, (window, degree) in enumerate(fits, start=1):
+            sel = t >= min(-window, t[-3])   # (at least the last three)
+            deg = min(degree, int(sel.sum()) - 2) if sel.sum() > 3 else 2
+            if order > deg or (order == 3 and self.ff.c3 <= 0):
+                break
+            tt = t[sel]
+            V = np.column_stack([tt ** n / math.factorial(n) for n in range(deg + 1)])
+            rows_p.append(np.linalg.lstsq(V, P[sel], rcond=None)[0][order])
+            if Z is not None:
+                rows_z.append(np.linalg.lstsq(V, Z[sel], rcond=None)[0][order])
+        return np.array(rows_p), (None if Z is None else np.array(rows_z))
 
     def _braking(self, now: float | None):
-        """The brake of a stream stopped by ``now`` (None: not stopped, or not moving)."""
+        """The brake of a stream stopped by ``now`` (None: not stopped, or not moving).
+
+        Stopped: repeating its newest target, or none for :meth:`stale_s`.
+        """
         h = self._hist
-        if now is None or not h or now <= h[-1][0] + self.stale_s():
+        if not h or (not self._repeated
+                     and (now is None or now <= h[-1][0] + self.stale_s())):
             return None
         if self._brake is None:
             fit = self._fit()
@@ -283,6 +368,8 @@ class StreamFeedforward:
         h = self._hist
         if not h:
             raise ValueError('no target pushed yet')
+        if now is None and self._repeated:   # (the stream says it stands still then)
+            now = self._repeat_t
         brake = self._braking(now)
         if brake is None:
             return h[-1][1], h[-1][2]
@@ -301,15 +388,17 @@ class StreamFeedforward:
     def target(self, now: float | None = None):
         """The wanted pose shifted for the mode: ``(position, z_axis or None)``.
 
-        ``now``: the time it is commanded at (None: the stream has not stopped).
+        ``now``: the time it is commanded at (None: the newest target's).
         """
         h = self._hist
         if not h:
             raise ValueError('no target pushed yet')
+        if now is None and self._repeated:
+            now = self._repeat_t
         brake = self._braking(now)
-        if brake is not None:
-            p, vp, z, vz = self._along(brake, now)
-            return self.ff.shifted(p, vp, z, vz)
+        if brake is not None:   # (no jerk term: the quintic's own jerk at its start, 36 v / T^2,
+            p, vp, z, vz = self._along(brake, now)   # would step the command by c3 times it)
+            return self.ff.shifted(p, vp[:2], z, None if vz is None else vz[:2])
         t1, p1, z1 = h[-1]
         fit = self._fit()
         if fit is None:

@@ -50,7 +50,7 @@ class TargetFilter:
         self.shaping = shaping
         self.shaper = None if shaping in ('none', 'smooth') else TargetShaper(shaping)
         self.jumps = JumpTransition() if shaping == 'smooth' else None
-        self.feedforward = (StreamFeedforward(1.0, 0.0, lag_s=lag_s, window_s=0.1)
+        self.feedforward = (StreamFeedforward(1.0, 0.0, lag_s=lag_s)
                             if dynamic_feedforward else None)
         self.mode: tuple[float, float] | None = None
         self._newest: tuple | None = None

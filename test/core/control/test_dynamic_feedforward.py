@@ -40,7 +40,7 @@ def test_stream_matches_the_path_clips_and_passes_steps():
     omega = 2 * math.pi / 2.0   # the 10x circle's rate
     sine = _sine(omega)
     path = dynamic_path(sine, F, ZETA, lag_s=TAU)
-    st = StreamFeedforward(F, ZETA, lag_s=TAU, window_s=0.1)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
     errs = []
     for k in range(100):           # a 50 Hz stream
         t = k / 50
@@ -93,7 +93,7 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
     """
     omega = 2 * math.pi / 2.0
     sine = _sine(omega, amp=0.01)
-    st = StreamFeedforward(F, ZETA, lag_s=TAU, window_s=0.1)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
     for k in range(51):            # 50 Hz, stopping at t1 = 1 s, at full speed
         st.push(k / 50, sine(k / 50)[0])
     t1, p1 = 1.0, sine(1.0)[0]
@@ -116,8 +116,87 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
         np.testing.assert_allclose(st.reference(now)[0], p1, atol=1e-15)
         np.testing.assert_allclose(st.target(now)[0], p1, atol=1e-15)
     assert st.busy(t1 + 1.2 * T) and not st.busy(t1 + 1.6 * T)
-    st.push(t1 + 2.0, p1)                                    # a new target ends the brake
+    st.push(t1 + 2.0, p1 + [1e-3, 0.0, 0.0])                 # a new target ends the brake
     assert st.hold_until() is None and not st.busy(t1 + 2.0)
+
+
+def _circle(period=2.0, radius=0.02):
+    w = 2 * math.pi / period
+    return lambda t: (np.array([radius * math.cos(w * t), radius * math.sin(w * t), 0.2]),
+                      np.array([0.05 * math.cos(w * t), 0.05 * math.sin(w * t), 1.0]))
+
+
+def test_a_stream_that_repeats_its_last_pose_brakes_smoothly():
+    """A planner that stops on its path and keeps publishing the pose it stopped at.
+
+    Fitting the repeated pose read the stop as an acceleration of metres per
+    second squared: the shift flipped between +10 and -10 mm from one 20 ms
+    target to the next (a lab-style trial, the two-segment circle at 10x).
+    Now the stream brakes as a stream that stops publishing does: the shift
+    goes away over one period of the mode, by less than 1 mm per target (it
+    turned by 0.3 mm per target while the stream moved), the robot is
+    brought to rest at the pose the stream stands at, and a stream that moves
+    again starts its fit there.
+    """
+    circle = _circle()
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    shifts = []
+    for k in range(151):                      # 3 s at 50 Hz, stopping at full speed
+        p, z = circle(k / 50)
+        st.push(k / 50, p, z)
+        shifts.append(st.target(k / 50)[0] - p)
+    p1, z1 = circle(3.0)
+    moving = max(np.linalg.norm(np.diff(shifts[30:], axis=0), axis=1))
+    held = []
+    for k in range(1, 60):                    # the same pose, 1.2 s more
+        t = 3.0 + k / 50
+        st.push(t, p1, z1)
+        pos, zz = st.target(t)
+        held.append(pos - p1)
+        assert np.linalg.norm(zz) == pytest.approx(1.0)
+    steps = np.linalg.norm(np.diff([shifts[-1]] + held, axis=0), axis=1)
+    # the brake takes the shift (4 mm) away over one mode period: 0.55 mm per target at most
+    assert moving < 3e-4 and steps.max() < 1e-3, (steps.max(), moving)
+    T = st.brake_s
+    assert st.busy(3.0 + 0.5 * T) and st.hold_until() == pytest.approx(3.0 + T)
+    np.testing.assert_allclose(held[-1], 0.0, atol=1e-15)   # at rest at the pose it stands at
+    np.testing.assert_allclose(st.reference(3.0 + 1.1 * T)[0], p1, atol=1e-15)
+    # moving again: the fit starts at the pose it stood at (no shift from the old motion)
+    st.push(4.2, p1 + [0.0, 5e-4, 0.0], z1)
+    assert st.hold_until() is None
+    assert np.linalg.norm(st.target(4.2)[0] - p1) < 2e-3
+
+
+@pytest.mark.parametrize('jitter_s', [0.0, 2e-4, 1e-3])
+def test_stream_shift_survives_jittered_stamps(jitter_s):
+    """Targets stamped when sent, not when computed: the shift must not amplify the jitter.
+
+    The two-segment bending circle's rate (2 s), 50 Hz, the stamps off the
+    poses' times by ``jitter_s`` RMS.  The short fit moved the shift by
+    3.9 mm (0.2 ms) and 15 mm (1 ms) between consecutive targets at the 99th
+    percentile; the circle alone turns it by 0.4 mm.  Exact stamps keep the
+    short fit (0.05 mm from the path's own shift).
+    """
+    circle = _circle()
+    exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
+    rng = np.random.default_rng(0)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    shifts, errors = [], []
+    for k in range(300):
+        t = k / 50
+        p, z = circle(t)
+        stamp = t + rng.normal(0.0, jitter_s)
+        st.push(stamp, p, z)
+        got = st.target(stamp)[0]
+        if k >= 30:
+            shifts.append(got - p)
+            errors.append(np.linalg.norm(got - exact(t)[0]))
+    change = np.linalg.norm(np.diff(shifts, axis=0), axis=1)
+    shift = np.median(np.linalg.norm(shifts, axis=1))
+    assert shift > 3e-3                                    # the shift is there (4.2 mm)
+    assert np.percentile(change, 99) < 1.0e-3, np.percentile(change, 99)
+    assert np.percentile(errors, 99) < (1.0e-4 if jitter_s == 0.0 else 1.0e-3), \
+        np.percentile(errors, 99)
 
 
 def test_a_held_stream_that_stops_is_not_braked():

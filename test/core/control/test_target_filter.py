@@ -43,7 +43,7 @@ def test_a_previewed_stream_is_shaped_at_its_newest_time():
 
 def test_dynamic_feedforward_adds_the_streams_shift_and_keeps_the_axis_a_unit_vector():
     tf = TargetFilter('none', dynamic_feedforward=True, lag_s=0.06)
-    ff = StreamFeedforward(F, ZETA, lag_s=0.06, window_s=0.1)
+    ff = StreamFeedforward(F, ZETA, lag_s=0.06)
     tf.set_mode(F, ZETA)
     w = 2 * math.pi / 2.0
     for k in range(60):
