@@ -14,7 +14,7 @@ unless ``with_trajectory:=false`` ``trajectory_publisher``, and with
 ``rviz:=true`` rviz2 with the installed ``rviz/bellow_ancf.rviz`` (where
 rviz2 is installed; otherwise a log line says it is not), and with
 ``sim:=true`` ``simulated_robot_node`` (``sim_robot_config``, default the
-mismatched one-segment robot, ``sim_plant`` realistic or ideal hardware; it
+shipped mismatched robot of ``robot_config``, ``sim_plant`` realistic or ideal hardware; it
 vents after ``command_timeout_s`` 0.5 s without a command, as a regulator
 driver does).  ``use_sim_time`` (default: as ``sim``) puts every node on
 ``/clock``; with ``sim:=true`` the simulated robot publishes it, paced by
@@ -111,9 +111,13 @@ def generate_launch_description():
                               description='payload at the end effector [kg], known to the model'),
         DeclareLaunchArgument('sim', default_value='false',
                               description='start simulated_robot_node in place of the robot'),
-        DeclareLaunchArgument('sim_robot_config', default_value='one_segment_mismatched',
-                              description="the simulated robot's own file (two segments: "
-                                          'two_segment_mismatched)'),
+        DeclareLaunchArgument('sim_robot_config',
+                              default_value=[LaunchConfiguration('robot_config'), '_mismatched'],
+                              description="the simulated robot's own file; default "
+                                          '<robot_config>_mismatched, the shipped robot that is '
+                                          'not the model (one_segment_mismatched, '
+                                          'two_segment_mismatched), or robot_config itself '
+                                          'where none is shipped'),
         DeclareLaunchArgument('sim_plant', default_value='realistic',
                               description="the simulated robot's hardware: realistic (lag, "
                                           'dead time, hysteresis, creep, mocap latency, '

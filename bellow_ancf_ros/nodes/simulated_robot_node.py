@@ -102,8 +102,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import Trigger
 
-from ..core import load_robot
-from ..core.sim import PlantEffects, SimulatedRobot, SimulationClock
+from ..core.sim import PlantEffects, SimulatedRobot, SimulationClock, simulated_robot_file
 from ..core.model import MocapFrame
 from ..core import geometry
 from . import contract
@@ -348,7 +347,9 @@ class SimulatedRobotNode(Node):
         g = self.get_parameter
         unit = g('pressure_unit').value
         contract.check_unit(unit)
-        cfg = load_robot(g('robot_config').value)   # ConfigError: the node does not start
+        cfg, note = simulated_robot_file(g('robot_config').value)   # ConfigError: no start
+        if note is not None:
+            self.get_logger().warning(note)
         seed = int(g('seed').value)
         self.cfg, self._unit, self._frame = cfg, unit, g('base_frame').value
         self._robot_args = dict(n_elements=int(g('n_elements').value) or None,

@@ -418,6 +418,21 @@ def test_sim_feedback_and_payload_arguments(domain_id, tmp_path):
     assert all(got['use_sim_time'] for _, got in results.values())
 
 
+def test_the_simulated_robot_is_the_mismatched_one_of_robot_config(domain_id, tmp_path):
+    """``robot_config:=two_segment sim:=true``: a two-segment simulated robot, not the default.
+
+    A lab-style trial launched exactly that and got the one-segment robot,
+    which refused every six-pressure command while the controller wound up.
+    """
+    results = run_launch(domain_id, tmp_path, 'robot_config:=two_segment sim:=true')
+    for exe, (expected, got) in results.items():
+        assert got == expected, exe
+    assert results['simulated_robot_node'][1]['robot_config'] == 'two_segment_mismatched'
+    given = run_launch(domain_id, tmp_path,
+                       'robot_config:=two_segment sim:=true sim_robot_config:=two_segment')
+    assert given['simulated_robot_node'][1]['robot_config'] == 'two_segment'
+
+
 @pytest.mark.parametrize('args,sim_time', [('', False), ('sim:=true use_sim_time:=false', False),
                                            ('use_sim_time:=true', True),
                                            ('sim:=true sim_real_time_factor:=0.5', True)])

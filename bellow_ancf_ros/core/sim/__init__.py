@@ -1,6 +1,8 @@
 """The simulated robot: a robot that is not the model, with its hardware's effects (no ROS).
 
-* :class:`SimulatedRobot`: a robot with its own robot file, quasi-static or
+* :class:`SimulatedRobot`: a robot with its own robot file
+  (:func:`simulated_robot_file`: ``<robot>_mismatched``, or the robot
+  itself where none is shipped), quasi-static or
   swinging (its dynamics integrated), driven by pressure commands and seen
   through a motion capture, on the caller's time (wall clock or simulation
   time: the clock belongs to whoever steps it);
@@ -25,11 +27,12 @@ from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import EFFECTS, MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
 from ._robot_family import FAMILY_RANGES, RobotDraw, draw_robot, first_mode
-from ._simulated_robot import SimulatedRobot
+from ._simulated_robot import MISMATCHED, SimulatedRobot, simulated_robot_file
 
 __all__ = [
-    "BellowCreep", "CATCH_UP", "EFFECTS", "FAMILY_RANGES", "MIN_SAMPLES_PER_PERIOD", "MocapSample",
+    "BellowCreep", "CATCH_UP", "EFFECTS", "FAMILY_RANGES", "MISMATCHED", "MIN_SAMPLES_PER_PERIOD",
+    "MocapSample",
     "MotionCapture", "PlantEffects", "PressureRegulators", "RobotDraw", "SimulatedRobot",
     "SimulationClock",
-    "draw_robot", "first_mode",
+    "draw_robot", "first_mode", "simulated_robot_file",
 ]

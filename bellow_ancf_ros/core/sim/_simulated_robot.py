@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,13 +40,39 @@ import numpy as np
 from ..dynamics import GeneralizedAlpha, PressureRamp, default_step, natural_modes
 from ..geometry import rotation_from_vector, rotation_vector
 from ..history import bracket
-from ..model import RobotConfig, RobotModel, TipLoad, load_robot, tip_load
+from ..model import (ConfigError, RobotConfig, RobotModel, TipLoad, load_robot,
+                     shipped_robot_names, tip_load)
 from ..solve import ForwardResult, solve_forward
 from ._motion_capture import MocapSample, MotionCapture
 from ._plant_effects import MIN_SAMPLES_PER_PERIOD, PlantEffects
 from ._regulators import BellowCreep, PressureRegulators
 
-__all__ = ['SimulatedRobot']
+__all__ = ['MISMATCHED', 'SimulatedRobot', 'simulated_robot_file']
+
+#: ``<robot>`` + this names the shipped robot that is not ``<robot>``'s model.
+MISMATCHED = '_mismatched'
+
+
+def simulated_robot_file(name: str) -> tuple[RobotConfig, str | None]:
+    """The simulated robot's own file for ``name``, and a note when it is not that file.
+
+    ``<robot>_mismatched`` is the shipped robot that differs from
+    ``<robot>``'s model (``one_segment_mismatched``,
+    ``two_segment_mismatched``); where no such robot is shipped or on disk
+    (``three_segment_mismatched``, ``lab/arm.yaml_mismatched``: what a
+    launch's default makes of any ``robot_config``) the simulated robot is
+    ``<robot>`` itself, and the note says so.  Any other name loads as it
+    is; a :class:`ConfigError` of a file that exists is raised as it is.
+    """
+    try:
+        return load_robot(name), None
+    except ConfigError:
+        base = name[:-len(MISMATCHED)] if name.endswith(MISMATCHED) else ''
+        if not base or name in shipped_robot_names() or Path(name).expanduser().is_file():
+            raise
+    return load_robot(base), (f"robot_config '{name}': no such robot; simulating '{base}' "
+                              'itself (no mismatch from the model)')
+
 
 #: Effective pressures that moved less than this since the last equilibrium [Pa] reuse it.
 RESOLVE_THRESHOLD_PA = 1.0

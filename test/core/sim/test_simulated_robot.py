@@ -1,6 +1,7 @@
 """Tests of the simulated robot (core/control): regulators, creep, physics, motion capture."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -8,7 +9,8 @@ from bellow_ancf_ros.core.geometry import rotation_from_vector
 import pytest
 
 from bellow_ancf_ros.core import RobotModel, load_robot, solve_forward
-from bellow_ancf_ros.core.sim import EFFECTS, MotionCapture, PlantEffects, SimulatedRobot
+from bellow_ancf_ros.core.sim import (EFFECTS, MotionCapture, PlantEffects, SimulatedRobot,
+                                      simulated_robot_file)
 
 IDEAL = PlantEffects.ideal()
 
@@ -223,3 +225,22 @@ def test_dynamic_robot_rings_at_its_first_mode_and_settles_on_its_equilibrium():
     assert robot.failures == 0
     quasi = SimulatedRobot('one_segment_mismatched', seed=0, effects=PlantEffects.ideal())
     quasi.check_physics_rate(1.0)   # no mode to resolve without dynamics
+
+
+def test_the_simulated_robot_file_of_a_robot_without_a_mismatched_one(tmp_path):
+    """``<robot>_mismatched``: the shipped one where there is one, else the robot itself."""
+    from bellow_ancf_ros.core import ConfigError
+    cfg, note = simulated_robot_file('two_segment_mismatched')
+    assert cfg.name == 'two_segment_mismatched' and note is None
+    cfg, note = simulated_robot_file('three_segment_mismatched')
+    assert cfg.name == 'three_segment' and "simulating 'three_segment' itself" in note
+    own = tmp_path / 'arm.yaml'
+    own.write_text((Path(load_robot('one_segment').source)).read_text())
+    cfg, note = simulated_robot_file(f'{own}_mismatched')
+    assert cfg.name == 'arm' and str(own) in note
+    with pytest.raises(ConfigError, match='unknown robot name'):
+        simulated_robot_file('no_such_robot_mismatched')
+    bad = tmp_path / 'bad.yaml_mismatched'
+    bad.write_text('name: [')
+    with pytest.raises(ConfigError, match='YAML syntax error'):   # a file that is there: its error
+        simulated_robot_file(str(bad))
