@@ -152,6 +152,7 @@ AZIMUTH_MIN_RADIUS_M = 0.002
 
 # states (``IntegralFeedback.state``)
 WAITING = 'waiting for measured_pose'
+NO_TARGET = 'measured poses arriving, waiting for a target'
 TRACKING = 'integrating'
 SATURATED = 'holding (pressure limit or unreachable target)'
 STALE = 'holding the correction: measured_pose too old (dropout)'
@@ -373,6 +374,8 @@ class IntegralFeedback:
             return False
         self._meas_t, self._meas_p, self._meas_z = float(t), p, z
         self._pending.append((float(t), p, z))
+        if self.state == WAITING:   # (a control step says more once a target is there)
+            self.state = NO_TARGET
         self.noise.add(float(t), p)
         if len(self._pending) > MAX_PENDING:   # (no control step for a while: the newest)
             del self._pending[0]

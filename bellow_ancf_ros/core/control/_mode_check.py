@@ -55,6 +55,11 @@ def gain_setting(value) -> float | str:
     lo, hi = GAIN_RANGE_PER_S
     if isinstance(value, str) and value.strip().lower() == AUTO_GAIN:
         return AUTO_GAIN
+    if isinstance(value, str):   # (a dynamically typed parameter set to '1.5': a number)
+        try:
+            value = float(value)
+        except ValueError:
+            pass
     if not isinstance(value, bool) and isinstance(value, (int, float)) and (
             math.isfinite(value) and lo <= value <= hi):
         return float(value)

@@ -16,10 +16,12 @@ import pytest
 from bellow_ancf_ros.core import solve_forward, solve_inverse
 from bellow_ancf_ros.core.sim import PlantEffects
 from bellow_ancf_ros.core.control._feedback import (
+    NO_TARGET,
     OUTLIER,
     SATURATED,
     STALE,
     TRACKING,
+    WAITING,
     FeedbackSettings,
     IntegralFeedback,
 )
@@ -506,3 +508,18 @@ def test_a_carried_correction_stays_within_its_share_of_the_move(one):
     fb.corrected_target(1.0, a, move=move, hold_until=3.0)
     p, _ = fb.corrected_target(2.0, b, move=move, hold_until=3.0)
     assert p - b == pytest.approx(c_old + [0.0, -CARRY_SHARE * 0.01, 0.0], abs=1e-12)
+
+
+def test_measured_poses_before_any_target_say_so():
+    """Measured poses arrive, no target yet (refused, none sent): not "waiting for measured_pose".
+
+    A lab-style trial's heartbeat said "feedback without measured poses:
+    waiting for measured_pose" while 120 poses a second arrived and its
+    targets were refused (a frame the node does not take).
+    """
+    fb = IntegralFeedback()
+    assert fb.state == WAITING and fb.blind
+    assert fb.measurement(0.0, [0.0, 0.0, 0.2])
+    assert fb.state == NO_TARGET and not fb.blind and fb.measurement_age(0.01) == 0.01
+    p, _ = fb.corrected_target(0.02, [0.0, 0.0, 0.2])   # the first target: a control step
+    assert fb.state == TRACKING and np.allclose(p, [0.0, 0.0, 0.2])

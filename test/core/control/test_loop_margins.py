@@ -149,7 +149,8 @@ def test_automatic_gain_is_the_safe_gain_and_follows_the_mode(two):
     assert r4.gain_per_s < r1.gain_per_s
     assert gain_setting('auto') == gain_setting(' Auto ') == AUTO_GAIN
     assert gain_setting(2) == 2.0
-    for bad in ('fast', 0.0, 51.0, float('nan'), True):
+    assert gain_setting(' 1.5 ') == 1.5   # a string a dynamically typed parameter was set to
+    for bad in ('fast', 0.0, 51.0, float('nan'), True, '0', '51', 'nan'):
         with pytest.raises(ValueError, match="allowed: 'auto' or a number from 0.01 to 50"):
             gain_setting(bad)
 
