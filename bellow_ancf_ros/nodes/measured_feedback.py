@@ -50,7 +50,7 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, LOOP_DELAY_S, LOOP_LAG_S,
+from ..core.control import (AUTO_GAIN, FEEDBACK_MODES, LOOP_DELAY_S, LOOP_LAG_S, RESTORE_S,
                             FeedbackSettings, IntegralFeedback, MismatchTransfer, ModeCheck,
                             gain_setting)
 from ..core import geometry
@@ -155,6 +155,7 @@ class FeedbackLink:
         self.refused = 0
         self.received = 0
         self._trips_logged = 0
+        self._restores_logged = 0
         self._trip_t = -math.inf
         self._mode_result = None
 
@@ -209,6 +210,7 @@ class FeedbackLink:
         with self._lock:
             self._law = IntegralFeedback(s, self._use_orientation, (
                 MismatchTransfer(model) if s.correction_frame == 'model' else None))
+            self._trips_logged = self._restores_logged = 0   # (a new law counts from 0)
         self._sub = self.node.create_subscription(PoseStamped, 'measured_pose',
                                                   self._on_measured, measured_pose_qos())
 
@@ -314,16 +316,25 @@ class FeedbackLink:
                                              command=command, hold_until=hold_until,
                                              move=move)
             degraded, state = self._law.blind, self._law.state
-            wd = self._law.watchdog
-            trip = None
+            wd, law = self._law.watchdog, self._law
+            trip = restored = None
+            gain = law.gain_per_s
             if wd is not None and wd.trips > self._trips_logged:
                 self._trips_logged, trip = wd.trips, wd.last_trip
-                self._trip_t, gain = self._clock.now(), self._law.gain_per_s
+                self._trip_t = self._clock.now()
+            if law.restores > self._restores_logged:
+                self._restores_logged = restored = law.restores
         self._log_dropout(degraded, state)
         if trip is not None:
             self.node.get_logger().error(
                 f'feedback: {trip.message}; gain cut to {gain:.3g} /s, correction held for '
-                f'{2 / wd.frequency_hz:.2f} s (trip {wd.trips})')
+                f'{2 / wd.frequency_hz:.2f} s (trip {wd.trips}; '
+                + (f'doubled back after {RESTORE_S:g} s without one)' if law.restorable else
+                   f'within {RESTORE_S:g} s of a restore: the loop rings itself, the cut stays)'))
+        if restored is not None:
+            self.node.get_logger().info(
+                f'feedback: no oscillation for {RESTORE_S:g} s: gain doubled back to '
+                f'{gain:.3g} /s (restore {restored})')
         return out
 
     def _log_dropout(self, degraded: bool, state: str) -> None:

@@ -24,14 +24,15 @@
   the regulators are sent for the pressures wanted;
 * :class:`OscillationWatchdog`: a sustained or growing swing of the measured
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
-  its gain and holds its correction);
+  its gain and holds its correction, and doubles it back after
+  :data:`RESTORE_S` without a trip unless it rang again right after that);
 * :class:`TipForceEstimator`, :class:`ForceEstimate`: the tip force (or an
   unknown payload) from measured poses and the applied pressures.
 The ROS nodes only feed these; the simulated robot is :mod:`..sim`, the two
 closed around each other :mod:`..loop`.
 """
 
-from ._feedback import FEEDBACK_MODES, FeedbackSettings, IntegralFeedback
+from ._feedback import FEEDBACK_MODES, RESTORE_S, FeedbackSettings, IntegralFeedback
 from ._loop_margins import (LOOP_DELAY_S, LOOP_LAG_S, MIN_GAIN_MARGIN, MIN_PHASE_MARGIN_DEG,
                             LoopMargins, loop_delay_s, loop_margins, safe_gain)
 from ._dynamic_feedforward import DynamicFeedforward, StreamFeedforward, dynamic_path
@@ -49,7 +50,8 @@ from ._watchdog import OscillationWatchdog, WatchdogTrip
 
 __all__ = [
     "AUTO_GAIN", "ESTIMATOR_MODES", "FEEDBACK_MODES", "GAIN_RANGE_PER_S", "LOOP_DELAY_S",
-    "LOOP_LAG_S", "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "NOISE_BUDGET_M", "RETUNE_FRACTION",
+    "LOOP_LAG_S", "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "NOISE_BUDGET_M", "RESTORE_S",
+    "RETUNE_FRACTION",
     "SHAPERS",
     "TARGET_SHAPINGS", "CommandOutput", "CreepCompensation", "DynamicFeedforward",
     "FeedbackSettings", "ForceEstimate", "IntegralFeedback", "JumpTransition", "LoopMargins",

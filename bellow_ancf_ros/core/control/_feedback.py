@@ -161,6 +161,12 @@ HELD = 'frozen: no command went out for the corrected target'
 OSCILLATING = 'holding the correction: oscillation seen, gain cut'
 MOVING = 'holding the correction: a move of its own (a target jump, a stopped stream braking)'
 
+#: A gain the watchdog cut is doubled back (up to the full gain) after this long without a
+#: trip [s]: a swing from outside the loop (a knock, a target stream that rang the robot) is not
+#: the loop's own, and a gain cut for the rest of a run left a lab-style trial's robot 2-3 mm
+#: off a held target.  A trip within this long after such a restore keeps the cut for good:
+#: the loop itself rang (a gain too high for the robot rings again within a few periods).
+RESTORE_S = 20.0
 #: Time budget of the inverse solve that carries the correction to a jump's goal [s].
 CARRY_BUDGET_S = 0.02
 #: A carried correction differs from the azimuthally turned one by at most this share of the
@@ -241,7 +247,11 @@ class IntegralFeedback:
         self.base_gain_per_s = float(self.settings.gain_per_s)   # set_gain: the automatic one
         self._automatic = False     # set_gain was called: the motion capture's noise caps it
         self.noise = MocapNoise()   # of the accepted positions (the automatic gain's cap)
-        self.gain_scale = 1.0       # cut by the watchdog on every trip
+        self.gain_scale = 1.0       # cut by the watchdog on every trip, restored (RESTORE_S)
+        self.restores = 0           # cuts undone after RESTORE_S without a trip
+        self.restorable = True      # False: a trip came within RESTORE_S of a restore
+        self._trip_t = -math.inf    # the newest trip (or restore): RESTORE_S counts from it
+        self._restore_t = -math.inf
         self._hold_until = -math.inf
         self._move_until = -math.inf   # a jump's move (and its settling) ends then
 
@@ -312,11 +322,13 @@ class IntegralFeedback:
         On a trip (:class:`~._watchdog.OscillationWatchdog`) the gain is
         halved (:attr:`gain_scale`) and the correction is held for one
         window (state ``OSCILLATING``); :attr:`watchdog` ``.last_trip`` says
-        what was seen.  A new frequency (a payload moved the mode) keeps the
-        cut gain.  Samples captured while a move of the controller's own
-        holds the correction (``hold_until`` of :meth:`corrected_target`)
-        are not watched: the loop is open then, and its windows start
-        again after the move.
+        what was seen.  After :data:`RESTORE_S` of integrating without a
+        trip the cut is doubled back (:attr:`restores`), unless a trip came
+        within that time of a restore (:attr:`restorable` False).  A new
+        frequency (a payload moved the mode) keeps the cut gain.  Samples
+        captured while a move of the controller's own holds the correction
+        (``hold_until`` of :meth:`corrected_target`) are not watched: the
+        loop is open then, and its windows start again after the move.
         """
         if self.watchdog is None:
             self.watchdog = OscillationWatchdog(frequency_hz)
@@ -396,6 +408,9 @@ class IntegralFeedback:
             if trip is not None:
                 self.gain_scale *= 0.5
                 self._hold_until = float(t) + self.watchdog.window_s
+                if float(t) - self._restore_t < RESTORE_S:
+                    self.restorable = False   # rang again after a restore: the loop's own
+                self._trip_t = float(t)
         return True
 
     def measurement_age(self, t: float) -> float | None:
@@ -586,6 +601,11 @@ class IntegralFeedback:
         if errors is None:        # measured before the current targets began: nothing to compare
             self.state = TRACKING
             return
+        if (self.gain_scale < 1.0 and self.restorable
+                and self._meas_t - self._trip_t >= RESTORE_S):
+            self.gain_scale = min(1.0, 2.0 * self.gain_scale)
+            self.restores += 1
+            self._trip_t = self._restore_t = self._meas_t
         e_p, e_r = errors
         if self._mean_error is None:
             self._mean_error = e_p
@@ -659,6 +679,7 @@ class IntegralFeedback:
             'feedback_gain_per_s': f'{self.gain_per_s:.4g}',
             **self.noise.status(),
             'oscillation_trips': 0 if self.watchdog is None else self.watchdog.trips,
+            'oscillation_gain_restores': self.restores,
             'oscillation_seen': ('none' if self.watchdog is None or self.watchdog.last_trip is None
                                  else self.watchdog.last_trip.message),
         }
