@@ -375,7 +375,9 @@ class SimulatedRobotNode(Node):
             except ValueError as exc:
                 raise StartupParameterError('mocap_quaternion_xyzw', quat,
                                             'a non-zero quaternion (x, y, z, w)', str(exc))
-        self.clock = _simulation_clock(g, rate, self.get_logger().warning)   # None: wall clock
+        # (INFO: a launch passes them on the wall clock too; a WARN there was noise in every
+        # `sim:=true use_sim_time:=false` launch)
+        self.clock = _simulation_clock(g, rate, self.get_logger().info)   # None: wall clock
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.stats = {'received': 0, 'refused': 0, 'published_poses': 0, 'failed_solves': 0,
                       'timeouts': 0, 'dropped_poses': 0, 'outliers': 0, 'resets': 0}
