@@ -317,13 +317,14 @@ class FeedbackLink:
                                              move=move)
             degraded, state = self._law.blind, self._law.state
             wd, law = self._law.watchdog, self._law
-            trip = restored = None
-            gain = law.gain_per_s
+            trip = restored = gain = None
             if wd is not None and wd.trips > self._trips_logged:
                 self._trips_logged, trip = wd.trips, wd.last_trip
                 self._trip_t = self._clock.now()
             if law.restores > self._restores_logged:
                 self._restores_logged = restored = law.restores
+            if trip is not None or restored is not None:   # (the gain only when it is logged)
+                gain = law.gain_per_s
         self._log_dropout(degraded, state)
         if trip is not None:
             self.node.get_logger().error(

@@ -28,12 +28,12 @@ from __future__ import annotations
 from collections import deque
 import math
 
+from ..core.control import JUMP_M   # (a target this far from the one before is a jump [m])
+
 __all__ = ['HOLD_S', 'JUMP_M', 'TargetSources', 'publisher_names']
 
 #: Targets are held until no turn of two streams has come for this long [s].
 HOLD_S = 0.5
-#: A target this far from the one before is a jump [m] (the jump transition's threshold).
-JUMP_M = 0.002
 
 
 def publisher_names(node, topic: str) -> list:

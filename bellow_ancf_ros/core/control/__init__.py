@@ -43,13 +43,13 @@ from ._play import PlayCompensation
 from ._command_output import CommandOutput, CreepCompensation
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._target_filter import TARGET_SHAPINGS, TargetFilter
-from ._jumps import JumpTransition
+from ._jumps import JUMP_M, JumpTransition
 from ._mismatch import MismatchTransfer
 from ._mocap_noise import NOISE_BUDGET_M, MocapNoise
 from ._watchdog import OscillationWatchdog, WatchdogTrip
 
 __all__ = [
-    "AUTO_GAIN", "ESTIMATOR_MODES", "FEEDBACK_MODES", "GAIN_RANGE_PER_S", "LOOP_DELAY_S",
+    "AUTO_GAIN", "ESTIMATOR_MODES", "FEEDBACK_MODES", "GAIN_RANGE_PER_S", "JUMP_M", "LOOP_DELAY_S",
     "LOOP_LAG_S", "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "NOISE_BUDGET_M", "RESTORE_S",
     "RETUNE_FRACTION",
     "SHAPERS",

@@ -311,16 +311,22 @@ class StreamFeedforward:
         P = np.array([s[1] for s in h])
         Z = None if h[-1][2] is None else np.array([s[2] for s in h])
         rows_p, rows_z = [], []
+        solved: dict = {}   # (first sample, degree) -> coefficients (FITS: one fit for all)
         for order, (window, degree) in enumerate(fits, start=1):
             sel = t >= min(-window, t[-3])   # (at least the last three)
             deg = min(degree, int(sel.sum()) - 2) if sel.sum() > 3 else 2
             if order > deg or (order == 3 and self.ff.c3 <= 0):
                 break
-            tt = t[sel]
-            V = np.column_stack([tt ** n / math.factorial(n) for n in range(deg + 1)])
-            rows_p.append(np.linalg.lstsq(V, P[sel], rcond=None)[0][order])
+            key = (int(np.argmax(sel)), deg)
+            if key not in solved:
+                tt = t[sel]
+                V = np.column_stack([tt ** n / math.factorial(n) for n in range(deg + 1)])
+                solved[key] = (np.linalg.lstsq(V, P[sel], rcond=None)[0],
+                               None if Z is None else np.linalg.lstsq(V, Z[sel], rcond=None)[0])
+            cp, cz = solved[key]
+            rows_p.append(cp[order])
             if Z is not None:
-                rows_z.append(np.linalg.lstsq(V, Z[sel], rcond=None)[0][order])
+                rows_z.append(cz[order])
         return np.array(rows_p), (None if Z is None else np.array(rows_z))
 
     def _braking(self, now: float | None):
