@@ -276,6 +276,8 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
         its continuation (``resume_state``): passed as ``warm_start`` (with
         the same or other pressures) the solve continues from there, so a
         cold solve can be done in budget slices without losing work.
+        It must come from a model of the same layout and element count
+        (``ValueError`` otherwise).
     check_stability : compute the reduced-Hessian stability test.
     tol : tolerance on the scaled residual (forces relative to the robot's
         bending/weight force scale, constraints relative to its length).
@@ -295,6 +297,10 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     load = tip_load(payload_kg, tip_force_n)
     lam = model.stage1.stretch(p)
     warm = None
+    if warm_start is not None and np.size(warm_start.x) != model.N:   # (numba would index past it)
+        raise ValueError(f'warm_start has {np.size(warm_start.x)} coordinates, this model '
+                         f'{model.N} ({model.n} elements per actuator): allowed: a solution '
+                         'of a model with the same robot layout and element count')
     if warm_start is not None and warm_start.converged:
         warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.load)
     elif warm_start is not None and warm_start.resume_state is not None:

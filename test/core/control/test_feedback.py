@@ -449,17 +449,23 @@ def test_a_jump_carries_the_correction_to_its_goal_along_the_move(one):
     """The transfer's correction is reached with the goal, in proportion to the way there.
 
     Asked once per move, from the answer of the last command that went out
-    and the model's answer for the goal with the correction as it was; none
-    before a command's answer was reported.
+    and the model's answer for the goal with the correction as it was, then
+    again (:data:`CARRY_AGAIN` times) with the model's answer for the goal
+    with the correction carried; none before a command's answer was reported.
     """
+    from bellow_ancf_ros.core.control._feedback import CARRY_AGAIN
     c_old, c_goal = np.array([1e-3, 0.0, 0.0]), np.array([2e-3, 1e-3, 0.0])
-    calls = []
+    calls, agains = [], []
 
     class Transfer:
         model = one
 
         def transfer(self, held, c, r, new):
             calls.append((held, c.copy(), new.position.copy()))
+            return c_goal, None
+
+        def again(self, new):
+            agains.append(new.position.copy())
             return c_goal, None
 
     fb = IntegralFeedback(FeedbackSettings(correction_frame='base'), transfer=Transfer())
@@ -477,6 +483,9 @@ def test_a_jump_carries_the_correction_to_its_goal_along_the_move(one):
     assert p == pytest.approx(a + c_old, abs=1e-12)
     assert len(calls) == 1 and calls[0][0] is inv.forward
     assert calls[0][2] == pytest.approx(b + c_old, abs=1e-8)   # the goal, corrected as it was
+    assert len(agains) == CARRY_AGAIN    # then the goal, corrected as carried, asked again
+    for got in agains:
+        assert got == pytest.approx(b + c_goal, abs=1e-8)
     p, _ = fb.corrected_target(1.5, 0.5 * (a + b), move=move, hold_until=3.0)
     assert p == pytest.approx(0.5 * (a + b) + 0.5 * (c_old + c_goal), abs=1e-12)
     p, _ = fb.corrected_target(2.0, b, move=move, hold_until=3.0)
@@ -494,6 +503,9 @@ def test_a_carried_correction_stays_within_its_share_of_the_move(one):
 
         def transfer(self, held, c, r, new):
             return c + np.array([0.0, -0.02, 0.0]), None   # 20 mm: a fit gone wrong
+
+        def again(self, new):
+            return self.transfer(None, c_old, None, new)
 
     fb = IntegralFeedback(FeedbackSettings(correction_frame='base'), transfer=Transfer())
     a = solve_forward(one, [30e3, 0.0, 0.0]).position

@@ -243,7 +243,7 @@ def test_the_model_frame_carries_the_mismatch_to_a_step_target(name):
 
     Azimuthal: the correction learned at the held pose is wrong at the goal
     (one segment: 1.7 mm of overshoot; two: 0.58 mm off 1.5 s after);
-    ``model`` carries it there (0.05 mm; 0.21 mm).
+    ``model`` carries it there (0.05 mm of overshoot; 0.17 mm off 1.5 s after).
     """
     from functools import partial
     from bellow_ancf_ros.core.loop import step_case
@@ -261,4 +261,4 @@ def test_the_model_frame_carries_the_mismatch_to_a_step_target(name):
         assert out['model']['overshoot_mm'] < 0.3 and out['model']['late_mm'] < 0.2
     else:
         assert out['azimuthal']['late_mm'] > 0.4
-        assert out['model']['late_mm'] < 0.3 and out['model']['overshoot_mm'] < 0.5
+        assert out['model']['late_mm'] < 0.2 and out['model']['overshoot_mm'] < 0.5

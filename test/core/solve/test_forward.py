@@ -193,6 +193,20 @@ def test_warm_start_is_used(two):
     np.testing.assert_allclose(warm.position, again.position, atol=1e-9)
 
 
+def test_a_warm_start_of_another_element_count_is_refused_not_read_past(one):
+    """A solution of the same robot with 12 elements per actuator cannot start a 6-element solve.
+
+    (Passed on, the compiled kernels read and wrote past its end: heap corruption.)
+    """
+    fine = RobotModel(load_robot('one_segment'), n_elements=12)
+    other = solve_forward(fine, [20e3, 0, 0])
+    assert other.converged and one.n != fine.n
+    with pytest.raises(ValueError, match='warm_start has .* coordinates'):
+        solve_forward(one, [20e3, 0, 0], warm_start=other)
+    same = solve_forward(one, [20e3, 0, 0], warm_start=solve_forward(one, [10e3, 0, 0]))
+    assert same.converged
+
+
 def test_two_segment_payload_buckling_is_reported():
     model = RobotModel(load_robot("two_segment"))
     light = solve_forward(model, np.zeros(6), payload_kg=0.15)
