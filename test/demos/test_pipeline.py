@@ -108,3 +108,23 @@ def test_a_recorder_waits_for_the_vent_its_callback_may_take_late():
         (0.3, SimpleNamespace(data=[0.0, 0.0, 0.0])))).start()
     assert pipeline.Recorder.wait_for_vent(late, timeout=5.0)
     assert 0.15 < time.monotonic() - t0 < 2.0
+
+
+def test_the_node_processes_import_this_package(tmp_path):
+    """The children's path starts with the directory holding the package imported here.
+
+    (It held the package's own directory, where ``import bellow_ancf_ros``
+    finds nothing: a demo run from another directory drove the installed copy.)
+    """
+    import os
+    import subprocess
+    from pathlib import Path
+
+    import bellow_ancf_ros
+    env = child_env(0)
+    first = Path(env['PYTHONPATH'].split(os.pathsep)[0])
+    assert (first / 'bellow_ancf_ros' / '__init__.py').exists()
+    code = 'import bellow_ancf_ros; print(bellow_ancf_ros.__file__)'
+    out = subprocess.run([sys.executable, '-c', code], env={**env, 'PYTHONPATH': str(first)},
+                         cwd=tmp_path, capture_output=True, text=True, check=True).stdout.strip()
+    assert Path(out).resolve() == Path(bellow_ancf_ros.__file__).resolve()
