@@ -253,6 +253,17 @@ def _stage2(model, lam, load, warm, tol, max_iter, iteration_budget=None, deadli
 
 
 @one_thread_call
+def check_warm_start(model: RobotModel, warm_start) -> None:
+    """``ValueError`` unless ``warm_start`` (a ForwardResult or None) has ``model``'s size.
+
+    (The compiled kernels would read and write past the end of a shorter one.)
+    """
+    if warm_start is not None and np.size(warm_start.x) != model.N:
+        raise ValueError(f'warm_start has {np.size(warm_start.x)} coordinates, this model '
+                         f'{model.N} ({model.n} elements per actuator): allowed: a solution '
+                         'of a model with the same robot layout and element count')
+
+
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
                   check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
                   iteration_budget=500, tip_force_n=None) -> ForwardResult:
@@ -297,10 +308,7 @@ def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
     load = tip_load(payload_kg, tip_force_n)
     lam = model.stage1.stretch(p)
     warm = None
-    if warm_start is not None and np.size(warm_start.x) != model.N:   # (numba would index past it)
-        raise ValueError(f'warm_start has {np.size(warm_start.x)} coordinates, this model '
-                         f'{model.N} ({model.n} elements per actuator): allowed: a solution '
-                         'of a model with the same robot layout and element count')
+    check_warm_start(model, warm_start)
     if warm_start is not None and warm_start.converged:
         warm = (warm_start.x, warm_start.stretch, 1.0, warm_start.load)
     elif warm_start is not None and warm_start.resume_state is not None:

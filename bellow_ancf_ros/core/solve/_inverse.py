@@ -80,7 +80,8 @@ import numpy as np
 from ..linalg import one_thread_call
 from ..model import RobotModel, tip_load
 from ..status import InverseStatus
-from ._forward import ForwardResult, WarmState, assess_stability, solve_forward
+from ._forward import (ForwardResult, WarmState, assess_stability, check_warm_start,
+                       solve_forward)
 from ._inverse_limits import (
     MAX_CORNERS,
     POLISH_BELOW,
@@ -312,6 +313,7 @@ def solve_inverse(
             warm_fw, prev_best = warm_start.resume, warm_start.forward
             if _same_target(warm_start, position, z_axis, load):
                 stage, search = warm_start.resume_stage, warm_start.resume_search
+    check_warm_start(model, warm_fw)
     if warm_fw is not None and not warm_fw.converged:
         warm_fw, stage = None, _EXACT
     obj = Objective(model, position, z_axis, load, None, tol, budget)

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core import ForwardStatus, RobotModel, load_robot, solve_forward
+from bellow_ancf_ros.core import (ForwardStatus, RobotModel, load_robot, solve_forward,
+                                  solve_inverse)
 from bellow_ancf_ros.core.solve import _newton as solver
 
 
@@ -203,6 +204,8 @@ def test_a_warm_start_of_another_element_count_is_refused_not_read_past(one):
     assert other.converged and one.n != fine.n
     with pytest.raises(ValueError, match='warm_start has .* coordinates'):
         solve_forward(one, [20e3, 0, 0], warm_start=other)
+    with pytest.raises(ValueError, match='warm_start has .* coordinates'):
+        solve_inverse(one, other.position, warm_start=other)
     same = solve_forward(one, [20e3, 0, 0], warm_start=solve_forward(one, [10e3, 0, 0]))
     assert same.converged
 
