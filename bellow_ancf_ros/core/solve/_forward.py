@@ -252,7 +252,6 @@ def _stage2(model, lam, load, warm, tol, max_iter, iteration_budget=None, deadli
     return res, resume
 
 
-@one_thread_call
 def check_warm_start(model: RobotModel, warm_start) -> None:
     """``ValueError`` unless ``warm_start`` (a ForwardResult or None) has ``model``'s size.
 
@@ -264,6 +263,7 @@ def check_warm_start(model: RobotModel, warm_start) -> None:
                          'of a model with the same robot layout and element count')
 
 
+@one_thread_call
 def solve_forward(model: RobotModel, pressures, payload_kg=0.0, warm_start=None,
                   check_stability=True, tol=1e-10, max_iter=25, time_budget_s=None,
                   iteration_budget=500, tip_force_n=None) -> ForwardResult:
