@@ -111,14 +111,15 @@ class EnvelopeKKT:
         o = np.lexsort((new[cq], cr))
         ck, cr, cq = ck[o], cr[o], cq[o]
         rptr = np.searchsorted(cr, np.arange(nc + 1))
-        pa, pb = [], []
-        for r in range(nc):
-            ks = np.arange(rptr[r], rptr[r + 1])
-            ii, jj = np.meshgrid(ks, ks, indexing="ij")
-            m = new[cq[ii]] >= new[cq[jj]]
-            pa.append(ii[m])
-            pb.append(jj[m])
-        pa, pb = np.concatenate(pa), np.concatenate(pb)
+        # every pair (i, j) of one row's entries, row by row, i-major (the penalty pairs)
+        length = np.diff(rptr)
+        row = np.repeat(np.arange(nc), length * length)
+        k = np.arange(row.size) - np.repeat(np.cumsum(length * length) - length * length,
+                                            length * length)
+        ii = rptr[row] + k // length[row]
+        jj = rptr[row] + k % length[row]
+        m = new[cq[ii]] >= new[cq[jj]]
+        pa, pb = ii[m], jj[m]
         # envelope: column j holds rows j..last[j] (last non-decreasing: no fill outside)
         lastnz = np.arange(n)
         np.maximum.at(lastnz, ent_b, ent_a)

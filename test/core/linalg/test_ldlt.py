@@ -100,3 +100,25 @@ def test_an_equilibrium_is_factorised_by_ldlt_with_its_inertia():
     f.solve(np.ones(model.N))
     assert isinstance(f.lu, ldlt.EnvelopeLDL)
     assert f.lu.inertia == (model.nq, model.nc) and fw.stable
+
+
+@pytest.mark.parametrize("name,n", [("one_segment", 2), ("two_segment", 6), ("three_segment", 6)])
+def test_the_penalty_pairs_are_every_ordered_pair_of_each_constraint_rows_entries(name, n):
+    """Built vectorised, the pairs are those of the per-row double loop, in its order."""
+    model = RobotModel(load_robot(name), n)
+    p = linsolve.kkt_solver(model).envelope
+    offs = p.ints[:ldlt._NS + 1]
+
+    def sec(i):
+        return p.ints[offs[i]:offs[i + 1]]
+    new, cq, rptr = sec(ldlt._NEW), sec(ldlt._CQ), sec(ldlt._RPTR)
+    pa, pb = [], []
+    for r in range(model.nc):
+        for i in range(rptr[r], rptr[r + 1]):
+            for j in range(rptr[r], rptr[r + 1]):
+                if new[cq[i]] >= new[cq[j]]:
+                    pa.append(i)
+                    pb.append(j)
+    assert len(pa) > model.nc
+    np.testing.assert_array_equal(sec(ldlt._PA), pa)
+    np.testing.assert_array_equal(sec(ldlt._PB), pb)
