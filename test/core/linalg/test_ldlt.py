@@ -102,7 +102,7 @@ def test_an_equilibrium_is_factorised_by_ldlt_with_its_inertia():
     assert f.lu.inertia == (model.nq, model.nc) and fw.stable
 
 
-@pytest.mark.parametrize("name,n", [("one_segment", 2), ("two_segment", 6), ("three_segment", 6)])
+@pytest.mark.parametrize("name,n", [("one_segment", 3), ("two_segment", 6), ("three_segment", 6)])
 def test_the_penalty_pairs_are_every_ordered_pair_of_each_constraint_rows_entries(name, n):
     """Built vectorised, the pairs are those of the per-row double loop, in its order."""
     model = RobotModel(load_robot(name), n)
