@@ -51,8 +51,8 @@ pose, which neither frame follows (the shipped two-segment mismatched robot,
 creep and play compensated: 0.58 mm off 1.5 s after a 10 mm step in the
 azimuthal frame, 0.24-0.35 mm carried once, 0.05-0.11 mm carried and asked
 again at the goal's pressures, :data:`CARRY_AGAIN`; one segment: 1.68 mm of
-overshoot, 0.12 mm).  It assumes the correction held is the static mismatch: with the
-regulators' play or the bellows' creep not compensated, the correction
+overshoot, 0.12 mm).  It assumes the correction held is the static mismatch:
+with the regulators' play or the bellows' creep not compensated, the correction
 holds their offsets too, which the transfer then carries the wrong way
 (for a lab that compensates both, ``regulator_play_kpa`` and
 ``creep_fraction``).
@@ -525,8 +525,8 @@ class IntegralFeedback:
         for _ in range(CARRY_AGAIN):   # the goal's pressures with the carried correction
             if got is None:
                 return
-            zk = None if z is None else rotation_from_vector(got[1]) @ (goal_z / np.linalg.norm(
-                goal_z))
+            zk = (None if z is None
+                  else rotation_from_vector(got[1]) @ (goal_z / np.linalg.norm(goal_z)))
             new = solve_inverse(tr.model, goal + got[0], zk, payload_kg=load.payload_kg,
                                 tip_force_n=load.force_n, warm_start=new,
                                 time_budget_s=CARRY_BUDGET_S)

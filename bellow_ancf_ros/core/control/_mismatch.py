@@ -187,8 +187,10 @@ class MismatchTransfer:
         correction and asks again (a fixed point; the shipped mismatched
         robots' 10 mm step across the bend: the first answer leaves 26 % (one
         segment) and 14 % (two) of the change, two more 2 % and 3 %).  None
-        when the solve fails.
+        when the solve fails; ``ValueError`` before a transfer.
         """
+        if self._fit is None:
+            raise ValueError('MismatchTransfer.again before a transfer: nothing was fitted')
         at_new = self._offset(self._fit, new)
         if at_new is None:
             self.refused += 1

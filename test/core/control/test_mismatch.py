@@ -103,6 +103,8 @@ def test_a_robot_that_is_its_model_keeps_a_zero_correction_and_a_failed_solve_re
     assert np.all(c == 0.0) and r is None
     bad = dataclasses.replace(fw, pressures_pa=np.full(one.A, np.nan))
     assert tr.transfer(fw, np.ones(3) * 1e-3, None, bad) is None and tr.refused == 1
+    with pytest.raises(ValueError, match='before a transfer'):
+        MismatchTransfer(one).again(fw)
 
 
 def test_a_fit_that_leaves_the_robot_files_ranges_is_refused(one):
