@@ -30,7 +30,7 @@ import math
 
 from ..core.control import JUMP_M   # (a target this far from the one before is a jump [m])
 
-__all__ = ['HOLD_S', 'JUMP_M', 'TargetSources', 'publisher_names']
+__all__ = ['HOLD_S', 'TargetSources', 'publisher_names']
 
 #: Targets are held until no turn of two streams has come for this long [s].
 HOLD_S = 0.5

@@ -512,25 +512,26 @@ class IntegralFeedback:
             return
         _, start, goal, goal_z = move
         start, goal = np.asarray(start, float), np.asarray(goal, float)
-        z = None
-        if self.use_orientation and goal_z is not None:
-            z = rotation_from_vector(r_old) @ (goal_z / np.linalg.norm(goal_z))
+        z_goal = (goal_z / np.linalg.norm(goal_z)
+                  if self.use_orientation and goal_z is not None else None)
         load = held.forward.load
-        new = solve_inverse(tr.model, goal + c_old, z,
-                            payload_kg=load.payload_kg, tip_force_n=load.force_n,
-                            warm_start=held, time_budget_s=CARRY_BUDGET_S)
-        if new.forward is None or not new.forward.success:
+
+        def solve_goal(c, r, warm):   # the model's answer for the goal corrected by (c, r)
+            z = None if z_goal is None else rotation_from_vector(r) @ z_goal
+            res = solve_inverse(tr.model, goal + c, z, payload_kg=load.payload_kg,
+                                tip_force_n=load.force_n, warm_start=warm,
+                                time_budget_s=CARRY_BUDGET_S)
+            return res if res.forward is not None and res.forward.success else None
+
+        new = solve_goal(c_old, r_old, held)
+        if new is None:
             return
         got = tr.transfer(held.forward, c_old, r_old, new.forward)
         for _ in range(CARRY_AGAIN):   # the goal's pressures with the carried correction
             if got is None:
                 return
-            zk = (None if z is None
-                  else rotation_from_vector(got[1]) @ (goal_z / np.linalg.norm(goal_z)))
-            new = solve_inverse(tr.model, goal + got[0], zk, payload_kg=load.payload_kg,
-                                tip_force_n=load.force_n, warm_start=new,
-                                time_budget_s=CARRY_BUDGET_S)
-            if new.forward is None or not new.forward.success:
+            new = solve_goal(got[0], got[1], new)
+            if new is None:
                 break   # (the answer so far stands)
             got = tr.again(new.forward)
         if got is None:
