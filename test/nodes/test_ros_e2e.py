@@ -27,6 +27,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
@@ -135,10 +136,14 @@ class Client:
         self.lock = threading.Lock()
         self.msgs = {}
         self.subs = {}
+        # every message, however long a busy machine keeps this process from taking them (the
+        # nodes' depth of 5 lost a lead-in's first targets to a client spun late)
+        deep = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                          history=HistoryPolicy.KEEP_LAST, depth=1000)
         for topic, typ in (('pressure_command', Float64MultiArray),
                            ('commanded_pose', PoseStamped),
                            ('predicted_pose', PoseStamped), ('target_pose', PoseStamped)):
-            self._record(typ, topic, command_qos())
+            self._record(typ, topic, deep)
         self._record(DiagnosticArray, '/diagnostics', command_qos())
         self.target_pub = self.node.create_publisher(PoseStamped, 'target_pose', command_qos())
         self.closed = threading.Event()
@@ -497,6 +502,8 @@ def test_two_segment_launch_leads_in_from_the_robot_at_rest(tmp_path, monkeypatc
     procs = [traj]
     try:
         wait_for(lambda: 'publishing' in traj.log(), STARTUP_TIMEOUT, 'the trajectory publisher')
+        wait_for(lambda: client.subs['target_pose'].get_publisher_count() >= 1, STARTUP_TIMEOUT,
+                 'the trajectory publisher matched (its first target recorded)')
         procs += [NodeProcess(m, env, tmp_path, robot).start()
                   for m in ('inverse_kinetostatic_node', 'forward_kinetostatic_node')]
         # the lead-in (20 targets at 10 Hz) and the path's start, and the first predictions
