@@ -502,8 +502,14 @@ def test_two_segment_launch_leads_in_from_the_robot_at_rest(tmp_path, monkeypatc
     procs = [traj]
     try:
         wait_for(lambda: 'publishing' in traj.log(), STARTUP_TIMEOUT, 'the trajectory publisher')
-        wait_for(lambda: client.subs['target_pose'].get_publisher_count() >= 1, STARTUP_TIMEOUT,
-                 'the trajectory publisher matched (its first target recorded)')
+        # both ways matched before the controller starts (its first target recorded): the
+        # client sees the publisher by name (its own target publisher counts in
+        # get_publisher_count()), and the publisher's heartbeat reaches the client
+        wait_for(lambda: any(i.node_name == 'trajectory_publisher' for i in
+                             client.node.get_publishers_info_by_topic('/target_pose'))
+                 and any(s.name.startswith('trajectory_publisher')
+                         for _, m in client.since('/diagnostics', 0) for s in m.status),
+                 STARTUP_TIMEOUT, 'the trajectory publisher and the client matched')
         procs += [NodeProcess(m, env, tmp_path, robot).start()
                   for m in ('inverse_kinetostatic_node', 'forward_kinetostatic_node')]
         # the lead-in (20 targets at 10 Hz) and the path's start, and the first predictions

@@ -325,6 +325,11 @@ from bellow_ancf_ros.nodes import ros_util
 class Probe(Node):
     def __init__(self):
         super().__init__('hanging_teardown_probe')
+        # 'UP' once spinning: a SIGINT in the constructor rightly just returns (nothing to vent)
+        self._up = self.create_timer(0.01, self._say_up)
+
+    def _say_up(self):
+        self._up.cancel()
         print('UP', flush=True)
 
     def destroy_node(self):
