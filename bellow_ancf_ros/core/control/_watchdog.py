@@ -17,7 +17,15 @@ trips when that amplitude
   0.8 of the first: the free swing after a step decays, a limit cycle
   does not), or
 * grows by ``growth`` (1.4) from window to window ``growing_windows`` times
-  in a row (3) and is above ``floor_m`` (0.3 mm).
+  in a row (3) and is above ``floor_m`` (0.3 mm), counting only a swing
+  that peaks inside the band (an amplitude at least its neighbours'; the
+  band's lowest frequency against one more step below it).  A loop that
+  rings up does so at one frequency near the mode, a peak; what is left
+  in a window of a slow error is largest at the band's low end (a circle
+  of 2 s, noise-free: its largest peak in the band is 0.48 of that).  A
+  circle at 10x the paper's speed read there as a swing growing while it
+  spun up (0.40-0.63 mm "growing 3 times in a row" at 0.75 times a
+  2.8-3.0 Hz mode, on three two-segment robots of the family).
 
 A tracked trajectory's own error is slow (a circle of 2 s and more is below
 the band of every shipped robot's first mode), so it does not count.  The
@@ -103,28 +111,37 @@ class OscillationWatchdog:
         self._samples = []
         self._start = None
         self.amplitudes.clear()
+        self._peaks = deque(maxlen=8)   # the largest peak's amplitude per window (_fit)
         self._recent = deque(maxlen=3)
 
     def _fit(self, t: np.ndarray, e: np.ndarray, band=BAND):
-        """Largest sinusoid amplitude over the band, and its frequency, of one window.
+        """Largest sinusoid amplitude over the band, its frequency, and the largest peak's.
 
-        The trend's columns are scaled to the window (conditioning), and no
-        amplitude counts beyond the error's own largest deviation: a fit on
-        samples bunched in a corner of the window cannot invent a swing.
+        Returns ``(amplitude, frequency, peak amplitude)``; a peak is an
+        amplitude at least its neighbours' on the band, the band's lowest
+        frequency compared with one more step below it (0 when there is
+        none: the window's content rises below the band).  The trend's
+        columns are scaled to the window (conditioning), and no amplitude
+        counts beyond the error's own largest deviation: a fit on samples
+        bunched in a corner of the window cannot invent a swing.
         """
         t = t - t[0]
         u = t / max(t[-1], 1e-12)
         base = np.column_stack([np.ones_like(u), u, u * u])
         cap = float(np.max(np.linalg.norm(e - e.mean(axis=0), axis=1)))
-        best = (0.0, self.frequency_hz)
-        for factor in band:
+        factors = np.concatenate([[2 * band[0] - band[1]], band])   # one step below the band
+        amps = np.empty(len(factors))
+        for i, factor in enumerate(factors):
             w = 2 * math.pi * factor * self.frequency_hz
             X = np.column_stack([base, np.cos(w * t), np.sin(w * t)])
             coef, *_ = np.linalg.lstsq(X, e, rcond=1e-8)
-            amp = min(float(np.sqrt((coef[3:] ** 2).sum())), cap)   # all axes together
-            if amp > best[0]:
-                best = (amp, factor * self.frequency_hz)
-        return best
+            amps[i] = min(float(np.sqrt((coef[3:] ** 2).sum())), cap)   # all axes together
+        inner = amps[1:]
+        right = np.append(inner[1:], -np.inf)   # (the band's top: against its left only)
+        peaks = inner[(inner >= amps[:-1]) & (inner >= right)]
+        k = int(np.argmax(inner))
+        return (float(inner[k]), float(band[k] * self.frequency_hz),
+                float(peaks.max()) if peaks.size else 0.0)
 
     def feed(self, t: float, error) -> WatchdogTrip | None:
         """One measured error (3-vector [m]) at time ``t``; a :class:`WatchdogTrip` on a trip."""
@@ -142,8 +159,9 @@ class OscillationWatchdog:
         if len(ts) < 8 or ts[-1] - ts[0] < 0.75 * self.window_s or gaps.max() > 0.25 * (
                 self.window_s):
             return None
-        amp, freq = self._fit(ts, es)
+        amp, freq, peak = self._fit(ts, es)
         self.amplitudes.append((freq, amp))
+        self._peaks.append(peak)
         a = [x[1] for x in self.amplitudes]
         reason = None
         n = self.sustained_windows
@@ -151,8 +169,9 @@ class OscillationWatchdog:
                 and a[-1] >= SUSTAINED_RATIO * a[-n]):   # not a free swing dying out
             reason = f'above {self.sustained_m * 1e3:g} mm for {2 * n} periods'
         g = self.growing_windows
-        if len(a) > g and a[-1] > self.floor_m and all(
-                a[-i] > self.growth * a[-i - 1] for i in range(1, g + 1)):
+        pk = list(self._peaks)
+        if len(pk) > g and pk[-1] > self.floor_m and all(
+                pk[-i] > self.growth * pk[-i - 1] for i in range(1, g + 1)):
             reason = f'growing {g} times in a row'
         if reason is None:
             return None
@@ -163,4 +182,5 @@ class OscillationWatchdog:
         self.trips += 1
         self.last_trip = WatchdogTrip(t, freq, amp, reason)
         self.amplitudes.clear()
+        self._peaks.clear()
         return self.last_trip

@@ -57,6 +57,35 @@ def test_tracking_errors_and_noise_do_not_trip(period):
     assert _run(OscillationWatchdog(F), lambda t: np.zeros(3), 40.0, seed=3) is None
 
 
+@pytest.mark.parametrize('f_mode', [2.2, 2.9, 3.5])
+def test_a_circles_error_growing_as_it_spins_up_does_not_trip(f_mode):
+    """A 10x circle's error (2 s) grows as its spin-up ends: slow, however it grows.
+
+    Over a window of a two-segment robot (two periods of its mode) the
+    circle turns by a third of its period; the error's growth over the
+    spin-up (0.1 mm held, then up to 3 mm in 1 s) is no swing at the mode.
+    """
+    def circle(t):
+        w = 2 * math.pi / 2.0
+        amp = 0.1e-3 + 2.9e-3 * min(max(t - 3.0, 0.0), 1.0) ** 2
+        return amp * np.array([math.cos(w * t), math.sin(w * t), 0.0])
+    for seed in range(3):
+        assert _run(OscillationWatchdog(f_mode), circle, 12.0, seed=seed) is None
+
+
+def test_a_swing_peaks_in_the_band_a_slow_errors_leak_does_not():
+    """The window's fit: a swing near the mode is a peak; a slow error rises below the band."""
+    wd = OscillationWatchdog(2.9)
+    t = np.arange(0.0, wd.window_s, 1 / RATE)
+    swing = 0.5e-3 * np.sin(2 * math.pi * 1.1 * 2.9 * t)
+    amp, freq, peak = wd._fit(t, np.column_stack([swing, 0 * t, 0 * t]))
+    assert peak == amp == pytest.approx(0.5e-3, rel=0.05) and freq == pytest.approx(3.19)
+    slow = 3e-3 * np.column_stack([np.cos(math.pi * (t + 0.3)), np.sin(math.pi * (t + 0.3)),
+                                   0 * t])   # a circle of 2 s, a third of it in the window
+    amp, freq, peak = wd._fit(t, slow)
+    assert freq == pytest.approx(0.75 * 2.9) and amp > 1e-5 and peak < 0.5 * amp   # 0.48
+
+
 def test_the_loop_cuts_its_gain_and_holds_on_a_trip():
     fb = IntegralFeedback(FeedbackSettings(gain_per_s=2.5, correction_frame='base'))
     fb.watch(F)
