@@ -233,5 +233,11 @@ def test_a_fit_that_ends_worse_than_the_nominal_file_is_refused():
                                    position_noise_m=draw.effects.position_noise_m,
                                    angle_noise_rad=draw.effects.angle_noise_rad, seed=85)
     with pytest.raises(CalibrationError, match=r'farther from the recording than the nominal '
-                       r'robot file \(position RMSE 9\.9\d\d -> '):
+                       r'robot file \(position RMSE 9\.9\d\d -> .*a mass: fit mass_scale too'):
         cal.calibrate(base, rec)
+    # what the refusal says to do: with mass_scale, the robot is described, its mode too
+    got = cal.calibrate(base, rec, pk.default_keys(base.to_dict()) + [pk.MASS_SCALE])
+    assert got.rmse_after_mm < 0.2 and got.values[-1] > 1.1   # heavier (1.22)
+    model = RobotModel(got.config)
+    mode = natural_modes(solve_forward(model, np.zeros(model.A)), 1).first.frequency_hz
+    assert mode == pytest.approx(draw.first_mode_hz, rel=0.01)
