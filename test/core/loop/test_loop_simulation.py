@@ -152,6 +152,33 @@ def test_two_segments_carrying_50_g_on_the_automatic_gain_hold_the_target():
     assert rec.out_of_limits == 0
 
 
+def test_a_fixed_gain_that_rings_the_loop_up_trips_the_watchdog_and_the_cut_settles_it():
+    """8 /s on the two-segment robot (its margin allows about 5.5): the loop rings up at its mode.
+
+    The watchdog trips within seven periods of the 2.6 Hz mode (three
+    windows of two periods, after the first move's own swing), the gain is
+    halved on every trip, and the robot settles at the target.
+    """
+    from bellow_ancf_ros.core.control import ModeCheck
+    model = RobotModel(load_robot('two_segment'))
+    robot = SimulatedRobot('two_segment_mismatched', seed=1)
+    sim = LoopSimulation(model, robot, FeedbackSettings(gain_per_s=8.0), preview_s=0.0,
+                         physics_rate_hz=robot.auto_physics_rate_hz,
+                         mode_check=ModeCheck(8.0, 0.06, 0.05))
+    trips = []
+    rec = None
+    target = _held(model, [30e3, 0, 0, 0, 0, 0])
+    while robot.time_s < 14.0:
+        rec = sim.run(0.5, target, record=rec)
+        if sim.feedback.watchdog.trips > len(trips):
+            trips.append(sim.feedback.watchdog.last_trip.time_s)
+    wd = sim.feedback.watchdog
+    assert trips and trips[0] <= 3.0 and 'oscillation at' in wd.last_trip.message
+    assert sim.feedback.gain_per_s <= 4.0
+    s = rec.summary(start_s=10.0)   # (2.6 and 6.1 s, then 0.17 mm RMSE, 0.59 mm at most)
+    assert s['rmse_mm'] <= 0.3 and s['max_mm'] <= 1.0 and rec.out_of_limits == 0, (s, trips)
+
+
 def _ten_x(name, payload_kg):
     """Mismatched realistic robot, closed loop on the automatic gain, 2 s circle.
 
