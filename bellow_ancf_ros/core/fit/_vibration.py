@@ -23,6 +23,15 @@ from the motion's start.  The window ends where that first fit's envelope has
 sunk to twice its RMS residual (the noise, on a real recording; a long tail of
 noise alone can pull the nonlinear fit off), after at least three periods, or
 at the recording's end.
+
+A motion capture's outliers (a marker swapped for a reflection: poses
+centimetres off for one sample) are left out of every fit: a pose farther
+from the median of the seven around it than :data:`OUTLIER_FACTOR` times
+their own median distance from it (or the recording's typical distance,
+where they are still).
+Two of them (15 and 25 mm) in a 3 mm ring-down of a two-segment robot of
+the family turned its principal direction and the fit read 11.9 Hz for its
+1.6 Hz mode.
 """
 
 from __future__ import annotations
@@ -43,6 +52,23 @@ MOTION_SHARE = 0.1
 FADE_NOISE_FACTOR = 2.0
 #: ... but holds at least this many periods after its start.
 MIN_PERIODS = 3.0
+#: A pose farther than this many times its neighbours' spread from their median is an outlier.
+OUTLIER_FACTOR = 8.0
+
+
+def _without_outliers(t: np.ndarray, x: np.ndarray):
+    """``(t, x)`` without the motion capture's outliers (module docstring)."""
+    n = len(t)
+    if n < 7:
+        return t, x
+    idx = np.clip(np.arange(n)[:, None] + np.arange(-3, 4)[None, :], 0, n - 1)
+    near = x[idx]                                              # (n, 7, axes)
+    med = np.median(near, axis=1)
+    r = np.linalg.norm(x - med, axis=1)
+    spread = np.median(np.linalg.norm(near - med[:, None, :], axis=2), axis=1)
+    scale = np.maximum(spread, np.median(r))
+    keep = ~(r > OUTLIER_FACTOR * scale)
+    return t[keep], x[keep]
 
 
 @dataclass
@@ -90,10 +116,10 @@ def fit_free_vibration(times_s, positions_m, t_start_s: float | None = None,
     if t_end_s is not None:
         keep &= t <= t_end_s
     t, x = t[keep], x[keep]
+    order = np.argsort(t)
+    t, x = _without_outliers(t[order], x[order])
     if len(t) < 20:
         raise ValueError(f"only {len(t)} samples in the window; need at least 20")
-    order = np.argsort(t)
-    t, x = t[order], x[order]
     t_first = float(t[0])
     t = t - t_first
     xc = x - x.mean(axis=0)
