@@ -14,8 +14,10 @@ grows monotonically with it; ``scipy.optimize.brentq``).
 Which part of a recording to fit (:func:`ringdown_window`): the motion starts
 where the tip (a running median of five poses) has left its first recorded
 position (the median of the first five) by a tenth of its largest excursion
-from it; the fit starts half a period of the strongest oscillation
-later.  A release (or a step) starts at rest at a turning point of the first
+from it, for the last time before that excursion (a noisy motion capture's
+poses before the release crossed a tenth of a small push's excursion, and
+the window began with the still push); the fit starts half a period of the
+strongest oscillation later.  A release (or a step) starts at rest at a turning point of the first
 mode, so this is about its first peak after the release, by which time the
 faster modes, more damped (Kelvin-Voigt damping grows with the frequency),
 have died out; the strongest oscillation's frequency comes from a first fit
@@ -127,10 +129,12 @@ def fit_free_vibration(times_s, positions_m, t_start_s: float | None = None,
     d = vt[0]
     d = d * (1.0 if d[np.argmax(np.abs(d))] >= 0 else -1.0)
     y = x @ d
-    # start: the spectrum's peak (uniform resampling), the envelope's decay
+    # start: the spectrum's peak (uniform resampling, the straight line through the ends taken
+    # out: a creeping robot drifts while it rings), the envelope's decay
     n = len(t)
     tu = np.linspace(0.0, t[-1], n)
     yu = np.interp(tu, t, y - y.mean())
+    yu = yu - np.polyval(np.polyfit(tu, yu, 1), tu)
     spec = np.abs(np.fft.rfft(yu * np.hanning(n)))
     freqs = np.fft.rfftfreq(n, tu[1] - tu[0])
     k = 1 + int(np.argmax(spec[1:]))
@@ -250,7 +254,11 @@ def ringdown_window(times_s, positions_m, t_end_s: float | None = None) -> Ringd
     dist = np.linalg.norm(xs - np.median(x[:5], axis=0), axis=1)
     if not dist.max() > 0:
         raise ValueError("the tip does not move")
-    t_motion = float(t[np.argmax(dist > MOTION_SHARE * dist.max())])
+    # the motion that reaches the largest excursion starts after the tip was last within a
+    # tenth of it of its first position (a noisy pose before it crossed a tenth and fell back)
+    peak = int(np.argmax(dist))
+    still = np.flatnonzero(dist[:peak + 1] <= MOTION_SHARE * dist[peak])
+    t_motion = float(t[still[-1] + 1 if still.size else 0])
     first = fit_free_vibration(t, x, t_motion, t_end_s)
     period = 1.0 / max(first.damped_frequency_hz, 1e-9)
     t_start = t_motion + 0.5 * period

@@ -65,3 +65,25 @@ def test_a_motion_captures_outliers_are_left_out_of_the_fit(vent, rate_hz):
     assert fit.frequency_hz == pytest.approx(clean.frequency_hz, rel=0.02)
     assert fit.damping_ratio == pytest.approx(0.1, rel=0.15)
     assert fit.n_samples == len(t) - 2   # only the two left out
+
+
+def test_the_window_starts_at_the_release_not_at_a_noisy_pose_before_it():
+    """Poses off by a tenth of a small push before its release do not start the motion.
+
+    A 3 mm push held for 0.5 s, released into a ring at 12 Hz (damping
+    ratio 0.08), three poses 0.8 mm off during the hold: the window starts
+    at the release and the fit finds the ring.
+    """
+    from bellow_ancf_ros.core.fit import ringdown_window
+    t = np.arange(0.0, 1.3, 1.0 / 200.0)
+    w, zeta = 2 * math.pi * 12.0, 0.08
+    s = np.clip(t - 0.5, 0.0, None)
+    x = np.where(t < 0.5, 3e-3, 3e-3 * np.exp(-zeta * w * s) * np.cos(w * math.sqrt(1 - zeta ** 2)
+                                                                           * s))
+    x[40:43] += 0.8e-3
+    pos = np.stack([x, 0 * t, 0.09 + 0 * t], axis=1)
+    window = ringdown_window(t, pos)
+    assert 0.5 <= window.t_motion_s < 0.52
+    fit = fit_free_vibration(t, pos, window.t_start_s, window.t_end_s)
+    assert fit.frequency_hz == pytest.approx(12.0, rel=1e-3)
+    assert fit.damping_ratio == pytest.approx(zeta, rel=1e-2)
