@@ -78,8 +78,8 @@ def test_the_window_starts_at_the_release_not_at_a_noisy_pose_before_it():
     t = np.arange(0.0, 1.3, 1.0 / 200.0)
     w, zeta = 2 * math.pi * 12.0, 0.08
     s = np.clip(t - 0.5, 0.0, None)
-    x = np.where(t < 0.5, 3e-3, 3e-3 * np.exp(-zeta * w * s) * np.cos(w * math.sqrt(1 - zeta ** 2)
-                                                                           * s))
+    ring = 3e-3 * np.exp(-zeta * w * s) * np.cos(w * math.sqrt(1 - zeta ** 2) * s)
+    x = np.where(t < 0.5, 3e-3, ring)
     x[40:43] += 0.8e-3
     pos = np.stack([x, 0 * t, 0.09 + 0 * t], axis=1)
     window = ringdown_window(t, pos)
