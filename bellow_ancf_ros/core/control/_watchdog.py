@@ -17,15 +17,19 @@ trips when that amplitude
   0.8 of the first: the free swing after a step decays, a limit cycle
   does not), or
 * grows by ``growth`` (1.4) from window to window ``growing_windows`` times
-  in a row (3) and is above ``floor_m`` (0.3 mm), counting only a swing
-  that peaks inside the band (an amplitude at least its neighbours'; the
-  band's lowest frequency against one more step below it).  A loop that
-  rings up does so at one frequency near the mode, a peak; what is left
+  in a row (3) and is above ``floor_m`` (0.3 mm), both as the window's
+  largest amplitude and as its largest peak inside the band (an amplitude
+  at least its neighbours'; the band's lowest frequency against one more
+  step below it).  A loop that rings up does so at one frequency near the
+  mode, a peak that soon is the window's largest amplitude; what is left
   in a window of a slow error is largest at the band's low end (a circle
-  of 2 s, noise-free: its largest peak in the band is 0.48 of that).  A
-  circle at 10x the paper's speed read there as a swing growing while it
-  spun up (0.40-0.63 mm "growing 3 times in a row" at 0.75 times a
-  2.8-3.0 Hz mode, on three two-segment robots of the family).
+  of 2 s, noise-free: its largest peak in the band is 0.48 of that).  The
+  largest amplitude alone read a circle at 10x the paper's speed as a
+  swing growing while it spun up (0.40-0.63 mm "growing 3 times in a row"
+  at 0.75 times a 2.8-3.0 Hz mode, three two-segment robots of the
+  family); the peak alone tripped on a robot whose 0.5 mm swing at its
+  mode, driven by the circle, grew under that leak and stayed after the
+  gain was cut (one two-segment robot of the family).
 
 A tracked trajectory's own error is slow (a circle of 2 s and more is below
 the band of every shipped robot's first mode), so it does not count.  The
@@ -171,7 +175,8 @@ class OscillationWatchdog:
         g = self.growing_windows
         pk = list(self._peaks)
         if len(pk) > g and pk[-1] > self.floor_m and all(
-                pk[-i] > self.growth * pk[-i - 1] for i in range(1, g + 1)):
+                pk[-i] > self.growth * pk[-i - 1] and a[-i] > self.growth * a[-i - 1]
+                for i in range(1, g + 1)):
             reason = f'growing {g} times in a row'
         if reason is None:
             return None
