@@ -73,6 +73,21 @@ def test_a_circles_error_growing_as_it_spins_up_does_not_trip(f_mode):
         assert _run(OscillationWatchdog(f_mode), circle, 12.0, seed=seed) is None
 
 
+@pytest.mark.parametrize('slow_m', [0.0, 3e-3, 10e-3])
+def test_a_swing_growing_under_a_circles_error_trips_as_without_it(slow_m):
+    """A ring-up at 1.1 times the mode (1.5x per window) beside a 10x circle's error of 0-10 mm."""
+    f_mode = 2.9
+    window = 2.0 / f_mode
+
+    def signal(t):
+        w = 2 * math.pi / 2.0
+        swing = 0.1e-3 * 1.5 ** (t / window) * math.sin(2 * math.pi * 1.1 * f_mode * t)
+        return slow_m * np.array([math.cos(w * t), math.sin(w * t), 0.0]) + [swing, 0.0, 0.0]
+    trip = _run(OscillationWatchdog(f_mode), signal, 20.0)
+    assert trip is not None and trip.time_s < 8.5 * window   # (5.53 s for each)
+    assert trip.frequency_hz == pytest.approx(1.1 * f_mode, rel=0.1)
+
+
 def test_a_swing_peaks_in_the_band_a_slow_errors_leak_does_not():
     """The window's fit: a swing near the mode is a peak; a slow error rises below the band."""
     wd = OscillationWatchdog(2.9)
