@@ -17,23 +17,23 @@ position (the median of the first five) by a tenth of its largest excursion
 from it, for the last time before that excursion (a noisy motion capture's
 poses before the release crossed a tenth of a small push's excursion, and
 the window began with the still push); the fit starts half a period of the
-strongest oscillation later.  A release (or a step) starts at rest at a turning point of the first
-mode, so this is about its first peak after the release, by which time the
-faster modes, more damped (Kelvin-Voigt damping grows with the frequency),
-have died out; the strongest oscillation's frequency comes from a first fit
-from the motion's start.  The window ends where that first fit's envelope has
-sunk to twice its RMS residual (the noise, on a real recording; a long tail of
-noise alone can pull the nonlinear fit off), after at least three periods, or
-at the recording's end.
+strongest oscillation later.  A release (or a step) starts at rest at a
+turning point of the first mode, so this is about its first peak after the
+release, by which time the faster modes, more damped (Kelvin-Voigt damping
+grows with the frequency), have died out; the strongest oscillation's
+frequency comes from a first fit from the motion's start.  The window ends
+where that first fit's envelope has sunk to twice its RMS residual (the
+noise, on a real recording; a long tail of noise alone can pull the
+nonlinear fit off), after at least three periods, or at the recording's
+end.
 
 A motion capture's outliers (a marker swapped for a reflection: poses
 centimetres off for one sample) are left out of every fit: a pose farther
 from the median of the seven around it than :data:`OUTLIER_FACTOR` times
 their own median distance from it (or the recording's typical distance,
-where they are still).
-Two of them (15 and 25 mm) in a 3 mm ring-down of a two-segment robot of
-the family turned its principal direction and the fit read 11.9 Hz for its
-1.6 Hz mode.
+where they are still).  Two of them (15 and 25 mm) in a 3 mm ring-down of a
+two-segment robot of the family turned its principal direction, and the fit
+read 11.9 Hz for its 1.6 Hz mode.
 """
 
 from __future__ import annotations
