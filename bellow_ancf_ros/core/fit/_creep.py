@@ -74,6 +74,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
+from ._recordings import samples_around
+
 __all__ = ['CreepFit', 'fit_creep', 'pressure_step_time']
 
 #: The pose before the step: the median of this long a stretch before it [s] ...
@@ -384,8 +386,7 @@ def fit_creep(times_s, positions_m, t_step_s: float, t_end_s: float | None = Non
     # outliers: far from the median of the five poses around them
     after = t >= t_step - PRE_STEP_S
     t, x = t[after], x[after]
-    idx = np.clip(np.arange(len(t))[:, None] + np.arange(-2, 3)[None, :], 0, len(t) - 1)
-    off = np.linalg.norm(x - np.median(x[idx], axis=1), axis=1)
+    off = np.linalg.norm(x - np.median(samples_around(x, 2), axis=1), axis=1)
     good = off <= max(OUTLIER_NOISE_FACTOR * noise, OUTLIER_MOTION_SHARE * move)
     n_out = int(np.count_nonzero(~good))
     t, y = t[good], (x[good] - y0) @ d

@@ -232,11 +232,20 @@ def write_csv(path, recording: Recording) -> None:
 OUTLIER_M = 0.005
 
 
+def samples_around(x: np.ndarray, half_width: int) -> np.ndarray:
+    """The ``2 half_width + 1`` samples (rows of ``x``) around each, the ends repeated.
+
+    Shape ``(len(x), 2 half_width + 1) + x.shape[1:]``; its median over axis 1
+    is the running median the pose-stream fits use against outliers.
+    """
+    n = len(x)
+    offsets = np.arange(-half_width, half_width + 1)
+    return x[np.clip(np.arange(n)[:, None] + offsets[None, :], 0, n - 1)]
+
+
 def _not_spikes(pos: np.ndarray) -> np.ndarray:
     """True for the poses within :data:`OUTLIER_M` of the median of the five around them."""
-    n = len(pos)
-    idx = np.clip(np.arange(n)[:, None] + np.arange(-2, 3)[None, :], 0, n - 1)
-    med = np.median(pos[idx], axis=1)
+    med = np.median(samples_around(pos, 2), axis=1)
     return np.linalg.norm(pos - med, axis=1) <= OUTLIER_M
 
 

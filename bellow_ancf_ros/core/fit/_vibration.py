@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import brentq, least_squares
 
 from ..dynamics import reduced_system
+from ._recordings import samples_around
 
 __all__ = ["FreeVibrationFit", "DampingIdentification", "RingdownWindow", "fit_free_vibration",
            "identify_damping", "ringdown_window"]
@@ -60,11 +61,9 @@ OUTLIER_FACTOR = 8.0
 
 def _without_outliers(t: np.ndarray, x: np.ndarray):
     """``(t, x)`` without the motion capture's outliers (module docstring)."""
-    n = len(t)
-    if n < 7:
+    if len(t) < 7:
         return t, x
-    idx = np.clip(np.arange(n)[:, None] + np.arange(-3, 4)[None, :], 0, n - 1)
-    near = x[idx]                                              # (n, 7, axes)
+    near = samples_around(x, 3)                                # (n, 7, axes)
     med = np.median(near, axis=1)
     r = np.linalg.norm(x - med, axis=1)
     spread = np.median(np.linalg.norm(near - med[:, None, :], axis=2), axis=1)
@@ -249,8 +248,7 @@ def ringdown_window(times_s, positions_m, t_end_s: float | None = None) -> Ringd
     if len(t) < 20:
         raise ValueError(f"only {len(t)} samples; need at least 20")
     # a running median of five poses: single noisy poses do not start the motion
-    idx = np.clip(np.arange(len(t))[:, None] + np.arange(-2, 3)[None, :], 0, len(t) - 1)
-    xs = np.median(x[idx], axis=1)
+    xs = np.median(samples_around(x, 2), axis=1)
     dist = np.linalg.norm(xs - np.median(x[:5], axis=0), axis=1)
     if not dist.max() > 0:
         raise ValueError("the tip does not move")
