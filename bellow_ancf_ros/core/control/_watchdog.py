@@ -87,6 +87,7 @@ class OscillationWatchdog:
         self.growth, self.growing_windows = float(growth), int(growing_windows)
         self.floor_m = float(floor_m)
         self.amplitudes: deque = deque(maxlen=8)   # (frequency, amplitude) per window
+        self._peaks: deque = deque(maxlen=8)       # the largest peak's amplitude per window
         self._samples: list = []
         self._start: float | None = None
         self.trips = 0
@@ -115,7 +116,7 @@ class OscillationWatchdog:
         self._samples = []
         self._start = None
         self.amplitudes.clear()
-        self._peaks = deque(maxlen=8)   # the largest peak's amplitude per window (_fit)
+        self._peaks.clear()
         self._recent = deque(maxlen=3)
 
     def _fit(self, t: np.ndarray, e: np.ndarray, band=BAND):

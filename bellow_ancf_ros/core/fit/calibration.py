@@ -319,12 +319,12 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
     res = _result(cal, prob, v, sol, before, nfev, time.perf_counter() - start)
     if (res.rmse_after_mm > WORSE_THAN_NOMINAL * res.rmse_before_mm
             and res.rmse_after_deg > WORSE_THAN_NOMINAL * res.rmse_before_deg):
-        mass = '' if pk.MASS_SCALE in keys else f'fit {pk.MASS_SCALE} too; '
+        mass = '' if pk.MASS_SCALE in keys else f'a mass: fit {pk.MASS_SCALE} too; '
         raise CalibrationError(
             f'the fit ended farther from the recording than the nominal robot file (position '
             f'RMSE {res.rmse_before_mm:.3f} -> {res.rmse_after_mm:.3f} mm, z-axis '
             f'{res.rmse_before_deg:.3f} -> {res.rmse_after_deg:.3f} deg): the robot differs in '
-            f'what the fitted keys {keys} cannot say (a mass: {mass}a length: fit its key)')
+            f'what the fitted keys {keys} cannot say ({mass}a length: fit its key)')
     return res
 
 
