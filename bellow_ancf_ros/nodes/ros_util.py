@@ -631,10 +631,21 @@ def request_stop(exit_status: int = 0) -> None:
     _STOP.set()
 
 
-def run_node(node, before_destroy=None) -> None:
+#: What :func:`run_node` leaves alive until the process's ``os._exit``: the executor
+#: (see ``keep_until_exit``).
+_KEPT_UNTIL_EXIT: list = []
+
+
+def run_node(node, before_destroy=None, keep_until_exit: bool = False) -> None:
     """Spin ``node`` until Ctrl-C/SIGTERM or context shutdown, then clean up.
 
     ``before_destroy(node)`` runs while the context is still valid (vent).
+    ``keep_until_exit``: the caller ends the process with ``os._exit`` next,
+    so the executor is kept referenced rather than freed as this function
+    returns: freeing the EventsExecutor runs rclpy's QoS event handlers'
+    ``__exit__``, which hung a simulated robot's process after its vent,
+    holding the GIL, until the exit deadline killed it (exit status 1, one
+    main-job test in four fresh-clone runs).
     From the first signal on, further SIGINT/SIGTERM are counted, not raised:
     ``ros2 launch`` and a terminal may both deliver SIGINT, and a second one
     must not interrupt the vent or its acknowledgement wait (which is bounded).
@@ -663,6 +674,8 @@ def run_node(node, before_destroy=None) -> None:
             executor.remove_node(node)
             node.destroy_node()
             rclpy.try_shutdown()
+            if keep_until_exit:
+                _KEPT_UNTIL_EXIT.append(executor)
             # the vent is out and the process exits: a late signal must not kill it now.
             # Python resets its own handlers (_ShuttingDown) to the default at exit, and a
             # SIGINT arriving then ended the process with -2 after a clean vent (seen in
@@ -814,8 +827,9 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
         except Exception:
             rclpy.try_shutdown()
             raise
-        run_node(node, before_destroy=before_destroy)
-        if args is None and _is_the_program(node_class, name):
+        program = args is None and _is_the_program(node_class, name)
+        run_node(node, before_destroy=before_destroy, keep_until_exit=program)
+        if program:
             # the node's own executable: everything is done (vented, destroyed, shut down),
             # so end the process without the interpreter's finalisation, where the garbage
             # collection of rclpy's event handlers hung 2 of 21 node processes of a main-job
