@@ -125,7 +125,9 @@ def test_a_robots_play_is_read_from_a_staircase():
 def test_a_robots_damping_is_read_from_a_released_push():
     """``--lab``: a lightly damped two-segment robot (damping ratio 0.074) rings after a push.
 
-    Read within 20 % (0.067), and the calibrated file given that damping.
+    Read within 20 % (0.067), and the calibrated file given that damping; the
+    nominal file's first mode is read as 1/0.76 of the robot's (its
+    ``first_mode_error``).
     A one-segment robot's 12 Hz mode, 17 motion-capture samples a period
     under 0.26 mm of noise, is read too (0.077 against 0.082; refused while
     the window began at a noisy pose during the push); one whose window
@@ -142,12 +144,16 @@ def test_a_robots_damping_is_read_from_a_released_push():
     assert got['damping_ratio'] == pytest.approx(draw.values['damping_ratio'], rel=0.2)
     cfg = dataclasses.replace(base, damping_time=got['damping_time_s'])
     assert first_mode(cfg).damping_ratio == pytest.approx(got['damping_ratio'], rel=1e-3)
+    assert 1.0 + got['first_mode_error'] == pytest.approx(
+        draw.model_mode_hz / draw.first_mode_hz, rel=0.02)
+    assert draw.model_mode_hz / draw.first_mode_hz > 1.25
     one = draw_robot('one_segment', 0)
     read = family_bench.identified_damping(one, family_bench.load_robot('one_segment'))
     assert read['damping_ratio'] == pytest.approx(one.values['damping_ratio'], rel=0.2)
     refused = family_bench.identified_damping(draw_robot('one_segment', 13),
                                               family_bench.load_robot('one_segment'))
     assert refused['damping_time_s'] is None and '\n' not in refused['error']
+    assert refused['first_mode_error'] is None
 
 
 def test_the_calibration_finds_the_drawn_robot():
@@ -185,12 +191,14 @@ def test_the_lab_table_says_what_was_identified():
     for i, r in enumerate(runs):   # a run file with the damping read from a push
         r['values']['damping_ratio'] = 0.1
         r['damping_identified'] = ({'damping_time_s': 0.01, 'damping_ratio': 0.1 + 0.01 * i,
-                                    'error': ''} if i < 2 else
-                                   {'damping_time_s': None, 'damping_ratio': None, 'error': 'no'})
+                                    'first_mode_error': 0.03 + 0.03 * i, 'error': ''} if i < 2
+                                   else {'damping_time_s': None, 'damping_ratio': None,
+                                         'first_mode_error': None, 'error': 'no'})
     text = family_bench.markdown({'robots_per_count': 4, 'creep': 'identified', 'lab': True,
                                   'runs': runs})
     assert ("; the damping read from a released push on 2 of 4 robots (damping ratio off by 5 % "
-            "median, 10 % worst), the others keep the file's") in text
+            "median, 10 % worst), the others keep the file's; the file's first mode within 5 % "
+            "of the measured one on 1 of 4 robots (a step's move sized to it)") in text
 
 
 def test_the_docs_show_the_lab_table_of_its_last_full_run():

@@ -25,7 +25,8 @@ damping``: the first mode's frequency and damping ratio fitted to a recorded
 ring-down (:func:`bellow_ancf_ros.core.fit.fit_free_vibration`, window from
 :func:`bellow_ancf_ros.core.fit.ringdown_window`) and the
 ``dynamics.damping_time_s`` that reproduces them
-(:func:`bellow_ancf_ros.core.fit.identify_damping`).
+(:func:`bellow_ancf_ros.core.fit.identify_damping`), and the model's first
+mode against the measured one (``dynamics.first_mode_error``).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import numpy as np
 from ..core import GeneralizedAlpha, limit_blas_threads, solve_forward
 from ..core import dynamics as dyn
 from ..core import fit as fitting
+from ..core.control import KNOWN_MODE_ERROR
 from .common import (EXIT_FAILED, EXIT_OK, UsageError, add_config, add_loads, call_solver,
                      element_count, emit_json, error, finite_float, int_at_least, load_model,
                      nonneg_float, one_line, payload_mass, positive_float, print_lines)
@@ -378,7 +380,13 @@ def _cmd_identify_damping(args) -> int:
              f'model          first mode {res.model_frequency_hz:.4f} Hz '
              f'({100 * d["frequency_error"]:+.2f} % against the measured one)',
              f'damping_time_s {res.damping_time_s:.6g} s (model damping ratio '
-             f'{res.model_damping_ratio:.4f}); robot file key dynamics.damping_time_s']
+             f'{res.model_damping_ratio:.4f}); robot file key dynamics.damping_time_s',
+             f'first_mode_err {d["frequency_error"]:+.4f}; robot file key '
+             'dynamics.first_mode_error ' + (
+                 '(a target jump then moves in 1.83 periods of the measured mode)'
+                 if abs(d['frequency_error']) <= KNOWN_MODE_ERROR else
+                 f'(beyond +-{KNOWN_MODE_ERROR:g}: not used; calibrate the file with '
+                 'mass_scale)')]
     if args.plot:
         lines.append(f'plot           {args.plot}')
     print_lines(lines)

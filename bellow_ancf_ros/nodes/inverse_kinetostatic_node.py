@@ -240,8 +240,8 @@ class InverseKinetostaticNode(LifecycleNode):
             self._modes = ModeWatch(self, self._feedback.mode_check())
             self._modes.start(start)   # the first answer now, at the start equilibrium
         self._feedback.configure(model, self._worker.submit, self._modes)
-        self._targets.configure(self._modes, self._worker.submit,
-                                float(self.get_parameter('feedback_loop_lag_s').value))
+        lag_s = float(self.get_parameter('feedback_loop_lag_s').value)
+        self._targets.configure(self._modes, self._worker.submit, lag_s, cfg.first_mode_error)
         self._configured = True
         self.get_logger().info(
             f'configured: robot {cfg.name!r} ({cfg.n_segments} segment(s), {model.A} actuators, '

@@ -237,6 +237,11 @@ def test_identify_damping_recovers_the_damping_time_from_a_csv(capsys, tmp_path,
                          '--t-start-s', 10.1, '--t-end-s', 11.2)
     assert code == 0, err
     assert 'damping_time_s' in out and 'first mode' in out
+    # the model is the recording's robot: its first mode is known, for the robot file
+    line = next(w for w in out.splitlines() if w.startswith('first_mode_err'))
+    assert abs(float(line.split()[1].rstrip(';'))) < 0.01
+    assert 'dynamics.first_mode_error' in line and '1.83 periods' in line
+    assert abs(d['frequency_error']) < 0.01
 
 
 def test_simulate_csv_of_a_pressure_step_is_a_recording_identify_damping_reads(capsys,

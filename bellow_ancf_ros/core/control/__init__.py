@@ -43,7 +43,7 @@ from ._play import PlayCompensation
 from ._command_output import CommandOutput, CreepCompensation
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._target_filter import TARGET_SHAPINGS, TargetFilter
-from ._jumps import JUMP_M, JumpTransition
+from ._jumps import JUMP_M, KNOWN_MODE_ERROR, JumpTransition
 from ._mismatch import MismatchTransfer
 from ._mocap_noise import NOISE_BUDGET_M, MocapNoise
 from ._watchdog import OscillationWatchdog, WatchdogTrip
@@ -54,7 +54,8 @@ __all__ = [
     "RETUNE_FRACTION",
     "SHAPERS",
     "TARGET_SHAPINGS", "CommandOutput", "CreepCompensation", "DynamicFeedforward",
-    "FeedbackSettings", "ForceEstimate", "IntegralFeedback", "JumpTransition", "LoopMargins",
+    "FeedbackSettings", "ForceEstimate", "IntegralFeedback", "JumpTransition", "KNOWN_MODE_ERROR",
+    "LoopMargins",
     "MismatchTransfer", "MocapNoise", "ModeCheck", "ModeCheckResult", "OscillationWatchdog",
     "PlayCompensation",
     "StreamFeedforward", "TargetFilter", "TargetShaper", "TipForceEstimator", "WatchdogTrip",

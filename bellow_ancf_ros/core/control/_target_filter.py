@@ -43,13 +43,14 @@ class TargetFilter:
     """Input shaping and dynamic feedforward of one target stream (module docstring)."""
 
     def __init__(self, shaping: str = 'none', dynamic_feedforward: bool = False,
-                 lag_s: float = 0.0) -> None:
+                 lag_s: float = 0.0, mode_error: float | None = None) -> None:
+        """``mode_error``: the robot file's ``dynamics.first_mode_error`` (the jumps' moves)."""
         if shaping not in TARGET_SHAPINGS:
             raise ValueError(f'target_shaping = {shaping!r} is not allowed; allowed: '
                              f'{list(TARGET_SHAPINGS)}')
         self.shaping = shaping
         self.shaper = None if shaping in ('none', 'smooth') else TargetShaper(shaping)
-        self.jumps = JumpTransition() if shaping == 'smooth' else None
+        self.jumps = JumpTransition(mode_error=mode_error) if shaping == 'smooth' else None
         self.feedforward = (StreamFeedforward(1.0, 0.0, lag_s=lag_s)
                             if dynamic_feedforward else None)
         self.mode: tuple[float, float] | None = None

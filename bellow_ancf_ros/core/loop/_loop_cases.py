@@ -71,7 +71,9 @@ def default_loop(model: RobotModel, robot: SimulatedRobot, payload_kg: float = 0
                           preview_s=0.0,
                           physics_rate_hz=robot.auto_physics_rate_hz, payload_kg=payload_kg,
                           mode_check=ModeCheck(AUTO_GAIN, LOOP_LAG_S, LOOP_DELAY_S),
-                          feedforward=ff, jumps=JumpTransition() if smooth_jumps else None,
+                          feedforward=ff,
+                          jumps=(JumpTransition(mode_error=model.cfg.first_mode_error)
+                                 if smooth_jumps else None),
                           creep_compensation=creep_compensation,
                           play_compensation_pa=play_compensation_pa)
 

@@ -211,6 +211,11 @@ class RobotConfig:
         (dynamics only, ``dynamics.damping_time_s``; default :data:`DEFAULT_DAMPING_TIME_S`).
     mass_damping: mass-proportional (air) damping ``alpha`` [1/s] (dynamics only,
         ``dynamics.mass_damping_per_s``; default 0).
+    first_mode_error: the model's first mode over the robot's measured one, minus
+        one (``dynamics.first_mode_error``, as ``bellow-ancf identify damping``
+        prints it), or None: not measured.  The closed loop sizes a target
+        jump's move to the robot's mode when it is known within
+        :data:`~bellow_ancf_ros.core.control.KNOWN_MODE_ERROR`.
     source: where the description came from (not compared by ``==``).
     """
 
@@ -230,6 +235,7 @@ class RobotConfig:
     mocap_frame: MocapFrame | None = None
     damping_time: float = 0.005
     mass_damping: float = 0.0
+    first_mode_error: float | None = None
     source: str = field(default='<dict>', compare=False)
 
     def __post_init__(self) -> None:
@@ -309,6 +315,8 @@ class RobotConfig:
             'dynamics': {'damping_time_s': self.damping_time,
                          'mass_damping_per_s': self.mass_damping},
         }
+        if self.first_mode_error is not None:
+            d['dynamics']['first_mode_error'] = self.first_mode_error
         if self.mocap_frame is not None:
             d['mocap_frame'] = self.mocap_frame.to_dict()
         return d
@@ -317,7 +325,10 @@ class RobotConfig:
 # --------------------------------------------------------------------- schema
 _TOP_KEYS = ('name', 'actuator', 'segments', 'pressure_limits', 'model', 'payload_kg')
 _OPTIONAL_TOP_KEYS = ('mocap_frame', 'dynamics')
-_DYNAMICS_KEYS = ('damping_time_s', 'mass_damping_per_s')
+_DYNAMICS_KEYS = ('damping_time_s', 'mass_damping_per_s', 'first_mode_error')
+#: Allowed ``dynamics.first_mode_error``: a model whose first mode is farther off is
+#: recalibrated (``mass_scale``), not corrected by a number.
+FIRST_MODE_ERROR_RANGE = (-0.5, 1.0)
 #: Kelvin-Voigt retardation time of a robot file without ``dynamics.damping_time_s`` [s]:
 #: a loss factor of about 0.1 at a few Hz (polyurethane and silicone elastomers of
 #: Shore 30-60 A: tan delta 0.05-0.3), docs/dynamics.md.
@@ -655,7 +666,7 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
 
     payload = chk.number(top, '', 'payload_kg', nonneg=True)
     mocap = _mocap_frame(chk, top['mocap_frame']) if 'mocap_frame' in top else None
-    damping_time, mass_damping = DEFAULT_DAMPING_TIME_S, 0.0
+    damping_time, mass_damping, mode_error = DEFAULT_DAMPING_TIME_S, 0.0, None
     if 'dynamics' in top:
         dyn = chk.mapping(top['dynamics'], 'dynamics', (), optional=_DYNAMICS_KEYS)
         if dyn is not None:
@@ -663,6 +674,15 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
                 damping_time = chk.number(dyn, 'dynamics', 'damping_time_s', nonneg=True)
             if 'mass_damping_per_s' in dyn:
                 mass_damping = chk.number(dyn, 'dynamics', 'mass_damping_per_s', nonneg=True)
+            if 'first_mode_error' in dyn:
+                mode_error = chk.number(dyn, 'dynamics', 'first_mode_error')
+                lo, hi = FIRST_MODE_ERROR_RANGE
+                if mode_error is not None and not lo <= mode_error <= hi:
+                    chk.err('dynamics.first_mode_error',
+                            f'{mode_error!r} is not from {lo:g} to {hi:g} (the model\'s first '
+                            'mode over the measured one, minus one: farther off, calibrate '
+                            'the file again with mass_scale)')
+                    mode_error = None
 
     # A finite number in the file can still leave the floating-point range in SI.
     for key, value in (('p_min_kpa', p_min), ('p_max_kpa', p_max)):
@@ -711,6 +731,7 @@ def robot_from_dict(d: Any, source: str = '<dict>') -> RobotConfig:
         mocap_frame=mocap,
         damping_time=damping_time,
         mass_damping=mass_damping,
+        first_mode_error=mode_error,
         source=source,
     )
 

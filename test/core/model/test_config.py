@@ -150,9 +150,10 @@ def test_to_dict_round_trip():
         again = robot_from_dict(cfg.to_dict())
         assert again.source == '<dict>' and again.name == cfg.name
         for f in dataclasses.fields(RobotConfig):
-            if f.name not in ('source', 'segments', 'name', 'mocap_frame'):
+            if f.name not in ('source', 'segments', 'name', 'mocap_frame', 'first_mode_error'):
                 assert getattr(again, f.name) == pytest.approx(getattr(cfg, f.name), rel=1e-15)
         assert again.mocap_frame is None and cfg.mocap_frame is None
+        assert again.first_mode_error is None and cfg.first_mode_error is None
         for s_a, s_b in zip(again.segments, cfg.segments):
             for f in dataclasses.fields(SegmentConfig):
                 if getattr(s_b, f.name) is None:
@@ -178,7 +179,13 @@ def test_dynamics_keys_defaults_round_trip_and_refusals():
     again = robot_from_dict(cfg.to_dict())
     assert again.segments[0].plate_radius == pytest.approx(0.035)
     assert (again.damping_time, again.mass_damping) == (0.01, 0.5)
+    assert again.first_mode_error is None and 'first_mode_error' not in again.to_dict()['dynamics']
+    d['dynamics']['first_mode_error'] = -0.021   # measured (identify damping)
+    assert robot_from_dict(robot_from_dict(d).to_dict()).first_mode_error == -0.021
     for key, value, words in (('damping_time_s', -1.0, 'dynamics.damping_time_s'),
+                              ('first_mode_error', 1.5, 'dynamics.first_mode_error: 1.5 is '
+                               'not from -0.5 to 1'),
+                              ('first_mode_error', 'x', 'dynamics.first_mode_error'),
                               ('mass_damping_per_s', 'x', 'dynamics.mass_damping_per_s'),
                               ('damping_s', 0.1, "did you mean 'damping_time_s'")):
         bad = load_robot('one_segment').to_dict()
