@@ -261,8 +261,10 @@ class TargetLink:
             filt = self._filter
             if filt is None:
                 return {'target_shaping': self._kind, 'dynamic_feedforward': 'false'}
+            move = filt.jumps.duration_s if filt.jumps is not None else 0.0
             return {'target_shaping': self._kind,
                     'target_shaping_delay_s': f'{filt.delay_s:.3f}',
+                    'target_move_s': f'{move:.3f}' if move > 0 else 'none',
                     'dynamic_feedforward': str(filt.feedforward is not None).lower(),
                     'target_mode_hz': 'none' if filt.mode is None else f'{filt.mode[0]:.4g}'}
 

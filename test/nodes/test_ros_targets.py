@@ -93,6 +93,33 @@ def test_by_default_a_step_is_moved_through_smoothly(h, one):
     assert all(-1e-9 <= x <= 1 + 1e-9 for x in frac)    # never past the target
     assert inner == sorted(inner)                      # monotonic
     assert took >= 0.9 * dur, (took, dur)
+    assert float(st['target_move_s']) == pytest.approx(dur, abs=1e-3)
+
+
+def test_a_robot_file_with_its_measured_mode_moves_a_jump_in_its_periods(h, tmp_path):
+    """``dynamics.first_mode_error`` (identify damping): 1.8346 periods of the robot's mode.
+
+    The file's model is 2 % above the measured mode: the move lasts 1.8346
+    periods of f / 1.02 (0.18 s at 10.6 Hz vented instead of 0.27 s); 8 %
+    off is not used.
+    """
+    import yaml
+    from bellow_ancf_ros.core import load_robot
+    from bellow_ancf_ros.core.control._jumps import KNOWN_CYCLES
+    durations = []
+    for err in (0.02, 0.08):
+        d = load_robot('one_segment').to_dict()
+        d['dynamics']['first_mode_error'] = err
+        path = tmp_path / f'measured_{len(durations)}.yaml'
+        path.write_text(yaml.safe_dump(d))
+        node = h.add(InverseKinetostaticNode, robot_config=str(path),
+                     name=f'measured_{len(durations)}')
+        st = node._targets.status()
+        f = node._targets._filter.mode[0]
+        durations.append((float(st['target_move_s']), f))
+    (known, f), (far, f2) = durations
+    assert known == pytest.approx(KNOWN_CYCLES * 1.02 / f, abs=1e-3)
+    assert far == pytest.approx(2.0 / (0.7 * f2), abs=1e-3)
 
 
 def test_the_first_target_after_activate_is_moved_to_from_the_vented_pose(h, one):

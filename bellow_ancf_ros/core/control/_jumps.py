@@ -21,11 +21,14 @@ A robot whose first mode was measured (``dynamics.first_mode_error`` of its
 file: the model's mode over the measured one, minus one, within
 :data:`KNOWN_MODE_ERROR`) gets a shorter move: ``T = KNOWN_CYCLES / f_r``
 with ``f_r`` the model's mode corrected by that error, the first duration at
-which a minimum-jerk move leaves no swing at all on the mode (residual zero
-at ``f T = 1.8346``; at most 2.6 % for a mode 5 % off).  For the slowest
-robots of the family (first mode 1.5 Hz, two periods of 0.7 times it: a
-1.9 s move) it is what brings a 10 mm step within 0.2 mm 1.5 s after it
-(measured: 1.85 -> 0.16 mm on the slowest robot).
+which a minimum-jerk move leaves no swing on an undamped mode (residual zero
+at ``f T = 1.8346``; at most 2.6 % for a mode 5 % off; 2-3.5 % on a mode
+damped at 0.05-0.25, which its damping then takes out, where the longer move
+leaves about 1 %).  For the slowest robots of the family (first mode 1.5 Hz,
+two periods of 0.7 times it: a 1.9 s move) it is what brings a 10 mm step
+within 0.2 mm 1.5 s after it (measured: 1.85 -> 0.16 mm on the slowest
+robot; over the family's two-segment robots, 0.212 -> 0.172 mm at the 95th
+percentile, the overshoot 0.139 -> 0.377 mm).
 
 A jump: a target more than :data:`JUMP_M` (or :data:`JUMP_RAD` of its
 z-axis) from where the stream was heading (the previous target plus the

@@ -120,3 +120,14 @@ def test_a_jumps_move_is_not_shifted_by_the_feedforward():
         tf.push(t + 0.02 * k, b)
         np.testing.assert_allclose(cmd[0], ref[0], atol=1e-12)
     assert tf.jumps.moves == 1
+
+
+def test_smooth_jumps_take_the_robot_files_measured_mode():
+    """``mode_error`` (``dynamics.first_mode_error``) reaches the jumps, as the node passes it."""
+    from bellow_ancf_ros.core.control._jumps import CYCLES, KNOWN_CYCLES, MODE_SPREAD
+    tf = TargetFilter('smooth', mode_error=-0.03)
+    tf.set_mode(F, ZETA)
+    assert tf.jumps.duration_s == pytest.approx(KNOWN_CYCLES * 0.97 / F)
+    unknown = TargetFilter('smooth')
+    unknown.set_mode(F, ZETA)
+    assert unknown.jumps.duration_s == pytest.approx(CYCLES / (MODE_SPREAD * F))

@@ -1,5 +1,7 @@
 """The closed loop's goal cases measure what they name (core, simulated time)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -57,6 +59,10 @@ def test_default_loop_is_the_nodes_closed_loop(model):
     assert sim.feedback is not None and sim.preview_s == 0.0 and sim.feedforward is not None
     assert sim.mode_check is not None and sim.jumps is not None
     assert default_loop(model, _exact_robot(), dynamic_feedforward=False).feedforward is None
+    assert sim.jumps.mode_error is None
+    # a robot file with its measured first mode: the jumps' moves sized to it, as in the node
+    measured = RobotModel(dataclasses.replace(model.cfg, first_mode_error=0.01))
+    assert default_loop(measured, _exact_robot()).jumps.mode_error == 0.01
 
 
 def test_step_overshoot_is_measured_along_the_step(model):
