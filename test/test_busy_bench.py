@@ -135,3 +135,16 @@ def test_goals_ratio_nominal_and_trips():
     # within 1.3x but over twice the nominal period
     rows = {r['figure']: r for r in busy_bench.compare(_run(90.0, 0.1), _run(110.0, 0.1), 0.05)}
     assert not rows['period_p99']['met'] and rows['held_mm']['met']
+
+
+def test_the_tracking_goals_hold_in_both_runs_beside_the_ratio():
+    """held 0.25 mm quiet and busy: within 1.3x, but above the two-segment robot's 0.2 mm."""
+    limits = busy_bench.tracking_goals(2)
+    assert limits['held_mm'] == 0.2 and busy_bench.tracking_goals(1)['held_mm'] == 0.1
+    rows = {r['figure']: r for r in busy_bench.compare(_run(25.0, 0.25), _run(25.0, 0.25),
+                                                       0.05, limits)}
+    assert rows['held_mm']['ratio'] == pytest.approx(1.0) and not rows['held_mm']['met']
+    assert rows['held_mm']['goal'] == 'busy <= 1.3x quiet, both <= 0.2'
+    rows = {r['figure']: r for r in busy_bench.compare(_run(25.0, 0.15), _run(25.0, 0.18),
+                                                       0.05, limits)}
+    assert rows['held_mm']['met']
