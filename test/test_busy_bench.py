@@ -138,7 +138,7 @@ def test_goals_ratio_nominal_and_trips():
 
 
 def test_the_tracking_goals_hold_in_both_runs_beside_the_ratio():
-    """held 0.25 mm quiet and busy: within 1.3x, but above the two-segment robot's 0.2 mm."""
+    """A held error of 0.25 mm quiet and busy: within 1.3x, above two segments' 0.2 mm."""
     limits = busy_bench.tracking_goals(2)
     assert limits['held_mm'] == 0.2 and busy_bench.tracking_goals(1)['held_mm'] == 0.1
     rows = {r['figure']: r for r in busy_bench.compare(_run(25.0, 0.25), _run(25.0, 0.25),
