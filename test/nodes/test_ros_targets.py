@@ -97,15 +97,15 @@ def test_by_default_a_step_is_moved_through_smoothly(h, one):
 
 
 def test_a_robot_file_with_its_measured_mode_moves_a_jump_in_its_periods(h, tmp_path):
-    """``dynamics.first_mode_error`` (identify damping): 1.8346 periods of the robot's mode.
+    """``dynamics.first_mode_error`` (identify damping): a ZV-shaped ramp at the robot's mode.
 
-    The file's model is 2 % above the measured mode: the move lasts 1.8346
-    periods of f / 1.02 (0.18 s at 10.6 Hz vented instead of 0.27 s); 8 %
-    off is not used.
+    The file's model is 2 % above the measured mode: a ramp of one period of
+    f / 1.02 and half a damped period more (0.14 s at 10.6 Hz vented instead
+    of 0.27 s); 8 % off is not used.
     """
     import yaml
     from bellow_ancf_ros.core import load_robot
-    from bellow_ancf_ros.core.control._jumps import KNOWN_CYCLES
+    from bellow_ancf_ros.core.control._jumps import KNOWN_RAMP_CYCLES
     durations = []
     for err in (0.02, 0.08):
         d = load_robot('one_segment').to_dict()
@@ -115,10 +115,13 @@ def test_a_robot_file_with_its_measured_mode_moves_a_jump_in_its_periods(h, tmp_
         node = h.add(InverseKinetostaticNode, robot_config=str(path),
                      name=f'measured_{len(durations)}')
         st = node._targets.status()
-        f = node._targets._filter.mode[0]
-        durations.append((float(st['target_move_s']), f))
-    (known, f), (far, f2) = durations
-    assert known == pytest.approx(KNOWN_CYCLES * 1.02 / f, abs=1e-3)
+        f, zeta = node._targets._filter.mode
+        durations.append((float(st['target_move_s']), f, zeta))
+    (known, f, zeta), (far, f2, _) = durations
+    assert 0.0 < zeta < 0.5
+    f_robot = f / 1.02
+    td = 1.0 / (f_robot * math.sqrt(1.0 - zeta ** 2))
+    assert known == pytest.approx(KNOWN_RAMP_CYCLES / f_robot + td / 2, abs=1e-3)
     assert far == pytest.approx(2.0 / (0.7 * f2), abs=1e-3)
 
 

@@ -19,16 +19,17 @@ ZV/ZVD shaper, it does not need the mode within +-20 %.
 
 A robot whose first mode was measured (``dynamics.first_mode_error`` of its
 file: the model's mode over the measured one, minus one, within
-:data:`KNOWN_MODE_ERROR`) gets a shorter move: ``T = KNOWN_CYCLES / f_r``
-with ``f_r`` the model's mode corrected by that error, the first duration at
-which a minimum-jerk move leaves no swing on an undamped mode (residual zero
-at ``f T = 1.8346``; at most 2.6 % for a mode 5 % off; 2-3.5 % on a mode
-damped at 0.05-0.25, which its damping then takes out, where the longer move
-leaves about 1 %).  For the slowest robots of the family (first mode 1.5 Hz,
-two periods of 0.7 times it: a 1.9 s move) it is what brings a 10 mm step
-within 0.2 mm 1.5 s after it (measured: 1.85 -> 0.16 mm on the slowest
-robot; over the family's two-segment robots, 0.212 -> 0.172 mm at the 95th
-percentile, the overshoot 0.139 -> 0.377 mm).
+:data:`KNOWN_MODE_ERROR`) gets a shorter move that leaves that mode at rest
+whatever its damping: a minimum-jerk ramp of :data:`KNOWN_RAMP_CYCLES`
+periods of the robot's mode ``f_r`` (the model's corrected by that error),
+shaped by a ZV shaper at ``f_r`` and the model's damping ratio (two ramps,
+the second half a damped period later: 1.5 periods in all).  Its residual
+swing is zero at the mode and at most 3.9 % of the move for a mode 5 % off
+(2.1 % at a damping ratio of 0.15); a plain minimum-jerk move leaves none
+only on an undamped mode, at ``f T = 1.8346``, and 2-3.5 % on one damped at
+0.05-0.25.  For the slowest robots of the family (first mode 1.5 Hz, two
+periods of 0.7 times it: a 1.9 s move) it is what brings a 10 mm step
+within 0.2 mm 1.5 s after it (measured: 1.85 mm on the slowest robot before).
 
 A jump: a target more than :data:`JUMP_M` (or :data:`JUMP_RAD` of its
 z-axis) from where the stream was heading (the previous target plus the
@@ -51,8 +52,10 @@ import math
 
 import numpy as np
 
-__all__ = ['CYCLES', 'JUMP_M', 'JUMP_RAD', 'JumpTransition', 'KNOWN_CYCLES', 'KNOWN_MODE_ERROR',
-           'MODE_SPREAD', 'SETTLE_S']
+from ._shaping import shaper_impulses
+
+__all__ = ['CYCLES', 'JUMP_M', 'JUMP_RAD', 'JumpTransition', 'KNOWN_MODE_ERROR',
+           'KNOWN_RAMP_CYCLES', 'MODE_SPREAD', 'SETTLE_S']
 
 #: A target this far from where the stream was heading [m] is a jump.
 JUMP_M = 0.002
@@ -64,9 +67,8 @@ MODE_SPREAD = 0.7
 CYCLES = 2.0
 #: A measured first mode (``dynamics.first_mode_error`` at most this far from 0) is known.
 KNOWN_MODE_ERROR = 0.05
-#: A known mode's move lasts this many of its periods: the first zero of the residual swing
-#: a minimum-jerk move leaves on an undamped mode.
-KNOWN_CYCLES = 1.8346
+#: A known mode's move: a minimum-jerk ramp of this many of its periods, ZV-shaped at it.
+KNOWN_RAMP_CYCLES = 1.0
 #: The closed loop holds its correction this long after a move ends [s]: the family's slowest
 #: regulators (lag 0.12 s, dead time 0.04 s) and motion capture (latency 0.02 s) catch up;
 #: measured on robots of the family, 0.5 s overshot less than 0.2 s and recovered as fast.
@@ -92,16 +94,20 @@ class JumpTransition:
         self.frequency_hz: float | None = None
         #: the model's first mode over the robot's measured one, minus one (None: unknown)
         self.mode_error = mode_error
+        #: a move: a minimum-jerk ramp of ``_ramp_s`` at each impulse ``(time [s], amplitude)``
+        self._ramp_s = 0.0
+        self._impulses: tuple = ((0.0, 1.0),)
         if frequency_hz is not None:
             self.set_mode(frequency_hz)
         self.moves = 0
         self.reset()
 
-    def set_mode(self, frequency_hz: float) -> None:
-        """Moves for this first mode of the model from now on.
+    def set_mode(self, frequency_hz: float, damping_ratio: float = 0.0) -> None:
+        """Moves for this first mode of the model (and its damping ratio) from now on.
 
-        CYCLES periods of MODE_SPREAD times it; KNOWN_CYCLES periods of the
-        robot's mode when :attr:`mode_error` says it was measured.
+        CYCLES periods of MODE_SPREAD times it; when :attr:`mode_error` says
+        the robot's mode was measured, KNOWN_RAMP_CYCLES periods of the
+        robot's mode shaped by a ZV shaper at it (module docstring).
         """
         f = float(frequency_hz)
         if not (math.isfinite(f) and f > 0):
@@ -109,9 +115,15 @@ class JumpTransition:
         self.frequency_hz = f
         err = self.mode_error
         if err is not None and abs(err) <= KNOWN_MODE_ERROR:
-            self.duration_s = KNOWN_CYCLES * (1.0 + err) / f
+            f_robot = f / (1.0 + err)
+            times, amps = shaper_impulses('zv', f_robot, min(max(float(damping_ratio), 0.0),
+                                                             0.9))
+            self._ramp_s = KNOWN_RAMP_CYCLES / f_robot
+            self._impulses = tuple(zip(times.tolist(), amps.tolist()))
         else:
-            self.duration_s = CYCLES / (MODE_SPREAD * f)
+            self._ramp_s = CYCLES / (MODE_SPREAD * f)
+            self._impulses = ((0.0, 1.0),)
+        self.duration_s = self._ramp_s + self._impulses[-1][0]
 
     def reset(self, start=None) -> None:
         """Forget the stream.
@@ -144,7 +156,8 @@ class JumpTransition:
                 jump |= float(np.linalg.norm(z - head_z)) > JUMP_RAD
             if jump and self.duration_s > 0:
                 start_p, start_z = self.at(float(t))
-                self._move = (float(t), self.duration_s, start_p, start_z)
+                self._move = (float(t), self.duration_s, start_p, start_z, self._ramp_s,
+                              self._impulses)
                 self.moves += 1
             # the step the stream takes and its time (none after a jump: not its speed)
             self._step = None if jump or not math.isfinite(dt) else (   # (none from the start)
@@ -180,8 +193,8 @@ class JumpTransition:
         _, p, z = self._newest
         if self._move is None or t >= self._move[0] + self._move[1]:   # (the target exactly)
             return p.copy(), None if z is None else z.copy()
-        t0, dur, p0, z0 = self._move
-        s = _min_jerk((t - t0) / dur)
+        t0, _, p0, z0, ramp, impulses = self._move
+        s = sum(a * _min_jerk((t - t0 - ti) / ramp) for ti, a in impulses)
         out_p = p0 + s * (p - p0)
         if z is None or z0 is None:
             return out_p, None if z is None else z.copy()

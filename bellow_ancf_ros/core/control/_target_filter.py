@@ -84,7 +84,7 @@ class TargetFilter:
         if self.shaper is not None:
             self.shaper.set_mode(frequency_hz, damping_ratio)
         if self.jumps is not None:
-            self.jumps.set_mode(frequency_hz)
+            self.jumps.set_mode(frequency_hz, damping_ratio)
         if self.feedforward is not None:
             self.feedforward.set_mode(frequency_hz, damping_ratio)
         self.mode = (float(frequency_hz), float(damping_ratio))

@@ -123,11 +123,13 @@ def test_a_jumps_move_is_not_shifted_by_the_feedforward():
 
 
 def test_smooth_jumps_take_the_robot_files_measured_mode():
-    """``mode_error`` (``dynamics.first_mode_error``) reaches the jumps, as the node passes it."""
-    from bellow_ancf_ros.core.control._jumps import CYCLES, KNOWN_CYCLES, MODE_SPREAD
+    """``mode_error`` (``dynamics.first_mode_error``) reaches the jumps with the mode's damping."""
+    from bellow_ancf_ros.core.control._jumps import CYCLES, KNOWN_RAMP_CYCLES, MODE_SPREAD
     tf = TargetFilter('smooth', mode_error=-0.03)
     tf.set_mode(F, ZETA)
-    assert tf.jumps.duration_s == pytest.approx(KNOWN_CYCLES * 0.97 / F)
+    f_robot = F / 0.97
+    td = 1.0 / (f_robot * math.sqrt(1.0 - ZETA ** 2))
+    assert tf.jumps.duration_s == pytest.approx(KNOWN_RAMP_CYCLES / f_robot + td / 2)
     unknown = TargetFilter('smooth')
     unknown.set_mode(F, ZETA)
     assert unknown.jumps.duration_s == pytest.approx(CYCLES / (MODE_SPREAD * F))
