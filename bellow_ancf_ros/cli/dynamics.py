@@ -383,7 +383,7 @@ def _cmd_identify_damping(args) -> int:
              f'{res.model_damping_ratio:.4f}); robot file key dynamics.damping_time_s',
              f'first_mode_err {d["frequency_error"]:+.4f}; robot file key '
              'dynamics.first_mode_error ' + (
-                 '(a target jump then moves in 1.83 periods of the measured mode)'
+                 '(a target jump then moves in 1.5 periods of the measured mode)'
                  if abs(d['frequency_error']) <= KNOWN_MODE_ERROR else
                  f'(beyond +-{KNOWN_MODE_ERROR:g}: not used; calibrate the file with '
                  'mass_scale)')]

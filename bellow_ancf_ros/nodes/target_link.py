@@ -17,10 +17,10 @@ two-segment robot's 2.4 Hz mode leaves 7 % of the swing the shaper cancels).
 
 Defaults: ``smooth``: a jump of the targets (a step target, the first target
 after a held one far away) becomes a minimum-jerk move over two periods of
-the slowest first mode the robot may have (0.7 times the model's; 1.83
-periods of the robot's own mode when its file gives the measured
-``dynamics.first_mode_error``), and the closed loop holds its correction
-through it; a smooth stream passes
+the slowest first mode the robot may have (0.7 times the model's; a ramp
+ZV-shaped at the robot's own mode, 1.5 of its periods, when its file gives
+the measured ``dynamics.first_mode_error``), and the closed loop holds its
+correction through it; a smooth stream passes
 unchanged and undelayed (measured on the robot family: a 10 mm step
 overshoots 0.1-0.4 mm instead of 0.4-9 mm; circles unchanged).  ZV/ZVD
 shapers are shorter but need the mode within +-20 % and delay every target
@@ -59,12 +59,12 @@ IMPULSE_LEAD_S = 0.001
 TARGET_PARAMETER_TABLE = (
     Param('target_shaping', 'smooth', descriptor(
         "What a jump of the targets becomes. 'smooth': a minimum-jerk move over two periods "
-        "of the slowest first mode the robot may have (0.7x the model's; 1.83 periods of "
-        "the measured one when the robot file gives dynamics.first_mode_error), the closed "
-        "loop holding its correction through it; a smooth stream passes unchanged. 'zv' or "
-        "'zvd': input shaping at the first mode (Singer & Seering; zvd robust to a mode "
-        "known to +-20 %), every target delayed by the shaper. 'none': targets as they "
-        "come. Read on configure.",
+        "of the slowest first mode the robot may have (0.7x the model's; a ZV-shaped ramp "
+        "of 1.5 periods of the measured one when the robot file gives "
+        "dynamics.first_mode_error), the closed loop holding its correction through it; "
+        "a smooth stream passes unchanged. 'zv' or 'zvd': input shaping at the first mode "
+        "(Singer & Seering; zvd robust to a mode known to +-20 %), every target delayed by "
+        "the shaper. 'none': targets as they come. Read on configure.",
         ParameterType.PARAMETER_STRING, constraints="one of: 'smooth', 'none', 'zv', 'zvd'")),
     Param('dynamic_feedforward', True, descriptor(
         "Shift each moving target by the inertial and damping loads of its motion through "
