@@ -118,8 +118,9 @@ class JumpTransition:
         err = self.mode_error
         if err is not None and abs(err) <= KNOWN_MODE_ERROR:
             f_robot = f / (1.0 + err)
-            times, amps = shaper_impulses('zv', f_robot, min(max(float(damping_ratio), 0.0),
-                                                             0.9))
+            zeta = float(damping_ratio)
+            zeta = min(max(zeta, 0.0), 0.9) if math.isfinite(zeta) else 0.0   # (0.9: < 1)
+            times, amps = shaper_impulses('zv', f_robot, zeta)
             self._ramp_s = KNOWN_RAMP_CYCLES / f_robot
             self._impulses = tuple(zip(times.tolist(), amps.tolist()))
         else:

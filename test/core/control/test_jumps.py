@@ -124,6 +124,9 @@ def test_a_measured_mode_gets_a_shorter_move_that_leaves_it_at_rest():
     xs = [jt.at(t)[0][0] for t in np.linspace(0.0, jt.duration_s, 300)]
     assert xs[0] == pytest.approx(0.0, abs=1e-9) and xs[-1] == pytest.approx(1.0)
     assert np.all(np.diff(xs) >= -1e-12)
+    odd = JumpTransition(mode_error=0.02)   # a damping ratio a mode check could not give
+    odd.set_mode(F, math.nan)
+    assert odd.duration_s == known(0.0).duration_s
     far = JumpTransition(F, mode_error=KNOWN_MODE_ERROR + 0.01)
     assert far.duration_s == pytest.approx(CYCLES / (MODE_SPREAD * F))
 
