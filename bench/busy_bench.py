@@ -79,6 +79,7 @@ from bellow_ancf_ros.core.geometry import (angle_between, quaternion_from_z_axis
                                            z_axis_from_quaternion)
 from bellow_ancf_ros.demos.pipeline import (NodeProcess, SpunNode, child_env,
                                             hardware_parameters, record_qos, tidy, wait_up)
+from family_bench import GOALS
 from soak import proc_stats
 
 HERE = Path(__file__).resolve().parent
@@ -93,15 +94,18 @@ PERIOD_GOAL = 2.0     # command period p99 at most this many nominal periods
 GAP_S = 0.1           # measured poses this far apart (capture stamps): a gap
 NOT_QUIET_CORES = 0.25   # other processes' CPU in the quiet run worth a warning [cores]
 INVERSE = 'inverse_kinetostatic_node'
-#: The tracking goals of issue 34 per segment count (one, two or more), beside the ratio.
-TRACKING_GOALS = {1: {'held_mm': 0.1, 'circle_mm': 0.3, 'overshoot_mm': 0.5, 'late_mm': 0.2},
-                  2: {'held_mm': 0.2, 'held_deg': 0.1, 'circle_mm': 0.6, 'circle_deg': 0.3,
-                      'overshoot_mm': 0.5, 'late_mm': 0.2}}
+#: The tracking figures checked against the closed loop's goals (the family bench's GOALS).
+TRACKED = {'held_mm': 'held position RMSE [mm]', 'held_deg': 'held angle RMSE [deg]',
+           'circle_mm': 'circle 10x position RMSE [mm]',
+           'circle_deg': 'circle 10x angle RMSE [deg]', 'overshoot_mm': 'step overshoot [mm]',
+           'late_mm': 'step error 1.5 s after [mm]'}
 
 
 def tracking_goals(n_segments: int) -> dict:
     """The tracking goals (figure -> largest allowed value) of a robot of ``n_segments``."""
-    return TRACKING_GOALS[min(n_segments, 2)]
+    column = 2 if n_segments == 1 else 3
+    return {key: GOALS[label][column] for key, label in TRACKED.items()
+            if GOALS[label][column] is not None}
 
 
 def nominal_period_s() -> float:
