@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import brentq, least_squares
 
 from ..dynamics import reduced_system
+from ..model import FIRST_MODE_ERROR_RANGE
 from ._recordings import samples_around
 
 __all__ = ["FreeVibrationFit", "DampingIdentification", "RingdownWindow", "fit_free_vibration",
@@ -184,8 +185,11 @@ class DampingIdentification:
 
 
 #: The fitted frequency over the model's first mode that is taken for that mode (a calibrated
-#: file is within a few percent; a fit that latched onto the noise read 15-40 times it).
-FIRST_MODE_RANGE = (0.5, 2.0)
+#: file is within a few percent; a fit that latched onto the noise read 15-40 times it): 0.5
+#: to 2, the robot file's ``dynamics.first_mode_error`` range, so that every accepted fit
+#: gives a value the file takes.
+FIRST_MODE_RANGE = (1.0 / (1.0 + FIRST_MODE_ERROR_RANGE[1]),
+                    1.0 / (1.0 + FIRST_MODE_ERROR_RANGE[0]))
 
 
 def identify_damping(fit: FreeVibrationFit, equilibrium, max_damping_time_s: float = 0.2

@@ -20,8 +20,8 @@ from . import parameter_keys
 from ._ancf import (GAUSS_W, GAUSS_XI, element_energy, element_forces, gravity_weights, hermite,
                     shape_weights)
 from ._assembly import Evaluation, RobotModel
-from ._config import (ConfigError, MocapFrame, RobotConfig, SegmentConfig, check_element_count,
-                      config_dirs,
+from ._config import (FIRST_MODE_ERROR_RANGE, ConfigError, MocapFrame, RobotConfig,
+                      SegmentConfig, check_element_count, config_dirs,
                       find_shipped, load_robot, plate_support_problem, robot_from_dict,
                       shipped_robot_names, smallest_element_count)
 from ._kernels import element_parameters, evaluate_kernel, horner
@@ -30,7 +30,8 @@ from ._stage1 import Stage1
 from ._tip_load import MAX_TIP_FORCE_N, TipLoad, as_tip_load, tip_load
 
 __all__ = [
-    "ConfigError", "Evaluation", "MAX_TIP_FORCE_N", "MocapFrame", "TipLoad", "as_tip_load",
+    "FIRST_MODE_ERROR_RANGE", "ConfigError", "Evaluation", "MAX_TIP_FORCE_N", "MocapFrame",
+    "TipLoad", "as_tip_load",
     "tip_load", "GAUSS_W", "GAUSS_XI", "PccModel", "PccPose",
     "RobotConfig", "RobotModel", "SegmentConfig", "Stage1", "arc_parameters", "arc_state",
     "arc_transform", "check_element_count", "config_dirs", "element_energy", "element_forces",
