@@ -60,6 +60,8 @@ from typing import Callable
 
 import numpy as np
 
+from ._stream_heading import STALL_S, stream_heading
+
 __all__ = ['DynamicFeedforward', 'StreamFeedforward', 'dynamic_path']
 
 #: Largest shift of the target [m] and of its z-axis [rad] the feedforward applies.
@@ -200,8 +202,8 @@ class StreamFeedforward:
     :meth:`push` each target with the time it is wanted at; :meth:`target`
     gives the newest one shifted by the derivatives of polynomials fitted to
     the targets before it (:data:`FITS`; at least three targets).  A target
-    farther than ``jump_m`` from the one before (a step), a gap longer than
-    ``gap_s``, or too few samples: the newest target unshifted.
+    farther than ``jump_m`` from where the stream was heading (a step), a
+    stop (:meth:`_jump`), or too few samples: the newest target unshifted.
 
     **A stream that stops** while it was moving, either by no target for
     ``stale_periods`` of its own intervals (at least ``gap_s`` / 2) or by
@@ -224,8 +226,8 @@ class StreamFeedforward:
     stop at speed still swings the robot at its mode.
     """
 
-    def __init__(self, frequency_hz: float, damping_ratio: float, gap_s: float = 0.1,
-                 jump_m: float = 0.005, stale_periods: float = 3.0, brake_periods: float = 1.0,
+    def __init__(self, frequency_hz: float, damping_ratio: float, gap_s: float = 0.05,
+                 jump_m: float = 0.005, stale_periods: float = 1.5, brake_periods: float = 1.0,
                  **kw) -> None:
         self.ff = DynamicFeedforward(frequency_hz, damping_ratio, **kw)
         self.gap_s, self.jump_m = float(gap_s), float(jump_m)
@@ -262,8 +264,7 @@ class StreamFeedforward:
             stood = (self._repeat_t, h[-1][1], h[-1][2])
             h.clear()
             h.append(stood)
-        if h and (t <= h[-1][0] or t - h[-1][0] > self.gap_s
-                  or np.linalg.norm(p - h[-1][1]) > self.jump_m):
+        if h and (t <= h[-1][0] or self._jump(t, p)):
             h.clear()
         h.append((float(t), p, z))
         while len(h) > 3 and h[0][0] < t - self._keep_s:
@@ -272,6 +273,22 @@ class StreamFeedforward:
         self._repeated = False
         if self._off_path() > NOISE_M:
             self._noisy_until = float(t) + NOISY_HOLD_S
+
+    def _jump(self, t: float, p) -> bool:
+        """Whether a target starts the stream again: a jump (a step), a stop, a late start.
+
+        A jump: farther than ``jump_m`` from where the stream was heading
+        (:func:`~._stream_heading.stream_heading`, which allows for the
+        stream's acceleration over a stall); a stop: no target for
+        :data:`~._stream_heading.STALL_S`; a stream of fewer than three
+        targets after a gap longer than ``gap_s`` starts again too (its
+        speed is not known).
+        """
+        h = self._hist
+        if t - h[-1][0] > (STALL_S if len(h) >= 3 else self.gap_s):
+            return True
+        head_p, _, allow_m, _ = stream_heading(list(h)[-3:], t)
+        return bool(np.linalg.norm(p - head_p) > self.jump_m + allow_m)
 
     def _off_path(self) -> float:
         """RMS distance [m] of the targets in the first fit's window from their cubic (0: few)."""

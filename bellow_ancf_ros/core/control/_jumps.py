@@ -34,14 +34,17 @@ within 0.2 mm 1.5 s after it (measured on the family's two-segment robots:
 the overshoot 0.139 -> 0.094 mm).
 
 A jump: a target more than :data:`JUMP_M` (or :data:`JUMP_RAD` of its
-z-axis) from where the stream was heading (the previous target plus the
+z-axis) from where the stream was heading, plus what the stream's own
+acceleration allows over the time since its last target
+(:func:`~._stream_heading.stream_heading`: the previous target plus the
 previous step scaled to the time since it, by the targets' times; the
-previous target itself after a jump): a stream that moves smoothly passes
-unchanged and undelayed at any rate, and with any jitter of its times (a
-circle at 10x: 0.02 mm from the extrapolation between 50 Hz targets, 0.5 mm
-between 10 Hz ones; a target 25 ms later than the one before, on the
-two-segment circle at 10x, is 2.1 mm from an extrapolation by one step); a
-stream that starts moving at full speed gets a smooth start.  While a move runs, new
+previous target itself after a jump or a stop): a stream that moves
+smoothly passes unchanged and undelayed at any rate, with any jitter of its
+times and through a busy computer's stall (a circle at 10x: 0.02 mm from
+the extrapolation between 50 Hz targets, 0.5 mm between 10 Hz ones; a
+target 25 ms later than the one before, on the two-segment circle at 10x,
+is 2.1 mm from an extrapolation by one step); a stream that starts moving
+at full speed gets a smooth start.  While a move runs, new
 targets move its end (the move converges on the newest).  The closed loop
 holds its correction until :meth:`JumpTransition.hold_until` (the move's end
 plus :data:`SETTLE_S` for the regulators' lag and the motion capture's
@@ -55,6 +58,7 @@ import math
 import numpy as np
 
 from ._shaping import shaper_impulses
+from ._stream_heading import STALL_S, stream_heading
 
 __all__ = ['CYCLES', 'JUMP_M', 'JUMP_RAD', 'JumpTransition', 'KNOWN_MODE_ERROR',
            'KNOWN_RAMP_CYCLES', 'MODE_SPREAD', 'SETTLE_S']
@@ -139,32 +143,30 @@ class JumpTransition:
         if start is not None:
             z0 = None if start[1] is None else np.asarray(start[1], dtype=float).reshape(3)
             self._newest = (-math.inf, np.asarray(start[0], dtype=float).reshape(3), z0)
-        self._step: tuple | None = None     # the stream's last step (position, z-axis, time)
+        self._stream: list = []   # its newest targets since a jump (stream_heading's)
         self._move: tuple | None = None     # (t0, duration, start position, start z-axis)
 
     def push(self, t: float, position, z_axis=None) -> None:
         """A new target wanted from time ``t`` on (times must not decrease)."""
         p = np.asarray(position, dtype=float).reshape(3)
         z = None if z_axis is None else np.asarray(z_axis, dtype=float).reshape(3)
-        old, step = self._newest, self._step
+        old = self._newest
         if old is not None:
-            # the last step, scaled to the time since the last target: a late target of a
-            # smooth stream (a busy computer, a dropped one) is where the stream was heading
-            dt = float(t) - old[0]
-            k = dt / step[2] if step is not None and 0.0 < step[2] < math.inf else 1.0
-            head_p = old[1] if step is None else old[1] + k * step[0]
-            jump = float(np.linalg.norm(p - head_p)) > JUMP_M
-            if z is not None and old[2] is not None:
-                head_z = old[2] if step is None or step[1] is None else old[2] + k * step[1]
-                jump |= float(np.linalg.norm(z - head_z)) > JUMP_RAD
+            # where the stream was heading (its last step scaled to the time since the last
+            # target: a late target of a smooth stream, a busy computer's stall, is no jump)
+            head_p, head_z, allow_m, allow_rad = stream_heading(self._stream or [old], float(t))
+            jump = float(np.linalg.norm(p - head_p)) > JUMP_M + allow_m
+            if z is not None and head_z is not None:
+                jump |= float(np.linalg.norm(z - head_z)) > JUMP_RAD + allow_rad
             if jump and self.duration_s > 0:
                 start_p, start_z = self.at(float(t))
                 self._move = (float(t), self.duration_s, start_p, start_z, self._ramp_s,
                               self._impulses)
                 self.moves += 1
-            # the step the stream takes and its time (none after a jump: not its speed)
-            self._step = None if jump or not math.isfinite(dt) else (   # (none from the start)
-                p - old[1], None if z is None or old[2] is None else z - old[2], dt)
+            # the stream's steps (none across a jump, a stop or from the start: not its speed)
+            if jump or not float(t) - old[0] <= STALL_S:
+                self._stream = []
+        self._stream = self._stream[-2:] + [(float(t), p, z)]
         self._newest = (float(t), p, z)
 
     @property

@@ -99,7 +99,7 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
     t1, p1 = 1.0, sine(1.0)[0]
     v = 0.01 * omega * math.cos(omega * t1)
     stale, T = st.stale_s(), st.brake_s
-    assert stale == pytest.approx(0.06) and T == pytest.approx(max(1 / F, 4 * TAU))
+    assert stale == pytest.approx(0.03) and T == pytest.approx(max(1 / F, 4 * TAU))
     fresh = st.target()[0]
     assert abs(fresh[0] - p1[0]) > 1e-3                      # moving: shifted
     np.testing.assert_array_equal(st.target(t1 + 0.9 * stale)[0], fresh)   # not stopped yet
@@ -205,3 +205,27 @@ def test_a_held_stream_that_stops_is_not_braked():
         st.push(k / 50, np.array([0.01, 0.0, 0.2]))
     assert not st.busy(5.0) and st.hold_until() is None
     np.testing.assert_allclose(st.target(5.0)[0], [0.01, 0.0, 0.2], atol=1e-12)
+
+
+def test_a_stalled_stream_keeps_its_shift():
+    """A planner stalled 0.1 s by a busy computer: the stream goes on where it was heading.
+
+    The first target after the stall (0.12 s after the one before, 7.5 mm on)
+    used to start the fit again: the shift (4 mm) dropped to nothing and came
+    back over three targets, a kick to the robot's mode.  Now the shift after
+    the stall is the path's own within 1 mm, and the brake that began during
+    the stall (a target overdue by half a period) ends with it.
+    """
+    circle = _circle()
+    exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    for k in range(100):
+        st.push(k / 50, *circle(k / 50))
+    t_last = 99 / 50
+    assert st.busy(t_last + 0.05) and st.hold_until() is not None   # overdue: braking
+    for t in np.arange(t_last + 0.12, t_last + 0.4, 0.02):
+        st.push(t, *circle(t))
+        got = st.target(t)[0]
+        assert np.linalg.norm(got - circle(t)[0]) > 3e-3             # shifted
+        assert np.linalg.norm(got - exact(t)[0]) < 1e-3, (t, np.linalg.norm(got - exact(t)[0]))
+    assert st.hold_until() is None

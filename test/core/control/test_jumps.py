@@ -10,6 +10,7 @@ from bellow_ancf_ros.core.control import FeedbackSettings, IntegralFeedback, Jum
 from bellow_ancf_ros.core.loop import paper_circle
 from bellow_ancf_ros.core.control._jumps import (CYCLES, KNOWN_MODE_ERROR, KNOWN_RAMP_CYCLES,
                                                  MODE_SPREAD, SETTLE_S)
+from bellow_ancf_ros.core.control._stream_heading import STALL_S
 
 F = 2.4    # the two-segment model's first mode [Hz]
 DT = 0.02  # a 50 Hz stream
@@ -191,3 +192,31 @@ def test_a_late_target_of_a_smooth_stream_is_no_jump():
     assert jt.moves == 0
     jt.push(2.02, path(2.0)[0] + [0.0, 0.005, 0.0], path(2.0)[1])   # a real jump still is one
     assert jt.moves == 1
+
+
+@pytest.mark.parametrize('stall_s', [0.1, 0.2, 0.3])
+def test_a_stalled_stream_is_no_jump_and_a_step_after_it_is_one(stall_s):
+    """A busy computer's stall of the planner (the busy bench saw 104 ms) is not a step.
+
+    On the two-segment circle at 10x, the target after a 0.1 s stall (0.12 s
+    after the one before) lies 2.2 mm off the linear heading, more than
+    JUMP_M: read as a jump, the next 1.2 s of the circle became a move that
+    lagged it by up to 32 mm.  The stream's acceleration allows for it; a
+    real step after the stall is still a jump, and a stream silent for
+    longer than a stall (it stopped) starts from its last target.
+    """
+    path = paper_circle(load_robot('two_segment'), 2.0)
+    jt = JumpTransition(2.4)
+    ts = list(np.arange(0.0, 1.0, 0.02)) + list(np.arange(1.0 + stall_s, 2.0, 0.02))
+    for t in ts:
+        jt.push(t, *path(t))
+    assert jt.moves == 0
+    if stall_s == 0.1:   # what the linear heading alone missed by
+        p0, p1, p2 = (path(t)[0] for t in (0.96, 0.98, 1.1))
+        assert np.linalg.norm(p2 - (p1 + 6.0 * (p1 - p0))) == pytest.approx(2.2e-3, abs=1e-4)
+    t = ts[-1] + 0.02
+    jt.push(t, path(t)[0] + [0.0, 0.005, 0.0], path(t)[1])   # a real jump still is one
+    assert jt.moves == 1
+    t_back = t + STALL_S + 0.1      # stopped, then the path again: 50 mm on, a new start
+    jt.push(t_back, *path(t_back))
+    assert jt.moves == 2
