@@ -30,11 +30,11 @@ STALL_S = 0.5
 
 
 def stream_heading(hist, t: float):
-    """Where the stream ``hist`` was heading at ``t``: ``(position, z, allowance_m, allowance_rad)``.
+    """Where the stream ``hist`` was heading at ``t``: ``(position, z, allow_m, allow_rad)``.
 
     ``hist``: its newest samples ``(time, position (3,), z-axis (3,) or
     None)``, oldest first, one at least, none across a jump (the last three
-    are read).  ``allowance_*``: how far a target of the stream may miss
+    are read).  ``allow_*``: how far a target of the stream may miss
     the heading by the stream's acceleration (module docstring); 0 with
     fewer than three samples.  After :data:`STALL_S` without a target, or
     with one sample: the newest sample itself.
