@@ -280,12 +280,10 @@ class StreamFeedforward:
         A jump: farther than ``jump_m`` from where the stream was heading
         (:func:`~._stream_heading.stream_heading`, which allows for the
         stream's acceleration over a stall); a stop: no target for
-        :data:`~._stream_heading.STALL_S`; a stream of fewer than three
-        targets after a gap longer than ``gap_s`` starts again too (its
-        speed is not known).
+        :data:`~._stream_heading.STALL_S`.
         """
         h = self._hist
-        if t - h[-1][0] > (STALL_S if len(h) >= 3 else self.gap_s):
+        if t - h[-1][0] > STALL_S:
             return True
         head_p, _, allow_m, _ = stream_heading(list(h)[-3:], t)
         return bool(np.linalg.norm(p - head_p) > self.jump_m + allow_m)

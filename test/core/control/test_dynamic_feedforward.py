@@ -229,3 +229,22 @@ def test_a_stalled_stream_keeps_its_shift():
         assert np.linalg.norm(got - circle(t)[0]) > 3e-3             # shifted
         assert np.linalg.norm(got - exact(t)[0]) < 1e-3, (t, np.linalg.norm(got - exact(t)[0]))
     assert st.hold_until() is None
+
+
+@pytest.mark.parametrize('rate_hz', [20.0, 25.0])
+def test_a_slow_stream_is_shifted(rate_hz):
+    """A planner at 20 or 25 Hz: each target is one stream with the ones before (not a restart).
+
+    (At 10 Hz this circle's 6.3 mm between targets is more than ``jump_m``
+    from a stream of one target, whose heading is that target: every target
+    starts the stream again, unshifted.)
+    """
+    circle = _circle()
+    exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    for k in range(int(3 * rate_hz)):
+        st.push(k / rate_hz, *circle(k / rate_hz))
+    t = (int(3 * rate_hz) - 1) / rate_hz
+    got = st.target(t)[0]
+    assert np.linalg.norm(got - circle(t)[0]) > 3e-3                 # shifted
+    assert np.linalg.norm(got - exact(t)[0]) < 1.5e-3, np.linalg.norm(got - exact(t)[0])
