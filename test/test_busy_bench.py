@@ -148,3 +148,20 @@ def test_the_tracking_goals_hold_in_both_runs_beside_the_ratio():
     rows = {r['figure']: r for r in busy_bench.compare(_run(25.0, 0.15), _run(25.0, 0.18),
                                                        0.05, limits)}
     assert rows['held_mm']['met']
+
+
+def test_repeats_combine_into_medians_with_their_range_and_the_worst_checks():
+    runs = [_run(25.0, 0.10), _run(31.0, 0.14, 1), _run(27.0, 0.30)]
+    for r, t in zip(runs, ([], [3.5], [])):
+        r.update(trip_at_s=t, oscillation_messages=[], commands_bad_examples=[])
+    runs[2]['commands_safe'] = False
+    got = busy_bench.combined(runs)
+    assert got['period_ms']['p99'] == 27.0 and got['held_rmse_mm'] == pytest.approx(0.14)
+    assert got['spread']['held_mm'] == (0.10, 0.30) and got['spread']['period_p99'] == (25.0, 31.0)
+    assert got['trips'] == 1 and got['trip_at_s'] == [3.5] and not got['commands_safe']
+    assert got['repeats'] == 3 and got['circle_rmse_mm'] is None
+    assert runs[0]['held_rmse_mm'] == 0.10      # the runs themselves are left as they were
+    one = busy_bench.combined(runs[:1])
+    rows = {r['figure']: r for r in busy_bench.compare(got, one, 0.05)}
+    assert rows['held_mm']['quiet_range'] == (0.10, 0.30)
+    assert rows['held_mm']['busy_range'] == (0.10, 0.10)
