@@ -489,6 +489,8 @@ def figures(data: dict, cfg, targets: Targets, t0: float) -> dict:
         out['solve_window_ms'] = {k: float(v[f'solve_ms_{k}']) for k in ('median', 'p95', 'max')
                                   if v.get(f'solve_ms_{k}', 'n/a') != 'n/a'}
         out['solve_window_ms']['n'] = int(v.get('solve_stats_window', 0))
+        out['carries'] = {k: int(v[f'feedback_{k}']) for k in ('carries', 'carries_cut')
+                          if str(v.get(f'feedback_{k}', '')).isdigit()}
     trip_at = []   # when each trip was first reported [s after the stream's start]
     for t, k in sorted(trip_seen):
         trip_at += [round(t - t0, 2)] * (k - trips)
@@ -571,6 +573,8 @@ INFO_ROWS = (
     ('solve time max [ms] (last 1000 solves)', ('solve_window_ms', 'max')),
     ('solve time p99 [ms] (10 Hz sample)', ('solve_ms', 'p99')),
     ('circle: solves holding for a jump [%]', ('circle_jump_pct',)),
+    ("jumps' goals the correction was carried to", ('carries', 'carries')),
+    ('... of them cut short (a solve failed)', ('carries', 'carries_cut')),
     ('mocap dropouts (ages left out)', ('dropouts',)),
     ('CPU: inverse node [cores]', ('cpu_cores', 'inverse')),
     ('CPU: simulated robot [cores]', ('cpu_cores', 'robot')),

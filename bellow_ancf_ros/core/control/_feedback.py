@@ -130,6 +130,7 @@ import numpy as np
 from ..geometry import rotation_between, rotation_from_vector, rotation_z
 from ..history import bracket
 from ..solve import solve_inverse
+from ..status import InverseStatus
 from ._median_gate import WINDOW, MedianGate
 from ._mismatch import ROTATION_LENGTH_M, MismatchTransfer
 from ._mocap_noise import NOISE_GATE_S, MocapNoise
@@ -276,6 +277,7 @@ class IntegralFeedback:
         self._held_inverse = None   # the inverse's answer for the last command that went out
         self._move_seen = None      # the start time of the newest move carried to its goal
         self._carry = None          # (from, to, start, goal, until): the correction carried
+        self.carries = [0, 0]       # corrections carried to a jump's goal: tried, cut short
         self.state = WAITING
 
     @property
@@ -521,10 +523,15 @@ class IntegralFeedback:
             res = solve_inverse(tr.model, goal + c, z, payload_kg=load.payload_kg,
                                 tip_force_n=load.force_n, warm_start=warm,
                                 time_budget_s=CARRY_BUDGET_S)
+            if res.status == InverseStatus.TIME_BUDGET:
+                cut[0] = True
             return res if res.forward is not None and res.forward.success else None
 
+        cut = [False]   # a solve ran out of its budget: the answer so far stands
+        self.carries[0] += 1
         new = solve_goal(c_old, r_old, held)
         if new is None:
+            self.carries[1] += 1
             return
         got = tr.transfer(held.forward, c_old, r_old, new.forward)
         for _ in range(CARRY_AGAIN):   # the goal's pressures with the carried correction
@@ -534,6 +541,8 @@ class IntegralFeedback:
             if new is None:
                 break   # (the answer so far stands)
             got = tr.again(new.forward)
+        if cut[0] or new is None:
+            self.carries[1] += 1
         if got is None:
             return
         s = self.settings
@@ -692,6 +701,8 @@ class IntegralFeedback:
             'feedback_correction_deg': f'{math.degrees(np.linalg.norm(self.correction_rad)):.3f}',
             'measured_pose_age_s': 'none' if age is None else f'{age:.3f}',
             'measured_poses_outliers': self.rejected,
+            'feedback_carries': self.carries[0],
+            'feedback_carries_cut': self.carries[1],
             'feedback_gain_per_s': f'{self.gain_per_s:.4g}',
             **self.noise.status(),
             'oscillation_trips': 0 if self.watchdog is None else self.watchdog.trips,

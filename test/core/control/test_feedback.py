@@ -25,7 +25,7 @@ from bellow_ancf_ros.core.control._feedback import (
     FeedbackSettings,
     IntegralFeedback,
 )
-from bellow_ancf_ros.core.control import loop_margins
+from bellow_ancf_ros.core.control import MismatchTransfer, loop_margins
 from bellow_ancf_ros.core.sim._simulated_robot import SimulatedRobot
 
 CTRL_S, PHYS_S, MOCAP_S = 0.05, 0.02, 0.01
@@ -492,6 +492,24 @@ def test_a_jump_carries_the_correction_to_its_goal_along_the_move(one):
     assert p == pytest.approx(b + c_goal, abs=1e-12)
     fb.corrected_target(2.1, b, move=move, hold_until=3.0)
     assert len(calls) == 1                   # one move, one transfer
+    assert fb.status(2.1)['feedback_carries'] == 1 and fb.status(2.1)['feedback_carries_cut'] == 0
+
+
+def test_a_carry_whose_solve_runs_out_of_its_budget_is_counted(one, monkeypatch):
+    """The status counts the carries whose goal solve ran out of its wall-clock budget."""
+    import bellow_ancf_ros.core.control._feedback as feedback_module
+    monkeypatch.setattr(feedback_module, 'CARRY_BUDGET_S', 1e-9)
+    fb = IntegralFeedback(FeedbackSettings(correction_frame='model'),
+                          transfer=MismatchTransfer(one))
+    a = solve_forward(one, [30e3, 0.0, 0.0]).position
+    fb.measurement(0.0, a)
+    fb.corrected_target(0.0, a)
+    fb.correction_m = np.array([1e-3, 0.0, 0.0])
+    inv = solve_inverse(one, a + fb.correction_m)
+    fb.report(True, False, inv.forward.position, inv.forward.z_axis, inverse=inv)
+    fb.corrected_target(1.0, a, move=(1.0, a, a + [0.0, 0.01, 0.0], None), hold_until=3.0)
+    st = fb.status(1.0)
+    assert st['feedback_carries'] == 1 and st['feedback_carries_cut'] == 1
 
 
 def test_a_carried_correction_stays_within_its_share_of_the_move(one):
