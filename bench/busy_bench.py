@@ -58,7 +58,7 @@ safe), each condition's range beside them, and writes the figures to
 be made (a node did not come up), else 0.
 
     .venv/bin/python bench/busy_bench.py [--robot one_segment|two_segment|both]
-        [--burners N] [--repeats N] [--time-scale S] [--out FILE]
+        [--burners N] [--repeats N] [--time-scale S] [--rig-nice N] [--out FILE]
 """
 
 from __future__ import annotations
@@ -97,6 +97,9 @@ LATE_S = 1.5          # the step's error is judged from this long after it on
 SEED = 7              # the motion capture's noise, outliers and dropouts
 RATIO_GOAL = 1.3      # a busy figure at most this many times the quiet one
 REPEATS = 3           # quiet and busy runs per robot: the figures are their medians
+RIG_NICE_HELP = ("the simulated robot's niceness (default 0: the nodes' and the burners' "
+                 'priority; negative, with the privilege to: above them, as the hardware it '
+                 'stands for, which a busy computer does not slow)')
 PERIOD_GOAL = 2.0     # command period p99 at most this many nominal periods
 GAP_S = 0.1           # measured poses this far apart (capture stamps): a gap
 NOT_QUIET_CORES = 0.25   # other processes' CPU in the quiet run worth a warning [cores]
@@ -332,13 +335,14 @@ def stop_burners(burners: list) -> None:
 
 def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: int = SEED,
              startup_timeout: float = 90.0, env_extra: dict | None = None,
-             identified: bool = True) -> dict:
+             identified: bool = True, rig_nice: int = 0) -> dict:
     """One run of the closed loop (``burners`` beside it): its figures (:func:`figures`).
 
     ``identified``: the inverse node is told the plant's hardware as a lab
     that identified it (``hardware_parameters``: the regulators' play, the
     bellows' creep, the correction carried in the model's frame), as
     ``make demo`` runs it; False: the node's bare defaults.
+    ``rig_nice``: the simulated robot's niceness (:data:`RIG_NICE_HELP`).
     ``env_extra``: more environment for the node processes.  Raises
     ``RuntimeError`` when the nodes do not come up or one dies (its log
     is kept and named).
@@ -353,7 +357,7 @@ def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: in
     try:
         time.sleep(0.5)   # the burners at full speed before the nodes start
         procs['robot'] = NodeProcess('simulated_robot_node', {
-            'robot_config': f'{robot}_mismatched', 'seed': seed}, env, logs)
+            'robot_config': f'{robot}_mismatched', 'seed': seed}, env, logs, nice=rig_nice)
         procs['inverse'] = NodeProcess(INVERSE, {
             'robot_config': robot, 'feedback': 'integral',
             **(hardware_parameters('realistic') if identified else {})}, env, logs)
@@ -692,7 +696,9 @@ def render(result: dict) -> str:
              f"{result['cpu_count']} cores), targets at {TARGET_RATE_HZ:g} Hz stamped when "
              f"sent; nominal command period {result['nominal_period_ms']:g} ms "
              '(1 / feedback_rate_hz)'
-             + (f'; medians of {n} runs each, their range after them' if n > 1 else ''),
+             + (f'; medians of {n} runs each, their range after them' if n > 1 else '')
+             + (f"; the simulated robot at nice {result['rig_nice']}"
+                if result.get('rig_nice') else ''),
              f"  {'figure':40s} {'quiet':>8s} {'busy':>8s} {'busy/quiet':>10s}  "
              f"{'goal':48s} met" + ('  quiet range      busy range' if n > 1 else '')]
     for r in result['rows']:
@@ -740,6 +746,7 @@ def main(argv=None) -> int:
     ap.add_argument('--repeats', type=int, default=REPEATS,
                     help='quiet and busy runs per robot, interleaved; the figures are their '
                          f'medians (default {REPEATS})')
+    ap.add_argument('--rig-nice', type=int, default=0, help=RIG_NICE_HELP)
     ap.add_argument('--out', type=Path, default=HERE / 'busy.json')
     ap.add_argument('--node-defaults', action='store_true',
                     help="the inverse node's bare defaults (default: told the plant's play and "
@@ -762,7 +769,7 @@ def main(argv=None) -> int:
                 print(f'{robot}, {name} ({k + 1} of {args.repeats}): {schedule.end_s:g} s of '
                       'targets ...', flush=True)
                 try:
-                    each[name].append(run_loop(robot, n, schedule,
+                    each[name].append(run_loop(robot, n, schedule, rig_nice=args.rig_nice,
                                                identified=not args.node_defaults))
                 except RuntimeError as exc:
                     print(f'  FAILED: {exc}')
@@ -774,13 +781,14 @@ def main(argv=None) -> int:
                               node_parameters=('identified hardware' if not args.node_defaults
                                                else 'defaults'),
                               nominal_period_ms=nominal * 1e3, schedule=asdict(schedule),
-                              rows=rows, repeats=each, **runs)
+                              rows=rows, repeats=each, rig_nice=args.rig_nice, **runs)
         print(render(results[robot]), flush=True)
     data = {'schedule': asdict(schedule), 'target_rate_hz': TARGET_RATE_HZ,
             'circle_period_s': PERIOD_S, 'spin_s': SPIN_S, 'seed': SEED,
             'ratio_goal': RATIO_GOAL, 'period_goal_nominal': PERIOD_GOAL,
             'nominal_period_s': nominal, 'cpu_count': os.cpu_count(),
-            'burners': args.burners, 'repeats': args.repeats, 'robots': results}
+            'burners': args.burners, 'repeats': args.repeats, 'rig_nice': args.rig_nice,
+            'robots': results}
     args.out.write_text(json.dumps(data, indent=1) + '\n')
     print(f'written: {args.out}')
     return 0

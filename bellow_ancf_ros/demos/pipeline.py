@@ -82,12 +82,17 @@ class NodeProcess:
     """One node as a child process (``params``: name -> value, ``remaps``: from -> to)."""
 
     def __init__(self, module: str, params: dict, env: dict, log_dir: Path,
-                 remaps: dict | None = None, tag: str = '') -> None:
-        """Start ``python -m bellow_ancf_ros.nodes.<module>``; its log goes to ``log_dir``."""
+                 remaps: dict | None = None, tag: str = '', nice: int = 0) -> None:
+        """Start ``python -m bellow_ancf_ros.nodes.<module>``; its log goes to ``log_dir``.
+
+        ``nice``: run it that much nicer (``nice -n``; negative: above this
+        process, which needs the privilege to).
+        """
         self.module = module
         self._interrupted = False
         self.log_path = log_dir / f'{tag}{module}.log'
-        self.cmd = [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args']
+        self.cmd = ((['nice', '-n', str(int(nice))] if nice else [])
+                    + [sys.executable, '-m', f'bellow_ancf_ros.nodes.{module}', '--ros-args'])
         for k, v in params.items():
             self.cmd += ['-p', f'{k}:={v}']
         for k, v in (remaps or {}).items():
