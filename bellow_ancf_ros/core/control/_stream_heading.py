@@ -4,11 +4,11 @@ A target that is far from where its stream was heading is a jump (a step
 of the planner); one that is where the stream was heading is the stream
 going on, however late it comes.  The heading is the newest target plus the
 stream's last step scaled to the time since it (the targets' own times):
-a 50 Hz stream on the two-segment circle at 10x lands within 0.1 mm of it.
+a 50 Hz stream on the two-segment circle at 10x lands within 0.11 mm of it.
 A late target misses it by the stream's acceleration: ``a g (g + h) / 2``
 after a gap ``g`` since a step ``h`` (the last step's chord is the velocity
 half a step back).  On a busy computer a planner stalls for 0.1 s and more
-(the busy bench: 104 ms), and on that circle a target 120 ms after the one
+(the busy bench: 104-156 ms), and on that circle a target 120 ms after the one
 before lies 2.2 mm off the heading: read as a jump, the stream's next 1.2 s
 became a move that lagged the circle by up to 32 mm (simulated; 0.74 mm
 RMSE without the stall, 15.9 mm with it).  So the allowance for the
