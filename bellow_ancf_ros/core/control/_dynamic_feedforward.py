@@ -206,7 +206,7 @@ class StreamFeedforward:
     stop (:meth:`_jump`), or too few samples: the newest target unshifted.
 
     **A stream that stops** while it was moving, either by no target for
-    ``stale_periods`` of its own intervals (at least ``gap_s`` / 2) or by
+    ``stale_periods`` of its own intervals (at least ``min_stale_s``) or by
     repeating its newest target (a planner that holds the path's last pose
     and keeps publishing it): the robot, led by the shift, is moving at the
     stream's speed.  Holding the shifted target would drive it on by the
@@ -226,11 +226,11 @@ class StreamFeedforward:
     stop at speed still swings the robot at its mode.
     """
 
-    def __init__(self, frequency_hz: float, damping_ratio: float, gap_s: float = 0.05,
+    def __init__(self, frequency_hz: float, damping_ratio: float, min_stale_s: float = 0.025,
                  jump_m: float = 0.005, stale_periods: float = 1.5, brake_periods: float = 1.0,
                  **kw) -> None:
         self.ff = DynamicFeedforward(frequency_hz, damping_ratio, **kw)
-        self.gap_s, self.jump_m = float(gap_s), float(jump_m)
+        self.min_stale_s, self.jump_m = float(min_stale_s), float(jump_m)
         self.stale_periods, self.brake_periods = float(stale_periods), float(brake_periods)
         self._keep_s = max(w for w, _ in FITS + NOISY_FITS)
         self._hist: deque = deque()
@@ -308,8 +308,9 @@ class StreamFeedforward:
     def stale_s(self) -> float:
         """How long after its newest target the stream counts as stopped [s]."""
         t = [s[0] for s in self._hist]
-        step = float(np.median(np.diff(t))) if len(t) >= 2 else self.gap_s
-        return max(self.stale_periods * step, 0.5 * self.gap_s)
+        if len(t) < 2:   # (no speed yet: nothing to brake)
+            return self.min_stale_s
+        return max(self.stale_periods * float(np.median(np.diff(t))), self.min_stale_s)
 
     def _fit(self):
         """The derivatives at the newest target, ``(dp, dz or None)``: rows v, a[, j].
