@@ -614,11 +614,11 @@ def combined(runs: list) -> dict:
     """
     out = copy.deepcopy(runs[0])
     out['spread'] = {}
-    for key, path in [(r[0], r[2]) for r in ROWS] + [(r[0], r[1]) for r in INFO_ROWS]:
+    for key, path in [(k, p) for k, _, p in ROWS] + [(None, p) for _, p in INFO_ROWS]:
         vals = [v for v in (_get(r, path) for r in runs) if v is not None]
         if vals:
             _put(out, path, float(np.median(vals)))
-            if any(key == r[0] for r in ROWS):
+            if key is not None:   # (a goal figure)
                 out['spread'][key] = (float(min(vals)), float(max(vals)))
     out['trips'] = int(sum(r['trips'] for r in runs))
     out['commands_safe'] = all(r['commands_safe'] for r in runs)
