@@ -164,6 +164,37 @@ def dynamic_path(path: Callable[[float], tuple], frequency_hz: float, damping_ra
     return f
 
 
+def _grid(stamps: np.ndarray) -> np.ndarray | None:
+    """The regular grid a stream's stamps scatter about (a planner's timer), or None.
+
+    ``stamps`` ascending; each interval is given the whole number of median
+    intervals nearest it (a dropped target skips one), and the grid is the
+    least-squares line through them.  None: fewer than six, two on one index
+    (a burst after a stall), or a stamp half an interval off the line (not
+    one regular stream).
+    """
+    if len(stamps) < 6:
+        return None
+    gaps = np.diff(stamps)
+    step = float(np.median(gaps))
+    if not step > 0:
+        return None
+    skips = np.rint(gaps / step)   # (interval by interval: the median's own error
+    if np.any(skips < 1):          # would add up along the whole span)
+        return None
+    k = np.concatenate(([0.0], np.cumsum(skips)))
+    for _ in range(2):   # then each stamp given the index nearest it on that first line
+        V = np.column_stack([np.ones_like(k), k])
+        a, b = np.linalg.lstsq(V, stamps, rcond=None)[0]
+        k = np.rint((stamps - a) / b)
+        if np.any(np.diff(k) < 1):
+            return None
+    grid = a + b * k
+    if np.max(np.abs(grid - stamps)) > 0.5 * b:
+        return None
+    return grid - grid[-1] + stamps[-1]
+
+
 def _brake_bases() -> np.ndarray:
     """Quintic bases of a stop: ``g_k^(m)(0) = delta_km`` (k, m = 1, 2), all else zero at 0 and 1.
 
@@ -238,6 +269,7 @@ class StreamFeedforward:
         self._repeated = False   # the newest targets repeat the one before them
         self._repeat_t = 0.0     # the newest repeat's time
         self._noisy_until = -math.inf   # read with NOISY_FITS until then
+        self._on_grid = False    # the fits read the targets' times from their stamps' grid
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shift for this mode from now on."""
@@ -249,6 +281,7 @@ class StreamFeedforward:
         self._brake = None
         self._repeated = False
         self._noisy_until = -math.inf
+        self._on_grid = False
 
     def push(self, t: float, position, z_axis=None) -> None:
         """A target wanted at time ``t`` (a time that goes back starts the stream again)."""
@@ -271,8 +304,7 @@ class StreamFeedforward:
             h.popleft()
         self._brake = None
         self._repeated = False
-        if self._off_path() > NOISE_M:
-            self._noisy_until = float(t) + NOISY_HOLD_S
+        self._read_times(t)
 
     def _jump(self, t: float, p) -> bool:
         """Whether a target starts the stream again: a jump (a step), a stop, a late start.
@@ -288,17 +320,42 @@ class StreamFeedforward:
         head_p, _, allow_m, _ = stream_heading(list(h)[-3:], t)
         return bool(np.linalg.norm(p - head_p) > self.jump_m + allow_m)
 
-    def _off_path(self) -> float:
-        """RMS distance [m] of the targets in the first fit's window from their cubic (0: few)."""
-        h = self._hist
-        window = FITS[0][0]
-        sel = [s for s in h if s[0] >= h[-1][0] - window]
-        if len(sel) < 6:   # (a cubic through five leaves one degree of freedom: too few to judge)
+    def _off_path(self, t: np.ndarray) -> float:
+        """RMS distance [m] of the targets from their cubic over the first fit's window.
+
+        The window holds at least the last six targets; 0 with fewer.
+
+        ``t``: the targets' times, relative to the newest (stamps or grid).
+        """
+        if len(t) < 6:   # (a cubic through five leaves one degree of freedom: too few to judge)
             return 0.0
-        t = np.array([s[0] for s in sel]) - h[-1][0]
-        V = np.column_stack([t ** n for n in range(4)])
-        P = np.array([s[1] for s in sel])
+        sel = t >= min(-FITS[0][0], t[-6])
+        V = np.column_stack([t[sel] ** n for n in range(4)])
+        P = np.array([s[1] for s in self._hist])[sel]
         return float(np.sqrt(np.mean((V @ np.linalg.lstsq(V, P, rcond=None)[0] - P) ** 2) * 3))
+
+    def _read_times(self, t: float) -> None:
+        """Read the stream by its stamps or by their grid, whichever its poses lie smoother on.
+
+        Called with each new target (at ``t``): the grid (:func:`_grid`) is
+        the fits' time from now on if the targets lie within :data:`NOISE_M`
+        of a cubic by it and closer than by their stamps; else the stamps,
+        and a stream off its cubic by more than :data:`NOISE_M` by them is
+        read with :data:`NOISY_FITS` (for :data:`NOISY_HOLD_S`).
+        """
+        stamps = np.array([s[0] for s in self._hist]) - self._hist[-1][0]
+        grid = _grid(stamps)
+        off = self._off_path(stamps)
+        off_grid = math.inf if grid is None else self._off_path(grid)
+        self._on_grid = off_grid < off and off_grid <= NOISE_M
+        if not self._on_grid and off > NOISE_M:
+            self._noisy_until = float(t) + NOISY_HOLD_S
+
+    def _times(self) -> np.ndarray:
+        """The targets' times for the fits, relative to the newest (:meth:`_read_times`)."""
+        stamps = np.array([s[0] for s in self._hist]) - self._hist[-1][0]
+        grid = _grid(stamps) if self._on_grid else None
+        return stamps if grid is None else grid
 
     @property
     def brake_s(self) -> float:
@@ -322,8 +379,8 @@ class StreamFeedforward:
         h = self._hist
         if len(h) < 3:
             return None
-        fits = NOISY_FITS if h[-1][0] <= self._noisy_until else FITS
-        t = np.array([s[0] for s in h]) - h[-1][0]
+        fits = NOISY_FITS if h[-1][0] <= self._noisy_until and not self._on_grid else FITS
+        t = self._times()
         P = np.array([s[1] for s in h])
         Z = None if h[-1][2] is None else np.array([s[2] for s in h])
         rows_p, rows_z = [], []
