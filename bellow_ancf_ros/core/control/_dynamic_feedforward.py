@@ -55,6 +55,7 @@ the end of the circle's spin-up (watchdog trips in 3 of 40 more).
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from typing import Callable
 
@@ -173,23 +174,30 @@ def _grid(stamps: np.ndarray) -> np.ndarray | None:
     (a burst after a stall), or a stamp half an interval off the line (not
     one regular stream).
     """
-    if len(stamps) < 6:
+    n = len(stamps)
+    if n < 6:
         return None
-    gaps = np.diff(stamps)
-    step = float(np.median(gaps))
+    # (plain floats: at some thirty stamps numpy's per-call cost was most of the time)
+    ts = stamps.tolist()
+    gaps = [b - a for a, b in zip(ts, ts[1:])]
+    step = sorted(gaps)[len(gaps) // 2]
     if not step > 0:
         return None
-    skips = np.rint(gaps / step)   # (interval by interval: the median's own error
-    if np.any(skips < 1):          # would add up along the whole span)
-        return None
-    k = np.concatenate(([0.0], np.cumsum(skips)))
-    for _ in range(2):   # then each stamp given the index nearest it on that first line
-        V = np.column_stack([np.ones_like(k), k])
-        a, b = np.linalg.lstsq(V, stamps, rcond=None)[0]
-        k = np.rint((stamps - a) / b)
-        if np.any(np.diff(k) < 1):
+    k = [0]
+    for gap in gaps:   # (interval by interval: the median's own error would add up)
+        skip = round(gap / step)
+        if skip < 1:
             return None
-    grid = a + b * k
+        k.append(k[-1] + skip)
+    for _ in range(2):   # then each stamp given the index nearest it on that first line
+        k_mean, t_mean = sum(k) / n, sum(ts) / n
+        b = (sum((ki - k_mean) * (ti - t_mean) for ki, ti in zip(k, ts))
+             / sum((ki - k_mean) ** 2 for ki in k))
+        a = t_mean - b * k_mean
+        k = [round((ti - a) / b) for ti in ts]
+        if any(k1 >= k2 for k1, k2 in zip(k, k[1:])):
+            return None
+    grid = a + b * np.array(k, dtype=float)
     if np.max(np.abs(grid - stamps)) > 0.5 * b:
         return None
     return grid - grid[-1] + stamps[-1]
@@ -270,6 +278,7 @@ class StreamFeedforward:
         self._repeat_t = 0.0     # the newest repeat's time
         self._noisy_until = -math.inf   # read with NOISY_FITS until then
         self._on_grid = False    # the fits read the targets' times from their stamps' grid
+        self._times = self._positions = np.zeros(0)   # the fits' (:meth:`_read_times`)
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shift for this mode from now on."""
@@ -330,9 +339,11 @@ class StreamFeedforward:
         if len(t) < 6:   # (a cubic through five leaves one degree of freedom: too few to judge)
             return 0.0
         sel = t >= min(-FITS[0][0], t[-6])
-        V = np.column_stack([t[sel] ** n for n in range(4)])
-        P = np.array([s[1] for s in self._hist])[sel]
-        return float(np.sqrt(np.mean((V @ np.linalg.lstsq(V, P, rcond=None)[0] - P) ** 2) * 3))
+        tau = t[sel] / FITS[0][0]   # (scaled to [-1, 0], about the newest: the normal
+        V = tau[:, None] ** np.arange(4)   # equations of a 4x4 are then well within double)
+        P = self._positions[sel] - self._positions[-1]
+        r = V @ np.linalg.solve(V.T @ V, V.T @ P) - P
+        return float(np.sqrt(np.mean(r ** 2) * 3))
 
     def _read_times(self, t: float) -> None:
         """Read the stream by its stamps or by their grid, whichever its poses lie smoother on.
@@ -343,19 +354,15 @@ class StreamFeedforward:
         and a stream off its cubic by more than :data:`NOISE_M` by them is
         read with :data:`NOISY_FITS` (for :data:`NOISY_HOLD_S`).
         """
+        self._positions = np.array([s[1] for s in self._hist])
         stamps = np.array([s[0] for s in self._hist]) - self._hist[-1][0]
         grid = _grid(stamps)
         off = self._off_path(stamps)
         off_grid = math.inf if grid is None else self._off_path(grid)
         self._on_grid = off_grid < off and off_grid <= NOISE_M
+        self._times = grid if self._on_grid else stamps
         if not self._on_grid and off > NOISE_M:
             self._noisy_until = float(t) + NOISY_HOLD_S
-
-    def _times(self) -> np.ndarray:
-        """The targets' times for the fits, relative to the newest (:meth:`_read_times`)."""
-        stamps = np.array([s[0] for s in self._hist]) - self._hist[-1][0]
-        grid = _grid(stamps) if self._on_grid else None
-        return stamps if grid is None else grid
 
     @property
     def brake_s(self) -> float:
@@ -367,7 +374,8 @@ class StreamFeedforward:
         t = [s[0] for s in self._hist]
         if len(t) < 2:   # (no speed yet: nothing to brake)
             return self.min_stale_s
-        return max(self.stale_periods * float(np.median(np.diff(t))), self.min_stale_s)
+        gap = statistics.median(b - a for a, b in zip(t, t[1:]))   # (numpy's: 10x the time)
+        return max(self.stale_periods * gap, self.min_stale_s)
 
     def _fit(self):
         """The derivatives at the newest target, ``(dp, dz or None)``: rows v, a[, j].
@@ -380,9 +388,9 @@ class StreamFeedforward:
         if len(h) < 3:
             return None
         fits = NOISY_FITS if h[-1][0] <= self._noisy_until and not self._on_grid else FITS
-        t = self._times()
-        P = np.array([s[1] for s in h])
+        t, P = self._times, self._positions
         Z = None if h[-1][2] is None else np.array([s[2] for s in h])
+        PZ = P if Z is None else np.hstack([P, Z])   # (one fit for both)
         rows_p, rows_z = [], []
         solved: dict = {}   # (first sample, degree) -> coefficients (FITS: one fit for all)
         for order, (window, degree) in enumerate(fits, start=1):
@@ -394,12 +402,10 @@ class StreamFeedforward:
             if key not in solved:
                 tt = t[sel]
                 V = np.column_stack([tt ** n / math.factorial(n) for n in range(deg + 1)])
-                solved[key] = (np.linalg.lstsq(V, P[sel], rcond=None)[0],
-                               None if Z is None else np.linalg.lstsq(V, Z[sel], rcond=None)[0])
-            cp, cz = solved[key]
-            rows_p.append(cp[order])
+                solved[key] = np.linalg.lstsq(V, PZ[sel], rcond=None)[0]
+            rows_p.append(solved[key][order, :3])
             if Z is not None:
-                rows_z.append(cz[order])
+                rows_z.append(solved[key][order, 3:])
         return np.array(rows_p), (None if Z is None else np.array(rows_z))
 
     def _braking(self, now: float | None):
