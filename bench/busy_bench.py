@@ -4,8 +4,10 @@ Runs the closed loop on the wall clock, as with a real robot:
 ``simulated_robot_node`` (the robot's ``*_mismatched`` file, its realistic
 plant) and ``inverse_kinetostatic_node`` (``feedback: integral``, its other
 defaults; the model ``one_segment`` / ``two_segment``) as separate processes
-on an isolated ``ROS_DOMAIN_ID``.  This process streams the targets at 50 Hz,
-each stamped when it is published (not previewed), in phases: a held target
+on an isolated ``ROS_DOMAIN_ID``.  This process streams the targets at 50 Hz
+as a lab's planner on a timer does: each the path at its tick's time, stamped
+when it is published (not previewed; after the tick by as long as the
+computer kept this process waiting; a missed tick skipped), in phases: a held target
 (8 s); the paper's circle at 10x its speed (2 s period), entered over a 1 s
 spin-up, left over a 1 s spin-down after three periods of path, where it
 started; held again (3 s); a 10 mm step in ``y``, held 4 s.  Each robot runs
@@ -215,6 +217,7 @@ class BusyClient(SpunNode):
         self.measured = []   # capture stamps [s]
         self.diag = []       # DiagnosticArray messages
         self.sent = []       # stamps [s] of the targets sent
+        self.late = []       # how long after its tick's time each was stamped [s]
         n = self.node
         n.create_subscription(Float64MultiArray, 'pressure_command', self._command, q)
         n.create_subscription(PoseStamped, 'true_pose', self._true, q)
@@ -255,30 +258,37 @@ class BusyClient(SpunNode):
         return seen and self.pub.get_subscription_count() >= 1 and self.inverse_active()
 
     def stream(self, targets: Targets, duration_s: float) -> float:
-        """Publish ``targets`` at 50 Hz for ``duration_s``, stamped now; its start [s, ROS]."""
+        """Stream ``targets`` at 50 Hz for ``duration_s`` as a lab's planner; its start [s, ROS].
+
+        A planner on a timer: each pose is the path at its tick's time, and
+        is stamped when it is published, after the tick (late by as much as
+        the computer kept this process waiting); a tick missed altogether is
+        skipped, as a ROS timer skips it.
+        """
         from bellow_ancf_ros.nodes.ros_util import pose_message
 
         clock = self.node.get_clock()
         t0 = clock.now().nanoseconds * 1e-9
-        tick = time.monotonic()
-        while True:
-            now = clock.now()
-            t = now.nanoseconds * 1e-9 - t0
-            if t > duration_s:
-                return t0
+        start = time.monotonic()
+        k = 0
+        while k / TARGET_RATE_HZ <= duration_s:
+            t = k / TARGET_RATE_HZ   # the tick's time: the path there
             pos, z = targets(t)
             q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z)
+            now = clock.now()
             self.pub.publish(pose_message(pos, q, 'base', now.to_msg()))
-            self.sent.append(t0 + t)
-            tick += 1.0 / TARGET_RATE_HZ
-            time.sleep(max(0.0, tick - time.monotonic()))
+            self.sent.append(now.nanoseconds * 1e-9)
+            self.late.append(now.nanoseconds * 1e-9 - t0 - t)
+            k = max(k + 1, math.ceil((time.monotonic() - start) * TARGET_RATE_HZ))
+            time.sleep(max(0.0, start + k / TARGET_RATE_HZ - time.monotonic()))
+        return t0
 
     def snapshot(self) -> dict:
         """A copy of everything recorded."""
         with self.lock:
             return {'commands': list(self.commands), 'true': list(self.true),
                     'measured': list(self.measured), 'diag': list(self.diag),
-                    'sent': list(self.sent)}
+                    'sent': list(self.sent), 'late': list(self.late)}
 
 
 def _stamp(msg) -> float:
@@ -454,6 +464,7 @@ def figures(data: dict, cfg, targets: Targets, t0: float) -> dict:
     out['commands_safe'] = bool(cmds) and not bad
     sent = np.array(data['sent'])
     out['target_period_ms'] = _ms(np.diff(sent))
+    out['target_late_ms'] = _ms(np.array(data.get('late', [])))
     # ---- diagnostics: the inverse node's per-solve statuses and heartbeats, the simulator's
     true_stamps = np.array([_stamp(m) for m in data['true']])
     drops = dropouts(data['measured'], true_stamps)
@@ -572,6 +583,8 @@ INFO_ROWS = (
     ('solves over their budget', ('counts', 'over_budget')),
     ('target stream period p99 [ms]', ('target_period_ms', 'p99')),
     ('target stream period max [ms]', ('target_period_ms', 'max')),
+    ("targets' stamps after their ticks p50 [ms]", ('target_late_ms', 'p50')),
+    ("targets' stamps after their ticks p99 [ms]", ('target_late_ms', 'p99')),
     ('solve time median [ms] (last 1000 solves)', ('solve_window_ms', 'median')),
     ('solve time p95 [ms] (last 1000 solves)', ('solve_window_ms', 'p95')),
     ('solve time max [ms] (last 1000 solves)', ('solve_window_ms', 'max')),

@@ -61,7 +61,7 @@ from typing import Callable
 
 import numpy as np
 
-from ._stream_heading import STALL_S, stream_heading
+from ._stream_heading import STALL_S, off_cubic, stream_jumps, stream_times
 
 __all__ = ['DynamicFeedforward', 'StreamFeedforward', 'dynamic_path']
 
@@ -165,44 +165,6 @@ def dynamic_path(path: Callable[[float], tuple], frequency_hz: float, damping_ra
     return f
 
 
-def _grid(stamps: np.ndarray) -> np.ndarray | None:
-    """The regular grid a stream's stamps scatter about (a planner's timer), or None.
-
-    ``stamps`` ascending; each interval is given the whole number of median
-    intervals nearest it (a dropped target skips one), and the grid is the
-    least-squares line through them.  None: fewer than six, two on one index
-    (a burst after a stall), or a stamp half an interval off the line (not
-    one regular stream).
-    """
-    n = len(stamps)
-    if n < 6:
-        return None
-    # (plain floats: at some thirty stamps numpy's per-call cost was most of the time)
-    ts = stamps.tolist()
-    gaps = [b - a for a, b in zip(ts, ts[1:])]
-    step = sorted(gaps)[len(gaps) // 2]
-    if not step > 0:
-        return None
-    k = [0]
-    for gap in gaps:   # (interval by interval: the median's own error would add up)
-        skip = round(gap / step)
-        if skip < 1:
-            return None
-        k.append(k[-1] + skip)
-    for _ in range(2):   # then each stamp given the index nearest it on that first line
-        k_mean, t_mean = sum(k) / n, sum(ts) / n
-        b = (sum((ki - k_mean) * (ti - t_mean) for ki, ti in zip(k, ts))
-             / sum((ki - k_mean) ** 2 for ki in k))
-        a = t_mean - b * k_mean
-        k = [round((ti - a) / b) for ti in ts]
-        if any(k1 >= k2 for k1, k2 in zip(k, k[1:])):
-            return None
-    grid = a + b * np.array(k, dtype=float)
-    if np.max(np.abs(grid - stamps)) > 0.5 * b:
-        return None
-    return grid - grid[-1] + stamps[-1]
-
-
 def _brake_bases() -> np.ndarray:
     """Quintic bases of a stop: ``g_k^(m)(0) = delta_km`` (k, m = 1, 2), all else zero at 0 and 1.
 
@@ -279,6 +241,8 @@ class StreamFeedforward:
         self._noisy_until = -math.inf   # read with NOISY_FITS until then
         self._on_grid = False    # the fits read the targets' times from their stamps' grid
         self._times = self._positions = np.zeros(0)   # the fits' (:meth:`_read_times`)
+        self._trusted = np.zeros(0, dtype=bool)
+        self._read = None   # (newest sample, times, trusted) by stream_times, as last read
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shift for this mode from now on."""
@@ -319,48 +283,37 @@ class StreamFeedforward:
         """Whether a target starts the stream again: a jump (a step), a stop, a late start.
 
         A jump: farther than ``jump_m`` from where the stream was heading
-        (:func:`~._stream_heading.stream_heading`, which allows for the
+        (:func:`~._stream_heading.stream_jumps`, which allows for the
         stream's acceleration over a stall); a stop: no target for
         :data:`~._stream_heading.STALL_S`.
         """
         h = self._hist
         if t - h[-1][0] > STALL_S:
             return True
-        head_p, _, allow_m, _ = stream_heading(list(h)[-3:], t)
-        return bool(np.linalg.norm(p - head_p) > self.jump_m + allow_m)
-
-    def _off_path(self, t: np.ndarray) -> float:
-        """RMS distance [m] of the targets from their cubic over the first fit's window.
-
-        The window holds at least the last six targets; 0 with fewer.
-
-        ``t``: the targets' times, relative to the newest (stamps or grid).
-        """
-        if len(t) < 6:   # (a cubic through five leaves one degree of freedom: too few to judge)
-            return 0.0
-        sel = t >= min(-FITS[0][0], t[-6])
-        tau = t[sel] / FITS[0][0]   # (scaled to [-1, 0], about the newest: the normal
-        V = tau[:, None] ** np.arange(4)   # equations of a 4x4 are then well within double)
-        P = self._positions[sel] - self._positions[-1]
-        r = V @ np.linalg.solve(V.T @ V, V.T @ P) - P
-        return float(np.sqrt(np.mean(r ** 2) * 3))
+        read = self._read if self._read is not None and self._read[0] is h[-1] else None
+        return stream_jumps(list(h), t, p, jump_m=self.jump_m,
+                            read=None if read is None else read[1:])
 
     def _read_times(self, t: float) -> None:
-        """Read the stream by its stamps or by their grid, whichever its poses lie smoother on.
+        """Read the stream by its stamps or by their grid (:func:`~._stream_heading.stream_times`).
 
-        Called with each new target (at ``t``): the grid (:func:`_grid`) is
-        the fits' time from now on if the targets lie within :data:`NOISE_M`
-        of a cubic by it and closer than by their stamps; else the stamps,
-        and a stream off its cubic by more than :data:`NOISE_M` by them is
-        read with :data:`NOISY_FITS` (for :data:`NOISY_HOLD_S`).
+        Called with each new target (at ``t``): the grid is the fits' time
+        from now on if the targets lie within :data:`NOISE_M` of a cubic by
+        it and closer than by their stamps; else the stamps, and a stream off
+        its cubic by more than :data:`NOISE_M` by them is read with
+        :data:`NOISY_FITS` (for :data:`NOISY_HOLD_S`).
         """
-        self._positions = np.array([s[1] for s in self._hist])
-        stamps = np.array([s[0] for s in self._hist]) - self._hist[-1][0]
-        grid = _grid(stamps)
-        off = self._off_path(stamps)
-        off_grid = math.inf if grid is None else self._off_path(grid)
-        self._on_grid = off_grid < off and off_grid <= NOISE_M
-        self._times = grid if self._on_grid else stamps
+        h = self._hist
+        self._positions = np.array([s[1] for s in h])
+        stamps = np.array([s[0] for s in h])
+        times, trusted, on_grid, off = stream_times(stamps, self._positions)
+        self._read = (h[-1], times, trusted)   # (the next target's jump test reads it so)
+        self._on_grid = on_grid and off <= NOISE_M
+        if on_grid and not self._on_grid:   # (a grid, but not a smooth path by it either)
+            times, off = stamps, off_cubic(stamps, self._positions)
+            trusted = np.ones(len(stamps), dtype=bool)
+        self._times = times - times[-1]   # (about the newest target's time: its shift's)
+        self._trusted = trusted           # (the fits': by the grid, a late send's tick is a guess)
         if not self._on_grid and off > NOISE_M:
             self._noisy_until = float(t) + NOISY_HOLD_S
 
@@ -388,8 +341,11 @@ class StreamFeedforward:
         if len(h) < 3:
             return None
         fits = NOISY_FITS if h[-1][0] <= self._noisy_until and not self._on_grid else FITS
-        t, P = self._times, self._positions
-        Z = None if h[-1][2] is None else np.array([s[2] for s in h])
+        ok = self._trusted
+        t, P = self._times[ok], self._positions[ok]
+        if len(t) < 3:
+            return None
+        Z = None if h[-1][2] is None else np.array([s[2] for s in h])[ok]
         PZ = P if Z is None else np.hstack([P, Z])   # (one fit for both)
         rows_p, rows_z = [], []
         solved: dict = {}   # (first sample, degree) -> coefficients (FITS: one fit for all)

@@ -58,7 +58,7 @@ import math
 import numpy as np
 
 from ._shaping import shaper_impulses
-from ._stream_heading import STALL_S, stream_heading
+from ._stream_heading import STALL_S, stream_jumps
 
 __all__ = ['CYCLES', 'JUMP_M', 'JUMP_RAD', 'JumpTransition', 'KNOWN_MODE_ERROR',
            'KNOWN_RAMP_CYCLES', 'MODE_SPREAD', 'SETTLE_S']
@@ -67,6 +67,8 @@ __all__ = ['CYCLES', 'JUMP_M', 'JUMP_RAD', 'JumpTransition', 'KNOWN_MODE_ERROR',
 JUMP_M = 0.002
 #: The same for the z-axis [rad] (the chord between unit vectors).
 JUMP_RAD = math.radians(2.0)
+#: The stream's targets kept to read it by [s] (at least three; its timer's grid: six or more).
+STREAM_KEEP_S = 0.6
 #: The slowest first mode the robot may have, as a fraction of the model's.
 MODE_SPREAD = 0.7
 #: The move lasts this many periods of that slowest mode.
@@ -154,10 +156,7 @@ class JumpTransition:
         if old is not None:
             # where the stream was heading (its last step scaled to the time since the last
             # target: a late target of a smooth stream, a busy computer's stall, is no jump)
-            head_p, head_z, allow_m, allow_rad = stream_heading(self._stream or [old], float(t))
-            jump = float(np.linalg.norm(p - head_p)) > JUMP_M + allow_m
-            if z is not None and head_z is not None:
-                jump |= float(np.linalg.norm(z - head_z)) > JUMP_RAD + allow_rad
+            jump = stream_jumps(self._stream or [old], float(t), p, z, JUMP_M, JUMP_RAD)
             if jump and self.duration_s > 0:
                 start_p, start_z = self.at(float(t))
                 self._move = (float(t), self.duration_s, start_p, start_z, self._ramp_s,
@@ -166,7 +165,9 @@ class JumpTransition:
             # the stream's steps (none across a jump, a stop or from the start: not its speed)
             if jump or not float(t) - old[0] <= STALL_S:
                 self._stream = []
-        self._stream = self._stream[-2:] + [(float(t), p, z)]
+        self._stream.append((float(t), p, z))
+        while len(self._stream) > 3 and self._stream[0][0] < float(t) - STREAM_KEEP_S:
+            self._stream.pop(0)
         self._newest = (float(t), p, z)
 
     @property

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from bellow_ancf_ros.core.control._stream_heading import STALL_S, stream_heading
+from bellow_ancf_ros.core.control._stream_heading import (
+    STALL_S, stream_grid, stream_heading, stream_jumps, stream_times)
 
 
 def _parabola(t):
@@ -44,3 +45,52 @@ def test_one_or_two_targets_give_no_allowance_and_the_z_axis_extrapolates():
     np.testing.assert_allclose(head, [3e-3, 0.0, 0.0])
     np.testing.assert_allclose(z, z1 + 2 * (z1 - z0))
     assert allow == allow_rad == 0.0
+
+
+def test_the_grid_of_a_timer_whose_sends_are_late():
+    """Ticks at 50 Hz, sends late by 0.5 ms on average, some by 3-19 ms, a tick skipped.
+
+    Each stamp's tick is found (a stamp is never earlier than its pose's
+    time); those within a quarter interval after their ticks are on the
+    grid's line, the later ones are not trusted.
+    """
+    rng = np.random.default_rng(3)
+    ticks = np.array([k for k in range(31) if k != 12]) * 0.02   # (tick 12 skipped)
+    late = rng.exponential(5e-4, len(ticks))
+    late[[4, 17, 25]] = [0.003, 0.012, 0.019]
+    stamps = 1.0 + ticks + late
+    grid, on = stream_grid(stamps)
+    np.testing.assert_allclose(grid - 1.0, ticks, atol=1e-3)
+    assert list(np.flatnonzero(~on)) == [17, 25]
+    assert stream_grid(stamps[:5]) is None                      # too few to tell
+    assert stream_grid(np.array([0.0, 0.02, 0.04, 0.041, 0.042, 0.043, 0.06])) is None
+
+
+def test_a_stream_is_read_by_its_grid_only_where_its_poses_are_smoother_by_it():
+    """Stamped when sent: by the grid.  Stamped with their own times, however late: the stamps."""
+    rng = np.random.default_rng(4)
+    ticks = np.arange(30) * 0.02
+    late = rng.exponential(1e-3, 30)
+    sent = np.array([_parabola(t) for t in ticks])
+    times, trusted, on_grid, off = stream_times(ticks + late, sent)
+    assert on_grid and off < 1e-9
+    np.testing.assert_allclose(times[trusted], ticks[trusted], atol=1e-3)
+    own = np.array([_parabola(t) for t in ticks + late])
+    times, trusted, on_grid, off = stream_times(ticks + late, own)
+    assert not on_grid and trusted.all() and off < 1e-9
+    np.testing.assert_array_equal(times, ticks + late)
+
+
+def test_a_target_after_a_late_send_is_no_jump_but_a_step_is():
+    """The newest target sent 37 ms late, the next tick skipped: the target after it.
+
+    Stamped 3 ms after the late one and two ticks on: by the stamps the
+    stream's last step took 57 ms, and the target is 3 mm past its heading.
+    """
+    path = [(k * 0.02 + (0.037 if k == 20 else 0.0), _parabola(k * 0.02), None)
+            for k in range(21)]
+    t_new, p_new = 22 * 0.02 + 1e-4, _parabola(22 * 0.02)
+    head, _, allow, _ = stream_heading(path, t_new)
+    assert np.linalg.norm(p_new - head) > 2.5e-3 + allow        # the old reading: a jump
+    assert not stream_jumps(path, t_new, p_new, jump_m=2e-3)
+    assert stream_jumps(path, t_new, p_new + [0.0, 0.0, 0.005], jump_m=2e-3)
