@@ -4,10 +4,11 @@ Runs the closed loop on the wall clock, as with a real robot:
 ``simulated_robot_node`` (the robot's ``*_mismatched`` file, its realistic
 plant) and ``inverse_kinetostatic_node`` (``feedback: integral``, its other
 defaults; the model ``one_segment`` / ``two_segment``) as separate processes
-on an isolated ``ROS_DOMAIN_ID``.  This process streams the targets at 50 Hz
-as a lab's planner on a timer does: each the path at its tick's time, stamped
-when it is published (not previewed; after the tick by as long as the
-computer kept this process waiting; a missed tick skipped), in phases: a held target
+on an isolated ``ROS_DOMAIN_ID``.  This process streams the targets at 50 Hz,
+each stamped when it is published (not previewed; ``--planner timer``: each
+the path at its timer tick's time, stamped after the tick by as long as the
+computer kept this process waiting, a missed tick skipped, as a lab's
+planner on a ROS timer), in phases: a held target
 (8 s); the paper's circle at 10x its speed (2 s period), entered over a 1 s
 spin-up, left over a 1 s spin-down after three periods of path, where it
 started; held again (3 s); a 10 mm step in ``y``, held 4 s.  Each robot runs
@@ -102,6 +103,11 @@ REPEATS = 3           # quiet and busy runs per robot: the figures are their med
 RIG_NICE_HELP = ("the simulated robot's niceness (default 0: the nodes' and the burners' "
                  'priority; negative, with the privilege to: above them, as the hardware it '
                  'stands for, which a busy computer does not slow)')
+PLANNERS = ('clock', 'timer')
+PLANNER_HELP = ("how the bench's planner stamps its targets: clock (default), each pose the "
+                'path at the time it is stamped with, when it is sent; timer, a lab\'s planner '
+                "on a timer: each pose the path at its tick's time, stamped when it is sent "
+                '(late by as long as the computer kept it waiting), a missed tick skipped')
 PERIOD_GOAL = 2.0     # command period p99 at most this many nominal periods
 GAP_S = 0.1           # measured poses this far apart (capture stamps): a gap
 NOT_QUIET_CORES = 0.25   # other processes' CPU in the quiet run worth a warning [cores]
@@ -257,12 +263,15 @@ class BusyClient(SpunNode):
             seen = bool(self.true)
         return seen and self.pub.get_subscription_count() >= 1 and self.inverse_active()
 
-    def stream(self, targets: Targets, duration_s: float) -> float:
-        """Stream ``targets`` at 50 Hz for ``duration_s`` as a lab's planner; its start [s, ROS].
+    def stream(self, targets: Targets, duration_s: float, planner: str = 'clock') -> float:
+        """Stream ``targets`` at 50 Hz for ``duration_s``; its start [s, ROS].
 
-        A planner on a timer: each pose is the path at its tick's time, and
-        is stamped when it is published, after the tick (late by as much as
-        the computer kept this process waiting); a tick missed altogether is
+        ``planner`` (:data:`PLANNERS`): ``clock``, each pose the path at the
+        time it is stamped with, when it is published (late ticks catch up);
+        ``timer``, a lab's
+        planner on a timer: each pose the path at its tick's time, stamped
+        when it is published, after the tick (late by as long as the
+        computer kept this process waiting), a tick missed altogether
         skipped, as a ROS timer skips it.
         """
         from bellow_ancf_ros.nodes.ros_util import pose_message
@@ -272,14 +281,18 @@ class BusyClient(SpunNode):
         start = time.monotonic()
         k = 0
         while k / TARGET_RATE_HZ <= duration_s:
-            t = k / TARGET_RATE_HZ   # the tick's time: the path there
+            now = clock.now()
+            t = k / TARGET_RATE_HZ if planner == 'timer' else now.nanoseconds * 1e-9 - t0
             pos, z = targets(t)
             q = (0.0, 0.0, 0.0, 1.0) if z is None else quaternion_from_z_axis(z)
-            now = clock.now()
+            if planner == 'timer':
+                now = clock.now()
             self.pub.publish(pose_message(pos, q, 'base', now.to_msg()))
             self.sent.append(now.nanoseconds * 1e-9)
-            self.late.append(now.nanoseconds * 1e-9 - t0 - t)
-            k = max(k + 1, math.ceil((time.monotonic() - start) * TARGET_RATE_HZ))
+            self.late.append(now.nanoseconds * 1e-9 - t0 - k / TARGET_RATE_HZ)
+            k += 1
+            if planner == 'timer':   # (the clock planner catches up, as it always did)
+                k = max(k, math.ceil((time.monotonic() - start) * TARGET_RATE_HZ))
             time.sleep(max(0.0, start + k / TARGET_RATE_HZ - time.monotonic()))
         return t0
 
@@ -345,8 +358,10 @@ def stop_burners(burners: list) -> None:
 
 def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: int = SEED,
              startup_timeout: float = 90.0, env_extra: dict | None = None,
-             identified: bool = True, rig_nice: int = 0) -> dict:
+             identified: bool = True, rig_nice: int = 0, planner: str = 'clock') -> dict:
     """One run of the closed loop (``burners`` beside it): its figures (:func:`figures`).
+
+    ``planner``: how the targets are stamped (:meth:`BusyClient.stream`).
 
     ``identified``: the inverse node is told the plant's hardware as a lab
     that identified it (``hardware_parameters``: the regulators' play, the
@@ -379,7 +394,7 @@ def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: in
         pids = {k: p.proc.pid for k, p in procs.items()}
         pids.update({f'burner{i}': p.pid for i, p in enumerate(burn)})
         cpu0 = _cpu(pids)
-        t0 = client.stream(targets, schedule.end_s)
+        t0 = client.stream(targets, schedule.end_s, planner)
         cpu1 = _cpu(pids)
         time.sleep(0.3)   # the last answers in
         dead = [k for k, p in procs.items() if not p.alive()]
@@ -760,6 +775,7 @@ def main(argv=None) -> int:
                     help='quiet and busy runs per robot, interleaved; the figures are their '
                          f'medians (default {REPEATS})')
     ap.add_argument('--rig-nice', type=int, default=0, help=RIG_NICE_HELP)
+    ap.add_argument('--planner', choices=PLANNERS, default='clock', help=PLANNER_HELP)
     ap.add_argument('--out', type=Path, default=HERE / 'busy.json')
     ap.add_argument('--node-defaults', action='store_true',
                     help="the inverse node's bare defaults (default: told the plant's play and "
@@ -783,7 +799,8 @@ def main(argv=None) -> int:
                       'targets ...', flush=True)
                 try:
                     each[name].append(run_loop(robot, n, schedule, rig_nice=args.rig_nice,
-                                               identified=not args.node_defaults))
+                                               identified=not args.node_defaults,
+                                               planner=args.planner))
                 except RuntimeError as exc:
                     print(f'  FAILED: {exc}')
                     return 1
@@ -794,7 +811,8 @@ def main(argv=None) -> int:
                               node_parameters=('identified hardware' if not args.node_defaults
                                                else 'defaults'),
                               nominal_period_ms=nominal * 1e3, schedule=asdict(schedule),
-                              rows=rows, repeats=each, rig_nice=args.rig_nice, **runs)
+                              rows=rows, repeats=each, rig_nice=args.rig_nice,
+                              planner=args.planner, **runs)
         print(render(results[robot]), flush=True)
     data = {'schedule': asdict(schedule), 'target_rate_hz': TARGET_RATE_HZ,
             'circle_period_s': PERIOD_S, 'spin_s': SPIN_S, 'seed': SEED,

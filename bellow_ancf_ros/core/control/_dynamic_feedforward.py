@@ -222,7 +222,7 @@ class StreamFeedforward:
     (``brake_periods`` of the mode, at least ``4 lag_s``), shifted as any
     path: the robot follows it and comes to rest at the last target, no
     shift left in the command (:meth:`busy` while braking; the closed loop
-    holds its integral once it is a stop: :meth:`hold_until`).  Repeated
+    holds its integral then).  Repeated
     targets are not fitted: when the stream moves again, its fit starts at
     the pose it stood at.  An abrupt
     stop at speed still swings the robot at its mode.
@@ -245,7 +245,6 @@ class StreamFeedforward:
         self._trusted = np.zeros(0, dtype=bool)
         self._read = None   # (newest sample, times, trusted) by stream_times, as last read
         self._late_s = 0.0  # the latest send after its tick in the stream's window [s]
-        self._now = -math.inf   # the latest time it was asked about [s]
 
     def set_mode(self, frequency_hz: float, damping_ratio: float) -> None:
         """Shift for this mode from now on."""
@@ -384,8 +383,6 @@ class StreamFeedforward:
         Stopped: repeating its newest target, or none for :meth:`stale_s`.
         """
         h = self._hist
-        if now is not None:
-            self._now = max(self._now, float(now))
         if not h or (not self._repeated
                      and (now is None or now <= h[-1][0] + self.stale_s())):
             return None
@@ -439,19 +436,8 @@ class StreamFeedforward:
         return brake is not None and now <= brake[0] + 1.5 * brake[1]
 
     def hold_until(self):
-        """The end of a brake under way (the closed loop holds its integral until then).
-
-        Only once the stream has been silent for twice its stale time (or
-        repeats its target): a late send or a short stall brakes the command
-        for a moment, along nearly the stream's own heading, and is no stop
-        to hold the correction for (simulated, two segments, 10x circle, one
-        send in 33 late by 3-40 ms: the correction was held for 23-66 % of
-        the circle).
-        """
-        b = self._brake
-        if b is None or not (self._repeated or self._now - b[0] >= 2.0 * self.stale_s()):
-            return None
-        return b[0] + b[1]
+        """The end of a brake under way (the closed loop holds its integral until then)."""
+        return None if self._brake is None else self._brake[0] + self._brake[1]
 
     def target(self, now: float | None = None):
         """The wanted pose shifted for the mode: ``(position, z_axis or None)``.

@@ -105,8 +105,7 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
     np.testing.assert_array_equal(st.target(t1 + 0.9 * stale)[0], fresh)   # not stopped yet
     assert not st.busy(t1 + 0.9 * stale) and st.hold_until() is None
     now = t1 + 1.1 * stale                                   # stopped: braking
-    assert st.busy(now) and st.hold_until() is None          # (a late send's moment: no hold)
-    assert st.busy(t1 + 2.0 * stale) and st.hold_until() == pytest.approx(t1 + T)
+    assert st.busy(now) and st.hold_until() == pytest.approx(t1 + T)
     ref = st.reference(now)[0]
     tau = (now - t1) / T               # leaves with its speed: v T (tau - 6 tau^3 + ...), a = 0
     assert ref[0] - p1[0] == pytest.approx(v * T * (tau - 6 * tau**3 + 8 * tau**4 - 3 * tau**5),
@@ -250,7 +249,7 @@ def test_a_stalled_stream_keeps_its_shift():
     for k in range(100):
         st.push(k / 50, *circle(k / 50))
     t_last = 99 / 50
-    assert st.busy(t_last + 0.07) and st.hold_until() is not None   # overdue: braking
+    assert st.busy(t_last + 0.05) and st.hold_until() is not None   # overdue: braking
     for t in np.arange(t_last + 0.12, t_last + 0.4, 0.02):
         st.push(t, *circle(t))
         got = st.target(t)[0]
