@@ -22,7 +22,7 @@ sends it: on a busy computer some sends come late (a lab-style busy run:
 the stream's last step off its time.  The target after it, on time and a
 tick or two on, lay 2.7-3.4 mm off the heading by the stamps; in a
 simulated closed loop (two segments, 10x circle, one send in 33 late by
-3-40 ms) 4-15 such false jumps in 7 s made the circle moves, 6.7-24 mm RMSE
+3-40 ms) 6-14 such false jumps in 7 s made the circle moves, 6.7-24 mm RMSE
 against 0.75 mm.  So a stream of six targets or more is read by its
 timer's grid where its poses lie smoother on it (:func:`stream_times`),
 a stamp is taken as the latest its pose's time can be (the target is

@@ -249,7 +249,7 @@ def test_targets_stamped_late_when_sent_are_no_jump(seed):
 
     A late send's stamp puts the stream's last step off its time: the target
     after it (on time, some ticks on) lay 2.7-3.4 mm off the heading by the
-    stamps, and 4-15 such false jumps in 7 s turned the two-segment circle at
+    stamps, and 6-14 such false jumps in 7 s turned the two-segment circle at
     10x into moves (simulated closed loop: 6.7-24 mm RMSE; 0.75 mm without
     late sends).  By the stamps' grid, and the heading of the targets before
     a late one, none is a jump; a real step among them still is one.
