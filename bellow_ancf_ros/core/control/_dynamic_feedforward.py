@@ -222,9 +222,8 @@ class StreamFeedforward:
     (``brake_periods`` of the mode, at least ``4 lag_s``), shifted as any
     path: the robot follows it and comes to rest at the last target, no
     shift left in the command (:meth:`busy` while braking; the closed loop
-    holds its integral then).  Repeated
-    targets are not fitted: when the stream moves again, its fit starts at
-    the pose it stood at.  An abrupt
+    holds its integral then).  Repeated targets are not fitted: when the
+    stream moves again, its fit starts at the pose it stood at.  An abrupt
     stop at speed still swings the robot at its mode.
     """
 
