@@ -131,15 +131,15 @@ def stream_times(stamps: np.ndarray, positions: np.ndarray) -> tuple:
     to a cubic by it (:func:`off_cubic`) than all do by their stamps; else
     the stamps (a planner that stamps each pose with its own time, however
     late its timer fires).  ``trusted``: the samples whose times are known
-    (on the grid: those whose stamps are within a quarter interval of it;
-    by the stamps: all).
+    (on the grid: those stamped at most half an interval after their ticks,
+    six of them at least; by the stamps: all).
     """
     stamps = np.asarray(stamps, dtype=float)
     off = off_cubic(stamps, positions)
     if off <= SMOOTH_M:   # (smooth by its stamps already: no grid can do better)
         return stamps, np.ones(len(stamps), dtype=bool), False, off
     grid = stream_grid(stamps)
-    if grid is not None:
+    if grid is not None and grid[1].sum() >= 6:   # (fewer: too few to judge the grid by)
         times, on = grid
         off_grid = off_cubic(times[on], positions[on])
         if off_grid < off:
