@@ -575,10 +575,10 @@ class InverseKinetostaticNode(LifecycleNode):
             values.get('feedback_state', '') if self._feedback.fallback else None)
         if counter is not None:
             self.stats[counter] += 1
-        if logged:
-            log = self.get_logger()
-            (log.error if level == DiagnosticStatus.ERROR else log.warning)(
-                msg, throttle_duration_sec=WARN_THROTTLE_S)
+        if logged and level == DiagnosticStatus.ERROR:   # (rclpy: one severity per call site)
+            self.get_logger().error(msg, throttle_duration_sec=WARN_THROTTLE_S)
+        elif logged:
+            self.get_logger().warning(msg, throttle_duration_sec=WARN_THROTTLE_S)
         self._publish_diag(level, msg, values)
 
     def _queue_slice(self, item) -> bool:

@@ -381,7 +381,10 @@ class FeedbackLink:
             log.info(f'feedback: automatic gain {res.gain_per_s:.3g} /s (was '
                      f'{"-" if old_gain is None else f"{old_gain:.3g}"}): {res.message}')
         elif before is None or before.ok != res.ok or (res.moved and not res.ok):
-            (log.info if res.ok else log.warning)(f'loop margins: {res.message}')
+            if res.ok:   # (two calls: rclpy allows one severity per call site)
+                log.info(f'loop margins: {res.message}')
+            else:
+                log.warning(f'loop margins: {res.message}')
 
     def _take(self, res) -> None:
         """A margin answer: the watchdog's band, and on ``auto`` the gain integrated with."""
