@@ -190,15 +190,15 @@ def stream_jumps(hist, t: float, position, z_axis=None, jump_m: float = math.inf
     ``(stamp, position, z-axis or None)``, oldest first, none across a
     jump, read by :func:`stream_times` (six or more: its timer's grid, where
     the stamps scatter about one; the samples whose times it trusts).  A
-    stamp is never earlier than its pose's
-    time (a pose is stamped when it is computed, or later when it is sent):
-    the target is the stream's pose at some time between the newest
-    sample's and ``t``, so it misses by its distance from the heading's path
-    over that time.  And the newest sample's own time may be wrong (sent
-    late, its stamp some ticks after its pose, however its grid reads it):
-    the target is a jump only if it also misses the heading of the samples
-    before it, from the time of the one before.  ``read``: ``(times,
-    trusted)`` of ``hist`` by :func:`stream_times`, if known.
+    stamp is never earlier than its pose's time (a pose is stamped when it
+    is computed, or later when it is sent): the target is the stream's pose
+    at some time between the newest sample's and ``t``, so it misses by its
+    distance from the heading's path over that time.  And the newest
+    sample's own time may be wrong (sent late, its stamp some ticks after
+    its pose, however its grid reads it): the target is a jump only if it
+    also misses the heading of the samples before it, from the time of the
+    one before.  ``read``: ``(times, trusted)`` of ``hist`` by
+    :func:`stream_times`, if known.
     """
     p = np.asarray(position, dtype=float)
     z = None if z_axis is None else np.asarray(z_axis, dtype=float)
