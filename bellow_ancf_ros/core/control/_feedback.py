@@ -442,7 +442,7 @@ class IntegralFeedback:
         move.  Integrates the newest accepted measurement first (unless a
         safeguard says otherwise); see the module docstring.
         """
-        if hold_until is not None and hold_until > self._move_until:
+        if hold_until is not None:   # (the caller's: a brake cut short ends earlier)
             self._move_until = float(hold_until)
         if move is not None and move[0] != self._move_seen:
             self._move_seen = move[0]

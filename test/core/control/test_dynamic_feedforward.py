@@ -117,7 +117,7 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
         np.testing.assert_allclose(st.target(now)[0], p1, atol=1e-15)
     assert st.busy(t1 + 1.2 * T) and not st.busy(t1 + 1.6 * T)
     st.push(t1 + 2.0, p1 + [1e-3, 0.0, 0.0])                 # a new target ends the brake
-    assert st.hold_until() is None and not st.busy(t1 + 2.0)
+    assert st.hold_until() == pytest.approx(t1 + T) and not st.busy(t1 + 2.0)
 
 
 def _circle(period=2.0, radius=0.02):
@@ -163,7 +163,7 @@ def test_a_stream_that_repeats_its_last_pose_brakes_smoothly():
     np.testing.assert_allclose(st.reference(3.0 + 1.1 * T)[0], p1, atol=1e-15)
     # moving again: the fit starts at the pose it stood at (no shift from the old motion)
     st.push(4.2, p1 + [0.0, 5e-4, 0.0], z1)
-    assert st.hold_until() is None
+    assert st.hold_until() == pytest.approx(3.0 + T)   # (its brake had ended)
     assert np.linalg.norm(st.target(4.2)[0] - p1) < 2e-3
 
 
@@ -241,7 +241,9 @@ def test_a_stalled_stream_keeps_its_shift():
     used to start the fit again: the shift (4 mm) dropped to nothing and came
     back over three targets, a kick to the robot's mode.  Now the shift after
     the stall is the path's own within 1 mm, and the brake that began during
-    the stall (a target overdue by half a period) ends with it.
+    the stall (a target overdue by half a period) ends with it; its hold of
+    the closed loop's correction ends as long after as the brake had run (it
+    held for the whole brake time, a mode's period).
     """
     circle = _circle()
     exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
@@ -255,6 +257,12 @@ def test_a_stalled_stream_keeps_its_shift():
         got = st.target(t)[0]
         assert np.linalg.norm(got - circle(t)[0]) > 3e-3             # shifted
         assert np.linalg.norm(got - exact(t)[0]) < 1e-3, (t, np.linalg.norm(got - exact(t)[0]))
+    # the brake's hold of the closed loop's correction ends as long after the target that
+    # ended the stall as the brake had run (0.09 s: overdue 0.03 s after the last target)
+    assert st.stale_s() == pytest.approx(0.03)
+    assert st.hold_until() == pytest.approx(t_last + 0.12 + 0.09)
+    assert st.hold_until() < t_last + st.brake_s
+    st.reset()
     assert st.hold_until() is None
 
 

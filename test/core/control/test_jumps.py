@@ -11,6 +11,7 @@ from bellow_ancf_ros.core.loop import paper_circle
 from bellow_ancf_ros.core.control._jumps import (CYCLES, KNOWN_MODE_ERROR, KNOWN_RAMP_CYCLES,
                                                  MODE_SPREAD, SETTLE_S)
 from bellow_ancf_ros.core.control._stream_heading import STALL_S
+from bellow_ancf_ros.core.control._feedback import TRACKING
 
 F = 2.4    # the two-segment model's first mode [Hz]
 DT = 0.02  # a 50 Hz stream
@@ -178,6 +179,27 @@ def test_the_feedback_holds_its_correction_through_a_move():
         fb.measurement(t, target + [0.001, 0.0, 0.0])
         fb.corrected_target(t, target, hold_until=0.5)
     assert np.linalg.norm(fb.correction_m) > np.linalg.norm(c)
+
+
+def test_a_hold_the_caller_cuts_short_ends_then():
+    """A stopped stream's brake holds the correction; a target after a late send ends the hold.
+
+    The caller's ``hold_until`` is taken as it is each time, also when it is
+    earlier than before (a brake cut short by a target that moves on).
+    """
+    fb = IntegralFeedback(FeedbackSettings(gain_per_s=5.0))
+    target = np.array([0.0, 0.0, 0.2])
+    for k in range(10):
+        fb.measurement(0.02 * k, target + [0.001, 0.0, 0.0])
+        fb.corrected_target(0.02 * k, target)
+    c = fb.correction_m.copy()
+    fb.measurement(0.2, target + [0.001, 0.0, 0.0])
+    fb.corrected_target(0.2, target, hold_until=0.6)      # a brake to 0.6 s
+    assert fb.state.startswith('holding the correction: a move of its own')
+    np.testing.assert_array_equal(fb.correction_m, c)
+    fb.measurement(0.24, target + [0.001, 0.0, 0.0])
+    fb.corrected_target(0.24, target, hold_until=0.22)    # the stream came back at 0.22 s
+    assert fb.state == TRACKING and np.linalg.norm(fb.correction_m) > np.linalg.norm(c)
 
 
 def test_a_late_target_of_a_smooth_stream_is_no_jump():
