@@ -241,7 +241,8 @@ class TargetLink:
                 return (pos, z), (pos, z)
             if item is not self._last_item:
                 self._last_item = item
-                filt.push(wanted_at, pos, z)
+                now = self._clock.now()   # (a late solve is no stop of the stream)
+                filt.push(wanted_at, pos, z, at=now)
                 self._schedule_levels(item, filt, wanted_at)
             return filt.targets(self._clock.now())
 

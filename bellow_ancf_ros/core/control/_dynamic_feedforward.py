@@ -70,6 +70,9 @@ MAX_SHIFT_M = 0.01
 MAX_SHIFT_RAD = math.radians(10.0)
 #: A stopped stream slower than this over its brake time is not braked [m], [rad].
 _STILL_M, _STILL_RAD = 1.0e-5, 1.0e-4
+#: The most a target is carried on to the time it is commanded at [s] (a pose that old is a
+#: stall, and the stream brakes after its stale time).
+MAX_LEAD_S = 0.1
 #: ``(window [s], polynomial degree)`` of the fits that give the velocity, the acceleration
 #: and the jerk at the newest target (module docstring); fewer targets than ``degree + 2`` in
 #: a window: the degree they allow, at least 2 (three targets).  ``FITS``: a stream whose
@@ -197,12 +200,26 @@ def _brake(tau: float) -> np.ndarray:
     return np.array([[np.polynomial.polynomial.polyval(t, c) for c in d] for d in _BRAKE]).T
 
 
+def _ahead(x, d, lead: float):
+    """``x`` and its derivative rows ``d`` (v, a[, j]) ``lead`` seconds on (Taylor series)."""
+    if lead <= 0.0:
+        return x, d
+    x = x + sum(row * lead ** (n + 1) / math.factorial(n + 1) for n, row in enumerate(d))
+    d = np.array([sum(d[m] * lead ** (m - n) / math.factorial(m - n) for m in range(n, len(d)))
+                  for n in range(len(d))])
+    return x, d
+
+
 class StreamFeedforward:
     """:class:`DynamicFeedforward` on a stream of stamped targets.
 
     :meth:`push` each target with the time it is wanted at; :meth:`target`
     gives the newest one shifted by the derivatives of polynomials fitted to
-    the targets before it (:data:`FITS`; at least three targets).  A target
+    the targets before it (:data:`FITS`; at least three targets), and
+    carried on by them to the time it is commanded at (at most
+    :data:`MAX_LEAD_S`): a pose solved after its time (a node kept waiting
+    by a busy computer, a planner's late send) would leave the command
+    behind the path by the pose's age times its speed.  A target
     farther than ``jump_m`` from where the stream was heading (a step), a
     stop (:meth:`_jump`), or too few samples: the newest target unshifted.
 
@@ -237,6 +254,8 @@ class StreamFeedforward:
         self._hist: deque = deque()
         self._brake = None   # the stop of the stream, once seen: (t1, T, p1, dp, z1, dz)
         self._held_to = None   # the hold's end of a brake the stream cut short by moving on
+        self._anchor = 0.0     # the newest target's stamp, or when it was pushed if later
+        self._t_pose = 0.0     # the newest pose's own time (its tick, read by the grid)
         self._repeated = False   # the newest targets repeat the one before them
         self._repeat_t = 0.0     # the newest repeat's time
         self._noisy_until = -math.inf   # read with NOISY_FITS until then
@@ -261,8 +280,14 @@ class StreamFeedforward:
         self._read = None
         self._late_s = 0.0
 
-    def push(self, t: float, position, z_axis=None) -> None:
-        """A target wanted at time ``t`` (a time that goes back starts the stream again)."""
+    def push(self, t: float, position, z_axis=None, at: float | None = None) -> None:
+        """A target wanted at time ``t`` (a time that goes back starts the stream again).
+
+        ``at``: when it was taken in, on the same clock (default ``t``): a
+        stream counts as stopped :meth:`stale_s` after the later of the two,
+        so a node that solves a target late (a busy computer) does not brake
+        a stream that goes on.
+        """
         p = np.asarray(position, float).reshape(3)
         z = None if z_axis is None else np.asarray(z_axis, float).reshape(3)
         h = self._hist
@@ -280,9 +305,11 @@ class StreamFeedforward:
         h.append((float(t), p, z))
         while len(h) > 3 and h[0][0] < t - self._keep_s:
             h.popleft()
+        anchor = float(t) if at is None else max(float(t), float(at))
         if self._brake is not None:   # the stream moves on: the hold ends as long after it
             t1, T = self._brake[0], self._brake[1]   # as the brake had run (the robot's answer)
-            self._held_to = min(t1 + T, 2.0 * float(t) - t1 - self.stale_s())
+            self._held_to = min(t1 + T, 2.0 * anchor - self._anchor - self.stale_s())
+        self._anchor = anchor
         self._brake = None
         self._repeated = False
         self._read_times(t)
@@ -320,6 +347,7 @@ class StreamFeedforward:
         if on_grid and not self._on_grid:   # (a grid, but not a smooth path by it either)
             times, off = stamps, off_cubic(stamps, self._positions)
             trusted = np.ones(len(stamps), dtype=bool)
+        self._t_pose = float(times[-1])
         self._times = times - times[-1]   # (about the newest target's time: its shift's)
         # how late its sends have come after their ticks (by the grid; exact stamps: none)
         self._late_s = max(float(np.max(stamps - times)), 0.0) if self._on_grid else 0.0
@@ -388,7 +416,7 @@ class StreamFeedforward:
         """
         h = self._hist
         if not h or (not self._repeated
-                     and (now is None or now <= h[-1][0] + self.stale_s())):
+                     and (now is None or now <= self._anchor + self.stale_s())):
             return None
         if self._brake is None:
             fit = self._fit()
@@ -475,6 +503,9 @@ class StreamFeedforward:
         if fit is None:
             return p1, z1
         dp, dz = fit
+        lead = 0.0 if now is None else min(max(float(now) - self._t_pose, 0.0), MAX_LEAD_S)
+        p1, dp = _ahead(p1, dp, lead)
         if z1 is None:
             return self.ff.shifted(p1, dp)
-        return self.ff.shifted(p1, dp, z1, dz)
+        z1, dz = _ahead(z1, dz, lead)
+        return self.ff.shifted(p1, dp, z1 / np.linalg.norm(z1), dz)

@@ -124,8 +124,12 @@ class TargetFilter:
             self.feedforward.reset()
         self._newest = None
 
-    def push(self, t: float, position, z_axis=None) -> None:
-        """A new target, wanted at time ``t`` (times must not decrease)."""
+    def push(self, t: float, position, z_axis=None, at: float | None = None) -> None:
+        """A new target, wanted at time ``t`` (times must not decrease).
+
+        ``at``: when it was taken in (a node's solve of it; default ``t``):
+        the feedforward's stream stops only its stale time after the later.
+        """
         p = np.asarray(position, float).reshape(3)
         z = None if z_axis is None else np.asarray(z_axis, float).reshape(3)
         if self._newest is not None and t < self._newest[0]:
@@ -135,7 +139,7 @@ class TargetFilter:
         if self.jumps is not None:
             self.jumps.push(t, p, z)
         if self.feedforward is not None:
-            self.feedforward.push(t, p, z)
+            self.feedforward.push(t, p, z, at=at)
         self._newest = (float(t), p, z)
         self._arrived = False
 

@@ -102,7 +102,11 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
     assert stale == pytest.approx(0.03) and T == pytest.approx(max(1 / F, 4 * TAU))
     fresh = st.target()[0]
     assert abs(fresh[0] - p1[0]) > 1e-3                      # moving: shifted
-    np.testing.assert_array_equal(st.target(t1 + 0.9 * stale)[0], fresh)   # not stopped yet
+    # not stopped yet: the newest target carried on to the time it is commanded at
+    # (the shift's own change over that time: 0.05 mm)
+    np.testing.assert_allclose(st.target(t1 + 0.9 * stale)[0], fresh + [v * 0.9 * stale, 0, 0],
+                               atol=1e-4)
+    assert abs(v) * 0.9 * stale > 8e-4
     assert not st.busy(t1 + 0.9 * stale) and st.hold_until() is None
     now = t1 + 1.1 * stale                                   # stopped: braking
     assert st.busy(now) and st.hold_until() == pytest.approx(t1 + T)
@@ -118,6 +122,28 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
     assert st.busy(t1 + 1.2 * T) and not st.busy(t1 + 1.6 * T)
     st.push(t1 + 2.0, p1 + [1e-3, 0.0, 0.0])                 # a new target ends the brake
     assert st.hold_until() == pytest.approx(t1 + T) and not st.busy(t1 + 2.0)
+
+
+def test_a_target_solved_late_is_carried_on_and_no_stop():
+    """A node kept waiting by a busy computer solves a target 40 ms after its stamp.
+
+    The stream has not stopped (the target was just taken in): no brake, and
+    the command is the path's shifted pose at the time it is commanded, not
+    40 ms behind it (2.5 mm on this circle).  A re-solve a stale time after
+    the target was taken in, with none after it, brakes.
+    """
+    circle = _circle()
+    exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    for k in range(100):
+        st.push(k / 50, *circle(k / 50), at=k / 50 + 0.04)
+        now = k / 50 + 0.04
+        assert not st.busy(now)
+        if k >= 30:
+            got = st.target(now)[0]
+            assert np.linalg.norm(got - exact(now)[0]) < 1e-4
+            assert np.linalg.norm(exact(now)[0] - exact(k / 50)[0]) > 2e-3
+    assert not st.busy(now + 0.9 * st.stale_s()) and st.busy(now + 1.1 * st.stale_s())
 
 
 def _circle(period=2.0, radius=0.02):
@@ -171,7 +197,8 @@ def _stream_errors(stamps_and_times):
     """Shift changes and errors from the path's own shift of a circle's stream.
 
     ``stamps_and_times``: ``(stamp, pose time)`` of each target, 300 of them;
-    the first 30 are left out.
+    the first 30 are left out.  Each is commanded at its stamp: the path's
+    shifted pose then is what it should give.
     """
     circle = _circle()
     exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
@@ -182,8 +209,8 @@ def _stream_errors(stamps_and_times):
         st.push(stamp, p, z)
         got = st.target(stamp)[0]
         if k >= 30:
-            shifts.append(got - p)
-            errors.append(np.linalg.norm(got - exact(t)[0]))
+            shifts.append(got - circle(stamp)[0])
+            errors.append(np.linalg.norm(got - exact(stamp)[0]))
     change = np.linalg.norm(np.diff(shifts, axis=0), axis=1)
     assert np.median(np.linalg.norm(shifts, axis=1)) > 3e-3   # the shift is there (4.2 mm)
     return np.percentile(change, 99), np.percentile(errors, 99)
@@ -199,19 +226,26 @@ def test_stream_shift_survives_jittered_stamps(jitter_s, sent):
     (``late``: exponential, as a send after the computation).  Read by their
     stamps with the short fit, the shift moved by 3.9 mm (0.2 ms) and 15 mm
     (1 ms) between consecutive targets at the 99th percentile; with the long
-    fits by 0.31-0.78 mm, 0.23-0.60 mm off the path's own shift.  Read by
-    the stamps' grid, the short fit is exact again: 0.04-0.05 mm off (the
-    circle alone turns the shift by 0.27 mm per target).  At 3 ms RMS, the
-    grid (a stamp half an interval off it) is not always there: 1.1 mm.
+    fits by 0.31-0.78 mm, 0.23-0.60 mm off the path's own shift at the
+    poses' times.  Read by the stamps' grid, the short fit is exact again:
+    0.04-0.05 mm off it (the circle alone turns the shift by 0.27 mm per
+    target).  Each target commanded at its stamp, the pose carried on from
+    its tick to it: 0.05-0.07 mm off the shifted path at the stamps at
+    0.2 ms, 0.14 mm late by 1 ms (0.28 mm not carried on), 0.24 mm at 1 ms
+    RMS (0.18 mm; stamps before their poses' times move the grid's ticks).
+    At 3 ms RMS, the grid (a stamp half an interval off it) is not always
+    there: 1.6 mm.
     """
     rng = np.random.default_rng(0)
     late = (rng.normal(0.0, jitter_s, 300) if sent == 'normal'
             else rng.exponential(jitter_s, 300))
     change, error = _stream_errors([(k / 50 + d, k / 50) for k, d in enumerate(late)])
-    if jitter_s <= 1e-3:
+    if jitter_s <= 2e-4:
         assert change < 3e-4 and error < 1e-4, (change, error)
+    elif jitter_s <= 1e-3:
+        assert change < 3.5e-4 and error < (2e-4 if sent == 'late' else 3e-4), (change, error)
     else:
-        assert change < 1.5e-3 and error < 1.5e-3, (change, error)
+        assert change < 2.5e-3 and error < 2e-3, (change, error)
 
 
 def test_a_late_timer_with_true_stamps_is_read_by_its_stamps():
