@@ -66,6 +66,27 @@ def test_the_grid_of_a_timer_whose_sends_are_late():
     assert stream_grid(np.array([0.0, 0.02, 0.04, 0.041, 0.042, 0.043, 0.06])) is None
 
 
+def test_the_grid_of_a_timer_sent_3_ms_late_on_average():
+    """Sends late by 3 ms on average (exponential, one after the other), 50 Hz, 30 at a time.
+
+    The median interval alone was 0.3-0.6 ms off the timer's (15 ms over the
+    window), and a send late by more than half an interval counted as a
+    skipped tick: the grid was found in 77 % of the windows, its ticks within
+    1 ms of the poses' times in 56 %.  Now in all of them, and 79 %.
+    """
+    rng = np.random.default_rng(3)
+    stamps = np.arange(400) / 50 + rng.exponential(3e-3, 400)
+    for i in range(1, 400):
+        stamps[i] = max(stamps[i], stamps[i - 1] + 2e-4)   # (a send after the one before)
+    found = close = 0
+    for end in range(30, 400):
+        got = stream_grid(stamps[end - 30:end])
+        if got is not None:
+            found += 1
+            close += np.max(np.abs(got[0] - np.arange(end - 30, end) / 50)) < 1e-3
+    assert found == 370 and close >= 0.75 * 370, (found, close)
+
+
 def test_a_stream_is_read_by_its_grid_only_where_its_poses_are_smoother_by_it():
     """Stamped when sent: by the grid.  Stamped with their own times, however late: the stamps."""
     rng = np.random.default_rng(4)
