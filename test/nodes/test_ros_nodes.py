@@ -34,6 +34,7 @@ from bellow_ancf_ros.core import solve_forward, solve_inverse  # noqa: E402
 from bellow_ancf_ros.core.experiments import trajectories  # noqa: E402
 from bellow_ancf_ros.core import geometry  # noqa: E402
 from bellow_ancf_ros.nodes import inverse_kinetostatic_node as inv_mod  # noqa: E402
+from bellow_ancf_ros.nodes.worker import BURST  # noqa: E402
 from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos, spin_until_closed  # noqa: E402
@@ -713,10 +714,12 @@ def test_latest_target_only_in_process(h, one):
     assert node.stats['solved'] <= 10             # ... and solved only the newest ones
     assert answer_delay < 1.0                     # without working through a backlog
     times = [t for t, _ in h.msgs['pressure_command']]
-    # rate bound: publishes are >= 1/20 s apart; receipt times may bunch on a loaded machine,
-    # so bound the count over the whole window (with 0.1 s of delivery jitter)
+    # rate bound: publishes are >= 1/20 s apart after the worker's first BURST (its token
+    # bucket: the first three came within 3-25 ms); receipt times may bunch on a loaded
+    # machine, so bound the count over the whole window (with 0.1 s of delivery jitter; without
+    # the burst, ten commands received 18 ms closer than their 0.365 s failed it)
     if len(times) > 1:
-        assert len(times) - 1 <= 20.0 * (times[-1] - times[0] + 0.1), np.diff(times)
+        assert len(times) - 1 <= 20.0 * (times[-1] - times[0] + 0.1) + BURST, np.diff(times)
     for _, m in h.msgs['pressure_command']:
         assert_safe(m.data, one.cfg)
 

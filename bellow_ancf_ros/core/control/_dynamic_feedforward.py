@@ -73,6 +73,8 @@ _STILL_M, _STILL_RAD = 1.0e-5, 1.0e-4
 #: The most a target is carried on to the time it is commanded at [s] (a pose that old is a
 #: stall, and the stream brakes after its stale time).
 MAX_LEAD_S = 0.1
+#: Intakes whose age (taken in after the pose's own time) give the usual one (their median).
+AGES_KEPT = 25
 #: ``(window [s], polynomial degree)`` of the fits that give the velocity, the acceleration
 #: and the jerk at the newest target (module docstring); fewer targets than ``degree + 2`` in
 #: a window: the degree they allow, at least 2 (three targets).  ``FITS``: a stream whose
@@ -216,10 +218,14 @@ class StreamFeedforward:
     :meth:`push` each target with the time it is wanted at; :meth:`target`
     gives the newest one shifted by the derivatives of polynomials fitted to
     the targets before it (:data:`FITS`; at least three targets), and
-    carried on by them to the time it is commanded at (at most
-    :data:`MAX_LEAD_S`): a pose solved after its time (a node kept waiting
-    by a busy computer, a planner's late send) would leave the command
-    behind the path by the pose's age times its speed.  A target
+    carried on by them to the time it is commanded at, less the usual age
+    of the stream's targets when taken in (the median of the last
+    :data:`AGES_KEPT`; at most :data:`MAX_LEAD_S`): a pose solved later
+    than usual (a node kept waiting by a busy computer, a planner's late
+    send) would leave the command behind the path by the extra age times
+    its speed, a jitter that rings the robot's mode.  A constant age (a
+    planner whose clock is behind the node's, the usual transport and
+    queue) is not carried: it costs little, and a clock's offset is no age.  A target
     farther than ``jump_m`` from where the stream was heading (a step), a
     stop (:meth:`_jump`), or too few samples: the newest target unshifted.
 
@@ -256,6 +262,7 @@ class StreamFeedforward:
         self._held_to = None   # the hold's end of a brake the stream cut short by moving on
         self._anchor = 0.0     # the newest target's stamp, or when it was pushed if later
         self._t_pose = 0.0     # the newest pose's own time (its tick, read by the grid)
+        self._ages: deque = deque(maxlen=AGES_KEPT)   # intake times after the poses' own
         self._repeated = False   # the newest targets repeat the one before them
         self._repeat_t = 0.0     # the newest repeat's time
         self._noisy_until = -math.inf   # read with NOISY_FITS until then
@@ -274,6 +281,7 @@ class StreamFeedforward:
         self._hist.clear()
         self._brake = None
         self._held_to = None
+        self._ages.clear()
         self._repeated = False
         self._noisy_until = -math.inf
         self._on_grid = False
@@ -313,6 +321,8 @@ class StreamFeedforward:
         self._brake = None
         self._repeated = False
         self._read_times(t)
+        if at is not None:
+            self._ages.append(float(at) - self._t_pose)
 
     def _jump(self, t: float, p) -> bool:
         """Whether a target starts the stream again: a jump (a step), a stop, a late start.
@@ -503,7 +513,9 @@ class StreamFeedforward:
         if fit is None:
             return p1, z1
         dp, dz = fit
-        lead = 0.0 if now is None else min(max(float(now) - self._t_pose, 0.0), MAX_LEAD_S)
+        usual = statistics.median(self._ages) if self._ages else 0.0
+        lead = 0.0 if now is None else min(max(float(now) - self._t_pose - usual, 0.0),
+                                           MAX_LEAD_S)
         p1, dp = _ahead(p1, dp, lead)
         if z1 is None:
             return self.ff.shifted(p1, dp)

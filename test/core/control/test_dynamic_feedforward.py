@@ -125,25 +125,44 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
 
 
 def test_a_target_solved_late_is_carried_on_and_no_stop():
-    """A node kept waiting by a busy computer solves a target 40 ms after its stamp.
+    """A node kept waiting by a busy computer solves one target in ten 40 ms later than usual.
 
     The stream has not stopped (the target was just taken in): no brake, and
-    the command is the path's shifted pose at the time it is commanded, not
-    40 ms behind it (2.5 mm on this circle).  A re-solve a stale time after
-    the target was taken in, with none after it, brakes.
+    the command is the path's shifted pose at the time it is commanded less
+    the usual 5 ms, not 40 ms behind that (2.5 mm on this circle).  A re-solve
+    a stale time after the newest target was taken in, with none after it,
+    brakes.
     """
     circle = _circle()
     exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
     st = StreamFeedforward(F, ZETA, lag_s=TAU)
     for k in range(100):
-        st.push(k / 50, *circle(k / 50), at=k / 50 + 0.04)
-        now = k / 50 + 0.04
+        now = k / 50 + (0.045 if k % 10 == 9 else 0.005)
+        st.push(k / 50, *circle(k / 50), at=now)
         assert not st.busy(now)
         if k >= 30:
-            got = st.target(now)[0]
-            assert np.linalg.norm(got - exact(now)[0]) < 1e-4
-            assert np.linalg.norm(exact(now)[0] - exact(k / 50)[0]) > 2e-3
+            assert np.linalg.norm(st.target(now)[0] - exact(now - 0.005)[0]) < 1e-4
+            if k % 10 == 9:
+                assert np.linalg.norm(exact(now - 0.005)[0] - exact(k / 50)[0]) > 2e-3
     assert not st.busy(now + 0.9 * st.stale_s()) and st.busy(now + 1.1 * st.stale_s())
+
+
+def test_a_planner_whose_clock_is_behind_is_neither_stopped_nor_carried():
+    """Stamps 0.5 s behind the node's clock (two computers' clocks apart): an age, but no lag.
+
+    Each target is taken in 0.5 s after its stamp: the stream goes on (no
+    brake, which it was, every target, while the stop was judged by the
+    stamps alone), and a constant age is not carried (the command would
+    lead the path by 0.1 s).
+    """
+    circle = _circle()
+    exact = dynamic_path(circle, F, ZETA, lag_s=TAU)
+    st = StreamFeedforward(F, ZETA, lag_s=TAU)
+    for k in range(100):
+        st.push(k / 50, *circle(k / 50), at=k / 50 + 0.5)
+        assert not st.busy(k / 50 + 0.5)
+        if k >= 30:
+            assert np.linalg.norm(st.target(k / 50 + 0.5)[0] - exact(k / 50)[0]) < 1e-4
 
 
 def _circle(period=2.0, radius=0.02):
