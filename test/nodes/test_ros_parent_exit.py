@@ -169,7 +169,9 @@ def test_a_node_whose_launcher_exits_vents_and_exits(env, client, subreaper, tmp
         for x in (0.004, 0.006):
             before = client.commands()[-1] if client.commands() else None
             deadline = time.monotonic() + TIMEOUT
-            while client.commands()[-1:] in ([], [before]) and time.monotonic() < deadline:
+            # (the vent of the node's activation may come after the first target: not an answer)
+            while (client.commands()[-1:] in ([], [before], [[0.0, 0.0, 0.0]])
+                   and time.monotonic() < deadline):
                 client.targets.publish(target(x=x))
                 time.sleep(0.2)
             assert client.commands()[-1:] not in ([], [before]), log_path.read_text()
