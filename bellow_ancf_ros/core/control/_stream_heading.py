@@ -123,7 +123,9 @@ def off_cubic(times: np.ndarray, positions: np.ndarray) -> float:
     tau = t[sel] / SMOOTH_WINDOW_S   # (scaled to [-1, 0], about the newest: the normal
     V = tau[:, None] ** np.arange(4)   # equations of a 4x4 are then well within double)
     P = positions[sel] - positions[-1]
-    r = V @ np.linalg.solve(V.T @ V, V.T @ P) - P
+    # (least squares, not the normal equations' solve: times on fewer than three instants made
+    # them singular, and the node's solve raised LinAlgError: 4 times in a make demo run)
+    r = V @ np.linalg.lstsq(V, P, rcond=None)[0] - P
     return float(np.sqrt(np.mean(r ** 2) * 3))
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bellow_ancf_ros.core.control._stream_heading import (
-    STALL_S, stream_grid, stream_heading, stream_jumps, stream_times)
+    STALL_S, off_cubic, stream_grid, stream_heading, stream_jumps, stream_times)
 
 
 def _parabola(t):
@@ -115,3 +115,12 @@ def test_a_target_after_a_late_send_is_no_jump_but_a_step_is():
     assert np.linalg.norm(p_new - head) > 2.5e-3 + allow        # the old reading: a jump
     assert not stream_jumps(path, t_new, p_new, jump_m=2e-3)
     assert stream_jumps(path, t_new, p_new + [0.0, 0.0, 0.005], jump_m=2e-3)
+
+
+def test_times_on_two_instants_give_a_distance_not_an_error():
+    """Stamps on fewer than three instants: the normal equations were singular (LinAlgError)."""
+    P = np.random.default_rng(0).normal(size=(8, 3))
+    for times in ([0, 0, 0, 0, 0, 0, 1, 1], [5] * 8):
+        assert math.isfinite(off_cubic(np.array(times, float), P))
+    t = np.arange(8) / 50.0
+    assert off_cubic(t, np.c_[t, t ** 2, t ** 3]) < 1e-12   # (a cubic: none)
