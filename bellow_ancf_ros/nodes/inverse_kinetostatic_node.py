@@ -420,9 +420,7 @@ class InverseKinetostaticNode(LifecycleNode):
             self._held_item = item
         self._feedback.remember(item)
         self._worker.submit(item)
-        # hand the GIL to the solver thread now: else it waits for the executor's own Python
-        # work before its next wait (about 0.5 ms of latency, measured by bench/ros_latency.py)
-        time.sleep(0)
+        time.sleep(0)   # the GIL to the solver now (0.5 ms of latency: bench/ros_latency.py)
 
     def _republish(self) -> None:
         """The current command again (``command_rate_hz``), unless a new one just went out.
@@ -528,7 +526,8 @@ class InverseKinetostaticNode(LifecycleNode):
             self._feedback.no_command()
             return
         unit = self._unit()
-        if p is not None:   # the command first, the diagnostics after it
+        if p is not None:   # the command first (at its time on a stream's grid), then the rest
+            self._targets.pace()
             with self._lock:
                 if not self._active or self._model is not model:
                     return   # deactivated while solving: the vent command stands

@@ -36,25 +36,39 @@ circle at 10x 0.489 mm median RMSE and 0.904 mm worst, against 0.553 and
 dead time and half a target period, the node inverting the lag (a
 preview is a pure delay, the lag also lowers the amplitude), or preview the
 lag too with ``dynamic_feedforward: false``.
+
+With the dynamic feedforward, a stream's commands go out on its own grid
+(:class:`~bellow_ancf_ros.core.control.CommandPacer`; wall clock only):
+each new target's command at its regular intake (its pose's time plus the
+usual age at arrival) plus the 95th percentile of how late the last 100
+were ready (at most one interval of the stream), its pose carried to that time
+(:meth:`pace`, called by the node before it publishes), instead of when
+its solve happened to end; re-solves and a held or braking stream's
+commands go out at once.  Diagnostics: ``command_margin_ms`` and
+``commands_paced_late`` (late / paced).
 """
 
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any, Callable
 
 from rcl_interfaces.msg import ParameterType
 
-from ..core.control import TARGET_SHAPINGS, TargetFilter
+from ..core.control import TARGET_SHAPINGS, CommandPacer, TargetFilter
 from . import lockstep
 from .ros_util import Param, StartupParameterError, control_clock, declare_all, descriptor
 
-__all__ = ['SHAPING_RATE_HZ', 'TARGET_PARAMETER_TABLE', 'TargetLink']
+__all__ = ['SHAPING_RATE_HZ', 'STREAM_DEFER_S', 'TARGET_PARAMETER_TABLE', 'TargetLink']
 
 #: Re-solve rate of a shaped target while it moves [Hz].
 SHAPING_RATE_HZ = 50.0
 #: A shaper level is solved this long after its impulse time [s] (the level is then in).
 IMPULSE_LEAD_S = 0.001
+#: No modal analysis until this long after a moving stream's newest target [s]
+#: (:meth:`~.mode_watch.ModeWatch.defer`; longer than a stopped stream's brake).
+STREAM_DEFER_S = 0.5
 #: The parameters TargetLink declares (read on configure).
 TARGET_PARAMETER_TABLE = (
     Param('target_shaping', 'smooth', descriptor(
@@ -99,6 +113,9 @@ class TargetLink:
         self._levels: list = []   # one-shot re-solves at impulse times (_level_timer)
         self._last_pose = None
         self._last_pose_t: float | None = None     # when the newest pose was first wanted
+        # a stream's commands on its grid (wall clock only: under use_sim_time the lockstep)
+        self._pacer = None if self._clock.simulated else CommandPacer()
+        self._due: tuple | None = None   # (regular intake, due) of the target being solved
 
     def _read_kind(self) -> str:
         kind = self.node.get_parameter('target_shaping').value
@@ -222,7 +239,9 @@ class TargetLink:
 
     def reset(self, start=None) -> None:
         """Forget the stream (on activate); ``start``: the pose the robot is at (vented)."""
-        self._last_item = None
+        self._last_item = self._due = None
+        if self._pacer is not None:
+            self._pacer.reset()
         with self._lock:
             if self._filter is not None:
                 self._filter.reset(start)
@@ -239,12 +258,30 @@ class TargetLink:
             filt = self._filter
             if filt is None:
                 return (pos, z), (pos, z)
+            now, self._due = self._clock.now(), None
             if item is not self._last_item:
                 self._last_item = item
-                now = self._clock.now()   # (a late solve is no stop of the stream)
-                filt.push(wanted_at, pos, z, at=now)
+                filt.push(wanted_at, pos, z, at=now)   # (a late solve is no stop of the stream)
                 self._schedule_levels(item, filt, wanted_at)
-            return filt.targets(self._clock.now())
+                tick = filt.stream_tick()   # (a moving stream: its pose's time, interval)
+                if tick is not None and self._modes is not None:
+                    self._modes.defer(now + STREAM_DEFER_S)
+                if tick is not None and self._pacer is not None:   # (item[3]: its arrival)
+                    self._due = self._pacer.due(tick[0], item[3], tick[1])
+                    now = max(now, self._due[1] or now)   # (carried to when it goes out)
+            return filt.targets(now)
+
+    def pace(self) -> None:
+        """Wait until the command just solved is due (:class:`CommandPacer`); else return.
+
+        Only a new target of a stream has a time: re-solves, a held or
+        braking stream's commands go out at once.
+        """
+        due, self._due = self._due, None
+        if due is not None and self._pacer is not None:
+            wait = self._pacer.ready(due[0], self._clock.now(), due[1])
+            if wait > 0.0:
+                time.sleep(wait)
 
     def hold_until(self) -> float | None:
         """Until when the closed loop holds its correction (a jump's move; control time)."""
@@ -263,11 +300,16 @@ class TargetLink:
             if filt is None:
                 return {'target_shaping': self._kind, 'dynamic_feedforward': 'false'}
             move = filt.jumps.duration_s if filt.jumps is not None else 0.0
+            pacer = self._pacer
+            margin, late, paced = ((None, 0, 0) if pacer is None
+                                   else (pacer.margin_s, pacer.late, pacer.paced))
             return {'target_shaping': self._kind,
                     'target_shaping_delay_s': f'{filt.delay_s:.3f}',
                     'target_move_s': f'{move:.3f}' if move > 0 else 'none',
                     'dynamic_feedforward': str(filt.feedforward is not None).lower(),
-                    'target_mode_hz': 'none' if filt.mode is None else f'{filt.mode[0]:.4g}'}
+                    'target_mode_hz': 'none' if filt.mode is None else f'{filt.mode[0]:.4g}',
+                    'command_margin_ms': 'none' if margin is None else f'{margin * 1e3:.1f}',
+                    'commands_paced_late': f'{late}/{paced}'}
 
 
 class _OneShot:

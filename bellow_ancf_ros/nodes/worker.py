@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 import threading
 import time
@@ -52,6 +53,7 @@ def ready_model(robot_config: str, payload_kg: float = 0.0) -> tuple:
     start = vented if payload_kg == 0.0 else solve_forward(model, vent, payload_kg=payload_kg)
     precompute_corners(model, payload_kg)
     warm_up(model)
+    gc.freeze()   # out of the collector's full passes, as what start-up built (main_for)
     return cfg, model, vented, start
 
 

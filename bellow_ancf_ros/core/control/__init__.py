@@ -21,7 +21,8 @@
 * :class:`PlayCompensation`: commands at the edge of the regulators' play
   band (the backlash inverse); :class:`CreepCompensation`: commands that
   lead the bellows' creep (its inverse); :class:`CommandOutput`: both, what
-  the regulators are sent for the pressures wanted;
+  the regulators are sent for the pressures wanted; :class:`CommandPacer`:
+  when each command of a target stream goes out (on the stream's grid);
 * :class:`OscillationWatchdog`: a sustained or growing swing of the measured
   error near the first mode (:meth:`IntegralFeedback.watch`: the loop cuts
   its gain and holds its correction, and doubles it back after
@@ -41,6 +42,7 @@ from ._mode_check import (AUTO_GAIN, GAIN_RANGE_PER_S, RETUNE_FRACTION, ModeChec
                           ModeCheckResult, gain_setting)
 from ._play import PlayCompensation
 from ._command_output import CommandOutput, CreepCompensation
+from ._pacing import CommandPacer
 from ._shaping import SHAPERS, TargetShaper, shaped, shaper_impulses
 from ._target_filter import TARGET_SHAPINGS, TargetFilter
 from ._jumps import JUMP_M, KNOWN_MODE_ERROR, JumpTransition
@@ -53,7 +55,7 @@ __all__ = [
     "LOOP_LAG_S", "MIN_GAIN_MARGIN", "MIN_PHASE_MARGIN_DEG", "NOISE_BUDGET_M", "RESTORE_S",
     "RETUNE_FRACTION",
     "SHAPERS",
-    "TARGET_SHAPINGS", "CommandOutput", "CreepCompensation", "DynamicFeedforward",
+    "TARGET_SHAPINGS", "CommandOutput", "CommandPacer", "CreepCompensation", "DynamicFeedforward",
     "FeedbackSettings", "ForceEstimate", "IntegralFeedback", "JumpTransition", "KNOWN_MODE_ERROR",
     "LoopMargins",
     "MismatchTransfer", "MocapNoise", "ModeCheck", "ModeCheckResult", "OscillationWatchdog",

@@ -494,6 +494,18 @@ class StreamFeedforward:
             return self._brake[0] + self._brake[1]
         return self._held_to
 
+    def stream_tick(self) -> tuple | None:
+        """The newest target's pose time and the stream's median interval [s], or None.
+
+        The pose's time is its tick on the stream's grid (else its stamp):
+        what a :class:`~._pacing.CommandPacer` times the command by.  None
+        while the stream stands still or brakes, or before its second target.
+        """
+        h = self._hist
+        if self._repeated or self._brake is not None or len(h) < 2:
+            return None
+        return self._t_pose, statistics.median(b[0] - a[0] for a, b in zip(h, list(h)[1:]))
+
     def target(self, now: float | None = None):
         """The wanted pose shifted for the mode: ``(position, z_axis or None)``.
 

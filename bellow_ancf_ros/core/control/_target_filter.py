@@ -143,6 +143,10 @@ class TargetFilter:
         self._newest = (float(t), p, z)
         self._arrived = False
 
+    def stream_tick(self) -> tuple | None:
+        """The feedforward's :meth:`StreamFeedforward.stream_tick` (None without it)."""
+        return None if self.feedforward is None else self.feedforward.stream_tick()
+
     def busy(self, now: float) -> bool:
         """True until the output stops moving: past the shaper's last impulse, a move's end.
 

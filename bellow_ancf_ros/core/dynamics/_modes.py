@@ -39,19 +39,43 @@ __all__ = ["Mode", "ModalAnalysis", "ModalError", "ReducedSystem", "natural_mode
 _CLUSTER_RTOL = 1e-6
 #: Up to this many modes the damped eigenvalues come from Newton's method on the quadratic
 #: eigenproblem (a few complex solves of the reduced size, milliseconds), beyond it from the
-#: dense first-order pencil (``scipy.linalg.eig`` of twice the size: 0.1 s for two segments,
-#: in one call that holds the interpreter: a node's margin thread stalled its control
-#: thread by 0.2 s every 2 s, and the command gaps rang the robot).
+#: dense first-order pencil (an eigenvalue problem of twice the size: 0.1 s for two segments).
 _NEWTON_MODES = 2
+
+
+# The dense linear algebra here goes through numpy, whose LAPACK calls release the
+# interpreter; scipy.linalg's hold it for the whole call (``eig`` of the pencil 130-180 ms,
+# the null space's SVD 10 ms for two segments), and a node computes modes in a thread
+# beside its control thread: a modal analysis stalled the inverse node's commands by up to
+# 0.18 s (tests/core/dynamics/test_modes.py measures a thread's wake-ups beside it).
+def _pencil(K, M, D):
+    """Eigenvalues and displacement rows of the eigenvectors of ``s^2 M + s D + K``.
+
+    The first-order form ``[[0, I], [-M^-1 K, -M^-1 D]]`` (``M`` positive
+    definite): the pencil's eigenpairs, through numpy's ``eig``.
+    """
+    n = K.shape[0]
+    A = np.block([[np.zeros((n, n)), np.eye(n)],
+                  [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
+    s, X = np.linalg.eig(A)
+    return s, X[:n]
+
+
+def _generalized_eigh(K, M):
+    """``K V = M V diag(w2)``, ``V^T M V = I``, ascending (Cholesky of ``M``, numpy's ``eigh``).
+
+    Raises ``LinAlgError`` when ``M`` is not positive definite.
+    """
+    L = np.linalg.cholesky(M)
+    Li = np.linalg.inv(L)
+    C = Li @ K @ Li.T
+    w2, Y = np.linalg.eigh(0.5 * (C + C.T))
+    return w2, Li.T @ Y
 
 
 def _damped_by_eig(Kr, Mr, Dr, V):
     """Damped eigenvalues (Im >= 0) matched to the undamped shapes ``V`` (M-weighted MAC)."""
-    n = Kr.shape[0]
-    A = np.block([[np.zeros((n, n)), np.eye(n)], [-Kr, -Dr]])
-    B = np.block([[np.eye(n), np.zeros((n, n))], [np.zeros((n, n)), Mr]])
-    s, X = sla.eig(A, B)
-    X = X[:n]
+    s, X = _pencil(Kr, Mr, Dr)
     used = np.zeros(len(s), bool)
     out = []
     for m in range(V.shape[1]):
@@ -62,26 +86,34 @@ def _damped_by_eig(Kr, Mr, Dr, V):
         mac = np.where((s.imag >= -1e-12 * np.abs(s)) & ~used & np.isfinite(s),
                        num / np.maximum(den, 1e-300), -1.0)
         c = int(np.argmax(mac))
-        used[c] = True
-        out.append(s[c])
+        used[c] = True   # (polished by Newton: the first-order form's eig loses digits)
+        polished = _damped_newton(Kr, Mr, Dr, 0.0, v, start=(s[c], X[:, c]))
+        out.append(s[c] if polished is None else polished)
     return out
 
 
-def _damped_newton(Kr, Mr, Dr, w, v, iters: int = 12):
+def _damped_newton(Kr, Mr, Dr, w, v, iters: int = 12, start=None):
     """The damped eigenvalue near the undamped mode ``(w, v)``, or None if Newton fails.
 
     Newton's method on ``T(s) x = 0``, ``T(s) = s^2 M + s D + K``, bordered
     by the normalisation ``v^T M x = 1``; the start is the proportional-damping
-    estimate ``zeta = v^T D v / (2 w)`` (unit modal mass).  Quadratic
+    estimate ``zeta = v^T D v / (2 w)`` (unit modal mass), or ``start``
+    (``(s, x)``: an eigenpair of the pencil to polish).  Quadratic
     convergence: 3-5 solves of the reduced size.
     """
     n = Kr.shape[0]
-    z0 = float(v @ Dr @ v) / (2 * w)
-    if not 0 <= z0 < 1:
-        return None
-    s = complex(-z0 * w, w * np.sqrt(1 - z0 * z0))
     c = Mr @ v
-    x = v.astype(complex) / (c @ v)
+    if start is not None:
+        s, x = complex(start[0]), np.asarray(start[1], complex)
+        if not abs(c @ x) > 0:
+            return None
+        x = x / (c @ x)
+    else:
+        z0 = float(v @ Dr @ v) / (2 * w)
+        if not 0 <= z0 < 1:
+            return None
+        s = complex(-z0 * w, w * np.sqrt(1 - z0 * z0))
+        x = v.astype(complex) / (c @ v)
     J = np.zeros((n + 1, n + 1), complex)
     J[n, :n] = c
     for _ in range(iters):
@@ -277,35 +309,27 @@ class ReducedSystem:
     @one_thread_call
     def damped_first(self, damping_time_s: float, mass_damping_per_s: float = 0.0):
         """Damped frequency [Hz] and damping ratio of the first mode for another damping."""
-        n = self.K.shape[0]
         D = self.damping(damping_time_s, mass_damping_per_s)
-        A = np.block([[np.zeros((n, n)), np.eye(n)], [-self.K, -D]])
-        B = np.block([[np.eye(n), np.zeros((n, n))], [np.zeros((n, n)), self.M]])
-        s, X = sla.eig(A, B)
-        v = self.V[:, 0]
-        mv = self.M @ v
-        X = X[:n]
-        num = np.abs(X.T @ mv) ** 2
-        den = np.real(np.einsum("ij,ij->j", X.conj(), self.M @ X))
-        mac = np.where((s.imag >= -1e-12 * np.abs(s)) & np.isfinite(s),
-                       num / np.maximum(den, 1e-300), -1.0)
-        sc = s[int(np.argmax(mac))]
+        sc = _damped_by_eig(self.K, self.M, D, self.V[:, :1])[0]
         return float(abs(sc.imag) / (2 * np.pi)), float(-sc.real / abs(sc))
 
 
 def _null_space(C: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the null space of the constraint Jacobian ``C``.
 
-    LAPACK's divide-and-conquer SVD (``gesdd``, scipy's default) now and then
-    fails to converge on a finite matrix (once in a 200-robot run of the
-    robot family's closed loops, from the mode check); the QR-iteration SVD
-    (``gesvd``) is then used.  A Jacobian that is not finite, or that neither
-    resolves, raises :class:`ModalError`.
+    LAPACK's divide-and-conquer SVD (``gesdd``, numpy's, which releases the
+    interpreter) now and then fails to converge on a finite matrix (once in
+    a 200-robot run of the robot family's closed loops, from the mode
+    check); the QR-iteration SVD (``gesvd``, scipy's) is then used.  A
+    Jacobian that is not finite, or that neither resolves, raises
+    :class:`ModalError`.
     """
     if not np.all(np.isfinite(C)):
         raise ModalError("the constraint Jacobian is not finite: no modes")
-    try:
-        return sla.null_space(C)
+    try:   # (as scipy.linalg.null_space: the singular values below max(shape) eps s_max)
+        _, sv, vh = np.linalg.svd(C, full_matrices=True)
+        rank = int(np.sum(sv > max(C.shape) * np.finfo(float).eps * (sv[0] if sv.size else 0)))
+        return vh[rank:].T.conj()
     except np.linalg.LinAlgError:
         try:
             return sla.null_space(C, lapack_driver="gesvd")
@@ -343,7 +367,7 @@ def reduced_system(fw, inertia: Inertia | None = None, damping_time_s: float | N
               blocks.ravel())
     Kr, Mr, Dr = (0.5 * (A + A.T) for A in (Z.T @ H @ Z, Z.T @ M @ Z, Z.T @ Dkv @ Z))
     try:
-        w2, V = sla.eigh(Kr, Mr)
+        w2, V = _generalized_eigh(Kr, Mr)
     except np.linalg.LinAlgError as exc:
         raise ModalError("the mass is not positive definite on the constraints' tangent "
                          "space (massless parts?)") from exc
