@@ -176,6 +176,38 @@ def test_dynamic_feedforward_shifts_a_moving_stream_not_a_held_target(h, one):
              what='the held target unshifted')
 
 
+def test_a_moving_streams_commands_are_paced_and_its_modes_deferred(h, one):
+    """A 50 Hz circle: commands on the stream's grid (CommandPacer), no modal analysis meanwhile.
+
+    Each new target's command waits for its time (the margin in the status,
+    few late); the first mode's analysis, due every 2 s while the robot
+    moves, waits until the stream has stopped moving (ModeWatch.defer).
+    """
+    node = h.add(InverseKinetostaticNode, dynamic_feedforward=True, name='paced')
+    c = solve_forward(one, [30e3, 30e3, 30e3]).position
+    r, w = 0.008, 2 * math.pi / 2.0
+    pub = h.publisher(PoseStamped, 'target_pose')
+    wait_for(lambda: pub.get_subscription_count() >= 1, what='subscribed')
+    watch = node._modes
+    t0 = time.monotonic()
+    answered = None
+    while time.monotonic() - t0 < 4.0:
+        t = time.monotonic() - t0
+        pub.publish(target_msg(c + r * np.array([math.cos(w * t), math.sin(w * t), 0.0])))
+        time.sleep(0.02)
+        if answered is None and t > 1.0:   # (after the start's answers)
+            answered = watch._answered_at
+    assert watch._answered_at == answered          # no analysis while the stream moved
+    st = node._targets.status()
+    late, paced = map(int, st['commands_paced_late'].split('/'))
+    assert 0.0 < float(st['command_margin_ms']) <= 40.0, st
+    assert paced >= 50 and late <= 0.5 * paced, st
+    for _ in range(10):   # held: the analyses resume within their period (2 s) and the defer
+        pub.publish(target_msg(c))
+        time.sleep(0.05)
+    wait_for(lambda: watch._answered_at != answered, timeout=6.0, what='an analysis once held')
+
+
 def test_bad_target_shaping_refused(h):
     with pytest.raises(ValueError, match="parameter target_shaping = 'zvdd' is not allowed; "
                        "allowed: a string, one of: 'smooth', 'none', 'zv', 'zvd'"):

@@ -22,6 +22,28 @@ def test_ready_model_starts_vented_and_carries_the_payload():
     assert np.allclose(vented2.position, vented.position)   # the warm start: no payload
 
 
+def test_ready_model_leaves_what_it_built_out_of_the_collectors_full_passes():
+    """gc.freeze: a full pass of the collector then skips the model and the modules (90 ms)."""
+    import gc
+    gc.unfreeze()
+    try:
+        worker.ready_model('one_segment')
+        assert gc.get_freeze_count() > 10_000      # (modules, the model, compiled kernels)
+        t0 = time.process_time()
+        gc.collect()
+        assert time.process_time() - t0 < 0.5 * _full_pass_unfrozen()
+    finally:
+        gc.unfreeze()
+
+
+def _full_pass_unfrozen() -> float:
+    import gc
+    gc.unfreeze()
+    t0 = time.process_time()
+    gc.collect()
+    return time.process_time() - t0
+
+
 def test_ready_model_refuses_an_unknown_robot():
     with pytest.raises(ConfigError):
         worker.ready_model('no_such_robot')
