@@ -15,10 +15,9 @@ one of its levels (a level 10-25 ms late left 0.24-0.41 mm of swing after a
 10 mm step where 0.034 mm was measured without the stall).
 :meth:`ModeWatch.defer` holds it off while a target stream moves, for at
 most :data:`MAX_DEFER_S` since the last answer and never after a change of
-the load: an analysis of two segments takes 50-65 ms of the interpreter
-beside the solves, which then took 25-36 ms instead of 7 and sent their
-commands 5-24 ms late (a 10x circle in ROS, every 2 s: 0.4-1.7 mm RMSE in
-the runs it hit, 0.13-0.25 mm in the others).
+the load: an analysis of two segments took 47-66 ms of CPU beside the
+solves, which then took 25-36 ms instead of 7 and sent their commands 5-24
+ms late (logged on a 10x circle in ROS, once every 2 s).
 """
 
 from __future__ import annotations
