@@ -114,9 +114,11 @@ class ModeWatch:
             self._wake.wait(_POLL_S)
             self._wake.clear()
             # the thread waits on the wall clock; what it waits for is in control time
-            while not self._stop.is_set() and self._clock.now() < self._held_off_until(self._fw):
-                left = self._held_off_until(self._fw) - self._clock.now()   # (looked at again:
-                self._stop.wait(min(left, _QUIET_POLL_S))   # simulated time, a new load)
+            while not self._stop.is_set():   # (looked at again: simulated time, a new load)
+                left = self._held_off_until(self._fw) - self._clock.now()
+                if left <= 0.0:
+                    break
+                self._stop.wait(min(left, _QUIET_POLL_S))
             fw = self._fw
             if self._stop.is_set() or fw is None or not self.check.due(fw, self._clock.now()):
                 continue

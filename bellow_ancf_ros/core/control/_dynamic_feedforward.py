@@ -379,11 +379,17 @@ class StreamFeedforward:
         for it, the command left the path and the closed loop held its
         correction for the brake's time).
         """
-        t = [s[0] for s in self._hist]
-        if len(t) < 2:   # (no speed yet: nothing to brake)
+        gap = self._interval()
+        if gap is None:   # (no speed yet: nothing to brake)
             return self.min_stale_s
-        gap = statistics.median(b - a for a, b in zip(t, t[1:]))   # (numpy's: 10x the time)
         return max(self.stale_periods * gap, self.min_stale_s) + self._late_s
+
+    def _interval(self) -> float | None:
+        """The median interval of the targets kept [s] (None: fewer than two)."""
+        t = [s[0] for s in self._hist]
+        if len(t) < 2:
+            return None
+        return statistics.median(b - a for a, b in zip(t, t[1:]))   # (numpy's: 10x the time)
 
     def _fit(self):
         """The derivatives at the newest target, ``(dp, dz or None)``: rows v, a[, j].
@@ -501,10 +507,10 @@ class StreamFeedforward:
         what a :class:`~._pacing.CommandPacer` times the command by.  None
         while the stream stands still or brakes, or before its second target.
         """
-        h = self._hist
-        if self._repeated or self._brake is not None or len(h) < 2:
+        gap = self._interval()
+        if self._repeated or self._brake is not None or gap is None:
             return None
-        return self._t_pose, statistics.median(b[0] - a[0] for a, b in zip(h, list(h)[1:]))
+        return self._t_pose, gap
 
     def target(self, now: float | None = None):
         """The wanted pose shifted for the mode: ``(position, z_axis or None)``.

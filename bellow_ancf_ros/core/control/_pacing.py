@@ -14,7 +14,8 @@ two-segment robot's 10x circle, a solve time of 6 ms plus an exponential
 :class:`CommandPacer` gives each command of a stream its time: the target's
 *regular intake* (its pose's time on the stream's grid,
 :meth:`StreamFeedforward.stream_tick`, plus the stream's usual age when it
-arrived: the median of the last :data:`AGES_KEPT`) plus a margin, the
+arrived: the median of the last
+:data:`~._dynamic_feedforward.AGES_KEPT`) plus a margin, the
 :data:`QUANTILE` of how long after its regular intake each of the last
 :data:`WINDOW` commands was ready (at most :data:`MAX_MARGIN_S`, and at most
 the stream's interval).  A command ready before its time waits for it; a
@@ -36,6 +37,8 @@ from collections import deque
 
 import numpy as np
 
+from ._dynamic_feedforward import AGES_KEPT   # (the usual age: the carry's and the pacer's)
+
 __all__ = ['CommandPacer']
 
 #: Commands whose readiness the margin is taken over.
@@ -45,8 +48,6 @@ WINDOW = 100
 QUANTILE = 0.95
 #: Readiness samples before the first paced command (until then: at once).
 MIN_SAMPLES = 10
-#: Arrivals whose age (after their pose's time) give the usual one (their median).
-AGES_KEPT = 25
 #: The largest margin [s]: beyond it a busy computer's commands go out when ready.
 MAX_MARGIN_S = 0.04
 
