@@ -49,9 +49,11 @@ Measured in each run:
   1000 solves, about the whole stream; p99 of the per-solve statuses'
   sample), the share of the solves on the circle that held the correction
   for a target jump (``feedback_state``: the node's smooth jump transition
-  took a late target for a jump), and the CPU the nodes and the machine's
+  took a late target for a jump), the CPU the nodes and the machine's
   other processes used meanwhile (the machine is shared: "quiet" means
-  without the burners, not alone).
+  without the burners, not alone), and the scheduler the inverse node's
+  threads ran on (its ``realtime_priority``: SCHED_FIFO where the bench
+  has the privilege to grant it, as a lab sets up its controller).
 
 Prints a table per robot, quiet against busy (medians) with the ratio
 busy/quiet and the goals (every busy figure within 1.3x of the quiet one;
@@ -341,6 +343,26 @@ def _cpu_use(a: dict, b: dict) -> dict:
 
 
 # ------------------------------------------------------------------ one run
+def scheduling(pid: int) -> dict:
+    """The scheduler of a process's threads: how many, how many on SCHED_FIFO, their priority.
+
+    Read from ``/proc/<pid>/task/*/stat`` (fields 40 and 41: the real-time
+    priority and the policy, 1 for SCHED_FIFO); the inverse node asks for
+    SCHED_FIFO itself (its ``realtime_priority``).
+    """
+    fifo, prio, n = 0, 0, 0
+    for task in Path(f'/proc/{pid}/task').glob('*'):
+        try:
+            fields = (task / 'stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        n += 1
+        if int(fields[38]) == 1:   # (fields 41 and 40 counted from the first, after the name)
+            fifo += 1
+            prio = max(prio, int(fields[37]))
+    return {'threads': n, 'fifo': fifo, 'priority': prio}
+
+
 def start_burners(n: int) -> list:
     """``n`` CPU-bound processes (``python -c "while True: pass"``), at our priority."""
     return [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
@@ -392,6 +414,7 @@ def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: in
             raise RuntimeError(f'the nodes did not come up within {startup_timeout:g} s')
         startup_s = time.monotonic() - t_start
         pids = {k: p.proc.pid for k, p in procs.items()}
+        sched = scheduling(pids['inverse'])
         pids.update({f'burner{i}': p.pid for i, p in enumerate(burn)})
         cpu0 = _cpu(pids)
         t0 = client.stream(targets, schedule.end_s, planner)
@@ -415,7 +438,7 @@ def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: in
         tidy(logs, ok)
     out = figures(data, cfg, targets, t0)
     out.update(burners=burners, startup_s=round(startup_s, 2), exit_codes=codes,
-               cpu_cores=_cpu_use(cpu0, cpu1))
+               cpu_cores=_cpu_use(cpu0, cpu1), inverse_scheduling=sched)
     return out
 
 
@@ -638,7 +661,8 @@ def combined(runs: list) -> dict:
     figure's ``(min, max)`` over the repeats; the watchdog's trips are
     summed, ``commands_safe`` holds only if it held in every repeat, and
     the messages and trip times are every repeat's (the start-up and
-    counts are the first repeat's).
+    counts are the first repeat's, the inverse node's scheduler the one of
+    the repeat with the fewest threads on SCHED_FIFO).
     """
     out = copy.deepcopy(runs[0])
     out['spread'] = {}
@@ -652,6 +676,9 @@ def combined(runs: list) -> dict:
     out['commands_safe'] = all(r['commands_safe'] for r in runs)
     for key in ('trip_at_s', 'oscillation_messages', 'commands_bad_examples'):
         out[key] = [x for r in runs for x in r[key]]
+    sched = [r['inverse_scheduling'] for r in runs if r.get('inverse_scheduling')]
+    if sched:   # (the run with the fewest threads on the real-time scheduler)
+        out['inverse_scheduling'] = min(sched, key=lambda x: (x['fifo'], -x['threads']))
     out['repeats'] = len(runs)
     return out
 
@@ -742,6 +769,12 @@ def render(result: dict) -> str:
         qv, bv = _get(q, path), _get(b, path)
         ratio = f'{bv / qv:.2f}' if qv and bv is not None else 'n/a'
         lines.append(f"  {label:40s} {_cell(qv):>8s} {_cell(bv):>8s} {ratio:>10s}")
+    for name, run in (('quiet', q), ('busy', b)):
+        sc = run.get('inverse_scheduling')
+        if sc:
+            lines.append(f"  {name}: the inverse node's threads on SCHED_FIFO "
+                         f"{sc['fifo']} of {sc['threads']}"
+                         + (f" (priority {sc['priority']})" if sc['fifo'] else ''))
     lines.append(f"  start-up {q['startup_s']:g} s quiet, {b['startup_s']:g} s busy; "
                  f"commands {q['commands']} / {b['commands']}; true poses "
                  f"{q['true_poses']} / {b['true_poses']}")

@@ -11,6 +11,7 @@ from rcl_interfaces.msg import ParameterType
 
 from . import contract
 from .measured_feedback import FEEDBACK_PARAMETERS
+from .realtime import REALTIME_PARAMETER, REALTIME_PRIORITY
 from .ros_util import Param, Topic, descriptor
 from .target_link import TARGET_PARAMETER_TABLE
 
@@ -20,8 +21,8 @@ __all__ = ['CONFIGURE_PARAMETERS', 'PARAMETERS', 'TOPICS']
 #: cleanup + configure (refused while configured, with the way out)
 CONFIGURE_PARAMETERS = (('robot_config', 'pressure_unit', 'base_frame') + FEEDBACK_PARAMETERS
                         + tuple(p.name for p in TARGET_PARAMETER_TABLE))
-D, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
-           ParameterType.PARAMETER_BOOL)
+D, S, B, INT = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING,
+                ParameterType.PARAMETER_BOOL, ParameterType.PARAMETER_INTEGER)
 #: The node's parameters: what it declares and what ``--help`` prints.
 PARAMETERS = (
     Param('robot_config', 'one_segment', descriptor(
@@ -74,6 +75,12 @@ PARAMETERS = (
     Param('autostart', True, descriptor(
         'Configure and activate at start-up (so that a plain ros2 run works).', B,
         read_only=True)),
+    Param(REALTIME_PARAMETER, REALTIME_PRIORITY, descriptor(
+        "SCHED_FIFO priority of the node's threads on the wall clock (1-98; 0: the normal "
+        'scheduler): its commands keep their period while other processes load the CPU. '
+        'Needs the privilege (root, CAP_SYS_NICE or an rtprio limit, as for ros2_control); '
+        'without it, one warning and the normal scheduler. Not under use_sim_time. Read at '
+        'start-up.', INT, lo=0, hi=98, read_only=True)),
 )
 
 

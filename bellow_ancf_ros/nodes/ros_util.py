@@ -45,6 +45,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from ..core import ConfigError, limit_blas_threads, numba_cache
 from . import contract
+from .realtime import use_realtime
 
 __all__ = [
     'ControlClock', 'EXECUTOR_ENV', 'EXECUTORS', 'QOS_DEPTH', 'STARTUP_ERROR_EXIT',
@@ -826,6 +827,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
                       '(about a minute on a 2-core machine; `ros2 run bellow_ancf_ros '
                       'bellow-ancf warm-up` does it ahead of time)', file=sys.stderr, flush=True)
             node = make()
+            use_realtime(node)   # (its threads, and those it starts later, on SCHED_FIFO)
             # what start-up built (modules, the model, compiled kernels: some 150 000 objects)
             # is left out of the garbage collector's full passes, which otherwise stopped
             # every thread of the process for 90 ms every few seconds (a command late by as

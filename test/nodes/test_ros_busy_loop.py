@@ -8,6 +8,7 @@ only (the figures against the quiet machine are the bench's).
 """
 
 import os
+import subprocess
 import sys
 
 import pytest
@@ -21,6 +22,12 @@ import busy_bench  # noqa: E402
 SCHEDULE = busy_bench.Schedule(held_s=5.0, circle_periods=2, settle_s=0.0, after_s=0.0)
 
 
+def _may_use_fifo() -> bool:
+    """Whether a process started here may put itself on SCHED_FIFO (root, CAP_SYS_NICE, ...)."""
+    probe = 'import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))'
+    return subprocess.run([sys.executable, '-c', probe], capture_output=True).returncode == 0
+
+
 def test_closed_loop_keeps_commanding_safely_beside_a_burner_per_core():
     f = busy_bench.run_loop('one_segment', os.cpu_count() or 1, SCHEDULE, startup_timeout=40.0)
     assert f['cpu_cores']['burners'] > 0.2 * f['burners'], f['cpu_cores']   # they did burn
@@ -32,3 +39,11 @@ def test_closed_loop_keeps_commanding_safely_beside_a_burner_per_core():
     assert f['trips'] == 0, f['oscillation_messages']
     assert f['held_rmse_mm'] < 1.0
     assert f['exit_codes'] == {'robot': 0, 'inverse': 0}
+    # the inverse node put every thread of its process on the real-time scheduler
+    # (realtime_priority, default 10) where it may; else none (and it said why)
+    sched = f['inverse_scheduling']
+    assert sched['threads'] >= 3, sched
+    if _may_use_fifo():
+        assert sched == {'threads': sched['threads'], 'fifo': sched['threads'], 'priority': 10}
+    else:
+        assert sched['fifo'] == 0, sched

@@ -377,12 +377,29 @@ class StreamFeedforward:
         plus the latest a send of the stream read by its timer's grid came
         after its tick in the fits' window (a late send is no stop: braking
         for it, the command left the path and the closed loop held its
-        correction for the brake's time).
+        correction for the brake's time), plus how much later than usual
+        the node took its targets in lately (:meth:`_held_up_s`).
         """
         gap = self._interval()
         if gap is None:   # (no speed yet: nothing to brake)
             return self.min_stale_s
-        return max(self.stale_periods * gap, self.min_stale_s) + self._late_s
+        return max(self.stale_periods * gap, self.min_stale_s) + self._late_s + self._held_up_s()
+
+    def _held_up_s(self) -> float:
+        """How much later than usual the stream's targets were taken in, lately [s].
+
+        The largest age at intake of the last :data:`AGES_KEPT` over their
+        median, at most :data:`MAX_LEAD_S`: a computer that kept the node
+        from its targets that long lately will again, and a target sent on
+        time that the node has not taken in yet is no stop (braked, the
+        command left the path and came back to it when the target was
+        taken: a kick to the robot's mode, up to four of them in one
+        circle on a busy computer).
+        """
+        ages = self._ages
+        if len(ages) < 2:
+            return 0.0
+        return min(max(ages) - statistics.median(ages), MAX_LEAD_S)
 
     def _interval(self) -> float | None:
         """The median interval of the targets kept [s] (None: fewer than two)."""

@@ -147,6 +147,29 @@ def test_a_target_solved_late_is_carried_on_and_no_stop():
     assert not st.busy(now + 0.9 * st.stale_s()) and st.busy(now + 1.1 * st.stale_s())
 
 
+def test_a_node_held_up_lately_waits_that_much_longer_before_braking():
+    """A busy computer kept the node from its targets by up to 35 ms more than usual lately.
+
+    The next target, sent on time, may again reach the solver that much
+    later: a re-solve before then is no stop (on a busy ROS node the
+    shaping tick braked the 10x circle up to four times in one period, each
+    brake a kick to the mode when the target came).  After it, the stream
+    brakes.  A quiet node (every target taken in as late as usual) still
+    brakes 1.5 intervals after its newest target; the allowance is at most
+    0.1 s.
+    """
+    circle = _circle()
+    for extra, allowed in ((0.0, 0.0), (0.035, 0.035), (0.4, 0.1)):
+        st = StreamFeedforward(F, ZETA, lag_s=TAU)
+        for k in range(60):
+            now = k / 50 + 0.005 + (extra if k % 8 == 2 else 0.0)
+            st.push(k / 50, *circle(k / 50), at=now)
+        stale = st.stale_s()
+        assert stale == pytest.approx(0.03 + allowed)
+        assert not st.busy(now + 0.03 + 0.9 * allowed)
+        assert st.busy(now + 1.01 * stale)
+
+
 def test_a_planner_whose_clock_is_behind_is_neither_stopped_nor_carried():
     """Stamps 0.5 s behind the node's clock (two computers' clocks apart): an age, but no lag.
 
