@@ -26,6 +26,7 @@ import threading
 from typing import Callable
 
 from ..core.control import ModeCheck, ModeCheckResult
+from .realtime import background
 from .ros_util import control_clock
 
 __all__ = ['MAX_DEFER_S', 'ModeWatch']
@@ -109,6 +110,7 @@ class ModeWatch:
             fn(before, res)
 
     def _loop(self) -> None:
+        background()   # (not on the command path: the normal scheduler, whatever the node's)
         log = self.node.get_logger()
         while not self._stop.is_set():
             self._wake.wait(_POLL_S)

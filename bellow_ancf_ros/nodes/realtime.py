@@ -20,25 +20,30 @@ user (``/etc/security/limits.conf``: ``@realtime - rtprio 98``, the user in
 group ``realtime``, as ros2_control's documentation sets it up).  Without
 it the node logs one warning and runs on the normal scheduler.  Under
 ``use_sim_time`` the simulation's lockstep times everything and the
-scheduler is left alone.
+scheduler is left alone.  A thread of background work (the first mode's
+analysis) goes back to the normal scheduler itself (:func:`background`).
 """
 
 from __future__ import annotations
 
 import os
+import threading
 
-__all__ = ['REALTIME_PARAMETER', 'REALTIME_PRIORITY', 'use_realtime']
+__all__ = ['REALTIME_PARAMETER', 'REALTIME_PRIORITY', 'background', 'use_realtime']
 
 #: The parameter a node declares to be put on the real-time scheduler (:func:`use_realtime`).
 REALTIME_PARAMETER = 'realtime_priority'
 #: The SCHED_FIFO priority a control node asks for by default (1-98; 0: the normal scheduler).
 REALTIME_PRIORITY = 10
+#: The threads (native ids) that do a node's background work (:func:`background`).
+_BACKGROUND: set = set()
 
 
 def _threads() -> list[int]:
-    """The thread ids of this process."""
+    """The thread ids of this process, but those of its background work."""
     try:
-        return sorted(int(t) for t in os.listdir('/proc/self/task'))
+        return sorted(int(t) for t in os.listdir('/proc/self/task')
+                      if int(t) not in _BACKGROUND)
     except OSError:
         return [0]
 
@@ -47,7 +52,8 @@ def use_realtime(node) -> str:
     """Put this process's threads at the node's ``realtime_priority``; what was done, in words.
 
     Threads started later inherit the policy of the thread that starts
-    them.  Logs one line: the priority taken, or why not (a warning).
+    them; those of background work (:func:`background`) are left on the
+    normal scheduler.  Logs one line: the priority taken, or why not (a warning).
     Nothing for a node without the parameter, at 0 or under ``use_sim_time``.
     """
     if not node.has_parameter(REALTIME_PARAMETER):
@@ -81,3 +87,20 @@ def use_realtime(node) -> str:
     text = f'scheduling: SCHED_FIFO priority {priority} for its {len(threads)} threads'
     log.info(text)
     return text
+
+
+def background() -> None:
+    """Put the calling thread on the normal scheduler: a node's background work.
+
+    The inverse node's analysis of its first mode (``ModeWatch``, some
+    100 ms of CPU at a time) is not on the command path; on SCHED_FIFO it
+    would take a core from everything else on the machine, the motion
+    capture driver and the regulators' side included.  A thread may always
+    lower its own priority.
+    """
+    _BACKGROUND.add(threading.get_native_id())   # (use_realtime leaves it there)
+    if hasattr(os, 'sched_setscheduler') and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        try:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass

@@ -7,6 +7,7 @@ on the normal scheduler).  The real node's threads are checked by
 """
 
 import os
+import threading
 
 import pytest
 
@@ -92,3 +93,19 @@ def test_not_permitted_warns_once_and_leaves_no_thread_on_fifo(monkeypatch):
 
 def test_the_threads_are_this_processs():
     assert os.getpid() in realtime._threads()   # (the main thread's id is the process id)
+
+
+def test_background_work_stays_on_the_normal_scheduler():
+    """A thread that says it does background work is left out of the threads raised."""
+    seen = {}
+
+    def work():
+        realtime.background()
+        seen['tid'] = threading.get_native_id()
+        seen['policy'] = os.sched_getscheduler(0)
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    assert seen['policy'] == os.SCHED_OTHER
+    assert seen['tid'] in realtime._BACKGROUND
+    realtime._BACKGROUND.discard(seen['tid'])

@@ -40,10 +40,11 @@ def test_closed_loop_keeps_commanding_safely_beside_a_burner_per_core():
     assert f['held_rmse_mm'] < 1.0
     assert f['exit_codes'] == {'robot': 0, 'inverse': 0}
     # the inverse node put every thread of its process on the real-time scheduler
-    # (realtime_priority, default 10) where it may; else none (and it said why)
+    # (realtime_priority, default 10) where it may, but the one of the first mode's analysis
+    # (background work); else none (and it said why)
     sched = f['inverse_scheduling']
     assert sched['threads'] >= 3, sched
     if _may_use_fifo():
-        assert sched == {'threads': sched['threads'], 'fifo': sched['threads'], 'priority': 10}
+        assert sched['fifo'] == sched['threads'] - 1 and sched['priority'] == 10, sched
     else:
         assert sched['fifo'] == 0, sched
