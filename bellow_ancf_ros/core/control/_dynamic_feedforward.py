@@ -251,7 +251,7 @@ class StreamFeedforward:
     """
 
     def __init__(self, frequency_hz: float, damping_ratio: float, min_stale_s: float = 0.025,
-                 jump_m: float = 0.005, stale_periods: float = 1.5, brake_periods: float = 1.0,
+                 jump_m: float = 0.005, stale_periods: float = 2.5, brake_periods: float = 1.0,
                  **kw) -> None:
         self.ff = DynamicFeedforward(frequency_hz, damping_ratio, **kw)
         self.min_stale_s, self.jump_m = float(min_stale_s), float(jump_m)

@@ -99,7 +99,7 @@ def test_a_stopped_stream_brakes_back_to_its_last_target():
     t1, p1 = 1.0, sine(1.0)[0]
     v = 0.01 * omega * math.cos(omega * t1)
     stale, T = st.stale_s(), st.brake_s
-    assert stale == pytest.approx(0.03) and T == pytest.approx(max(1 / F, 4 * TAU))
+    assert stale == pytest.approx(0.05) and T == pytest.approx(max(1 / F, 4 * TAU))
     fresh = st.target()[0]
     assert abs(fresh[0] - p1[0]) > 1e-3                      # moving: shifted
     # not stopped yet: the newest target carried on to the time it is commanded at
@@ -155,7 +155,7 @@ def test_a_node_held_up_lately_waits_that_much_longer_before_braking():
     shaping tick braked the 10x circle up to four times in one period, each
     brake a kick to the mode when the target came).  After it, the stream
     brakes.  A quiet node (every target taken in as late as usual) still
-    brakes 1.5 intervals after its newest target; the allowance is at most
+    brakes 2.5 intervals after its newest target; the allowance is at most
     0.1 s.
     """
     circle = _circle()
@@ -165,8 +165,8 @@ def test_a_node_held_up_lately_waits_that_much_longer_before_braking():
             now = k / 50 + 0.005 + (extra if k % 8 == 2 else 0.0)
             st.push(k / 50, *circle(k / 50), at=now)
         stale = st.stale_s()
-        assert stale == pytest.approx(0.03 + allowed)
-        assert not st.busy(now + 0.03 + 0.9 * allowed)
+        assert stale == pytest.approx(0.05 + allowed)
+        assert not st.busy(now + 0.05 + 0.9 * allowed)
         assert st.busy(now + 1.01 * stale)
 
 
@@ -327,16 +327,16 @@ def test_a_stalled_stream_keeps_its_shift():
     for k in range(100):
         st.push(k / 50, *circle(k / 50))
     t_last = 99 / 50
-    assert st.busy(t_last + 0.05) and st.hold_until() is not None   # overdue: braking
+    assert st.busy(t_last + 0.07) and st.hold_until() is not None   # overdue: braking
     for t in np.arange(t_last + 0.12, t_last + 0.4, 0.02):
         st.push(t, *circle(t))
         got = st.target(t)[0]
         assert np.linalg.norm(got - circle(t)[0]) > 3e-3             # shifted
         assert np.linalg.norm(got - exact(t)[0]) < 1e-3, (t, np.linalg.norm(got - exact(t)[0]))
     # the brake's hold of the closed loop's correction ends as long after the target that
-    # ended the stall as the brake had run (0.09 s: overdue 0.03 s after the last target)
-    assert st.stale_s() == pytest.approx(0.03)
-    assert st.hold_until() == pytest.approx(t_last + 0.12 + 0.09)
+    # ended the stall as the brake had run (0.07 s: overdue 0.05 s after the last target)
+    assert st.stale_s() == pytest.approx(0.05)
+    assert st.hold_until() == pytest.approx(t_last + 0.12 + 0.07)
     assert st.hold_until() < t_last + st.brake_s
     st.reset()
     assert st.hold_until() is None
