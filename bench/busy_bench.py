@@ -225,6 +225,8 @@ class BusyClient(SpunNode):
         self.measured = []   # capture stamps [s]
         self.diag = []       # DiagnosticArray messages
         self.sent = []       # stamps [s] of the targets sent
+        self.unmatched_s = 0.0   # how long the robot had not matched the commands when ready
+        self._unmatched_since = 0.0
         self.late = []       # how long after its tick's time each was stamped [s]
         n = self.node
         n.create_subscription(Float64MultiArray, 'pressure_command', self._command, q)
@@ -259,11 +261,34 @@ class BusyClient(SpunNode):
         return any(_values(st).get('lifecycle_state') == 'active'
                    for m in diag for st in m.status if st.name == f'{INVERSE}: status')
 
+    def robot_matched(self) -> int | None:
+        """The robot's newest status: publishers of its commands matched (None: none yet)."""
+        with self.lock:
+            diag = list(self.diag)
+        for m in reversed(diag):
+            for st in m.status:
+                if st.name.endswith(': simulated robot') and 'command_publishers' in _values(st):
+                    return int(_values(st)['command_publishers'])
+        return None
+
     def ready(self) -> bool:
-        """The simulator publishes, the inverse node listens to targets and is active."""
+        """The simulator publishes, the inverse node listens to targets and is active.
+
+        And the simulated robot has matched the inverse node's commands: on a
+        busy computer the discovery between the two can take a second or more
+        after the inverse node is active, and a run started before then loses
+        its first commands (the robot then steps to the newest at once).
+        ``unmatched_s``: how long it waited for that (up to a status period, 1 s, more).
+        """
         with self.lock:
             seen = bool(self.true)
-        return seen and self.pub.get_subscription_count() >= 1 and self.inverse_active()
+        if not (seen and self.pub.get_subscription_count() >= 1 and self.inverse_active()):
+            return False
+        since = self._unmatched_since = self._unmatched_since or time.monotonic()
+        if not self.robot_matched():
+            return False
+        self.unmatched_s = time.monotonic() - since
+        return True
 
     def stream(self, targets: Targets, duration_s: float, planner: str = 'clock') -> float:
         """Stream ``targets`` at 50 Hz for ``duration_s``; its start [s, ROS].
@@ -412,7 +437,7 @@ def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: in
         t_start = time.monotonic()
         if not wait_up(procs.values(), client.ready, startup_timeout):
             raise RuntimeError(f'the nodes did not come up within {startup_timeout:g} s')
-        startup_s = time.monotonic() - t_start
+        startup_s, unmatched_s = time.monotonic() - t_start, client.unmatched_s
         pids = {k: p.proc.pid for k, p in procs.items()}
         sched = scheduling(pids['inverse'])
         pids.update({f'burner{i}': p.pid for i, p in enumerate(burn)})
@@ -438,6 +463,7 @@ def run_loop(robot: str, burners: int, schedule: Schedule = Schedule(), seed: in
         tidy(logs, ok)
     out = figures(data, cfg, targets, t0)
     out.update(burners=burners, startup_s=round(startup_s, 2), exit_codes=codes,
+               startup_unmatched_s=round(unmatched_s, 2),
                cpu_cores=_cpu_use(cpu0, cpu1), inverse_scheduling=sched)
     return out
 

@@ -34,9 +34,10 @@ publishes
     ``measured_pressure`` (std_msgs/Float64MultiArray, same layout and unit as
     the commands) at ``physics_rate_hz``, at most 100 Hz (every n-th physics
     step above it): the regulated pressures.
-    ``/diagnostics``: 1 Hz status (solves, failed solves, refusals), WARN per
-    refused input, ERROR when an equilibrium could not be computed (the last
-    state is kept and published).
+    ``/diagnostics``: 1 Hz status (solves, failed solves, refusals; the
+    publishers of ``pressure_command`` matched, as a regulator driver sees
+    them: ``command_publishers``), WARN per refused input, ERROR when an
+    equilibrium could not be computed (the last state is kept and published).
 
 services (std_srvs/Trigger)
     ``~/pause``, ``~/unpause``, ``~/step`` (``step_count`` physics steps, while
@@ -699,6 +700,7 @@ class SimulatedRobotNode(Node):
         values = dict(self.stats, solves=solves, payload_kg=payload,
                       dynamics=self.robot.dynamics is not None,
                       first_mode_hz=self.robot.first_mode_hz or 0.0,
+                      command_publishers=self._sub.get_publisher_count(),
                       tip_force_n=' '.join(f'{v:g}' for v in self.robot.tip_force_n),
                       pressures=' '.join(f'{v:.6g}' for v in contract.to_unit(p, self._unit)))
         c, message = self.clock, 'simulating'

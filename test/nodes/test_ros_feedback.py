@@ -69,6 +69,10 @@ def test_simulated_robot_node_regulates_measures_and_refuses_bad_input(h, one):
     wait_for(lambda: node.stats['refused'] >= 4, what='4 refusals')
     wait_for(lambda: any(s.level == DiagnosticStatus.WARN and 'refused' in s.message
                          for s in diag_statuses(h, 'simulated robot')), what='WARN diagnostics')
+    # its status names the publishers of its commands it has matched: this test's one
+    wait_for(lambda: any({kv.key: kv.value for kv in s.values}.get('command_publishers') == '1'
+                         for s in diag_statuses(h, 'simulated robot')),
+             what='command_publishers 1 in the status')
     n1 = h.count('measured_pressure')
     wait_for(lambda: h.count('measured_pressure') > n1 + 5, what='more measured pressures')
     np.testing.assert_allclose(h.last('measured_pressure').data, p, atol=1.0)

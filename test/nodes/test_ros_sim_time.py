@@ -167,6 +167,38 @@ def test_control_clock_stands_still_across_a_jump_back_and_maps_stamps_by_their_
     assert ControlClock(None).now() == pytest.approx(time.monotonic(), abs=0.01)
 
 
+class _WallClock:
+    """The ROS clock off simulation time (system time); its first read is kept waiting."""
+
+    ros_time_is_active = False
+
+    def __init__(self, wait_s):
+        self.wait_s = wait_s
+
+    def now(self):
+        if self.wait_s:   # (a thread kept off the CPU between reading the two clocks)
+            time.sleep(self.wait_s)
+            self.wait_s = 0.0
+        return SimpleNamespace(nanoseconds=time.time_ns())
+
+
+def test_a_stamp_is_dated_right_when_the_thread_waits_between_the_clocks():
+    """A target stamped now is wanted now, though the reads were 30 ms apart.
+
+    Read once each, the stamp came out 30 ms early: a target sent after
+    another one could be wanted before it (an unshaped step, core TargetFilter).
+    """
+    for _ in range(5):   # (the test's own process may be held up too: the best of five)
+        wall = _WallClock(0.03)
+        clock = ControlClock(SimpleNamespace(get_clock=lambda: wall))
+        ns, mono = time.time_ns(), time.monotonic()
+        stamp = SimpleNamespace(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        err = clock.time_of(stamp) - mono
+        if abs(err) < 0.005:
+            break
+    assert abs(err) < 0.005
+
+
 # ------------------------------------------------------------ the inverse node
 def _republished_per_sim_s(node, clock, wall_s):
     n0, s0 = node.stats['republished'], clock.now()

@@ -125,7 +125,7 @@ class TargetFilter:
         self._newest = None
 
     def push(self, t: float, position, z_axis=None, at: float | None = None) -> None:
-        """A new target, wanted at time ``t`` (times must not decrease).
+        """A new target, wanted at time ``t`` (an earlier time starts the stream again).
 
         ``at``: when it was taken in (a node's solve of it; default ``t``):
         the feedforward's stream stops only its stale time after the later.
@@ -133,7 +133,12 @@ class TargetFilter:
         p = np.asarray(position, float).reshape(3)
         z = None if z_axis is None else np.asarray(z_axis, float).reshape(3)
         if self._newest is not None and t < self._newest[0]:
-            self.reset()   # a stream that goes back in time starts again
+            # a stream that goes back in time starts again, from where it stands: a
+            # jump from there is still a move (never a step of the commands)
+            start = self._standing()
+            self.reset(start)
+            if self.shaper is not None:
+                self.shaper.push(t, *start)
         if self.shaper is not None:   # (the first target is taken as it is: a stream's start)
             self.shaper.push(t, p, z)
         if self.jumps is not None:
@@ -142,6 +147,15 @@ class TargetFilter:
             self.feedforward.push(t, p, z, at=at)
         self._newest = (float(t), p, z)
         self._arrived = False
+
+    def _standing(self):
+        """Where the shaped target stands at the newest target's time: ``(position, z_axis)``."""
+        t_new, p, z = self._newest
+        if self.shaper is not None:
+            return self.shaper.at(t_new)
+        if self.jumps is not None:
+            return self.jumps.at(t_new)
+        return p, z
 
     def stream_tick(self) -> tuple | None:
         """The feedforward's :meth:`StreamFeedforward.stream_tick` (None without it)."""

@@ -63,12 +63,38 @@ def test_dynamic_feedforward_adds_the_streams_shift_and_keeps_the_axis_a_unit_ve
 def test_bad_shaping_and_a_stream_going_back():
     with pytest.raises(ValueError, match="target_shaping = 'zvdd' is not allowed"):
         TargetFilter('zvdd')
+    a, b = np.array([0.0, 0.0, 0.2]), np.array([0.01, 0.0, 0.2])
     tf = TargetFilter('zv')
     tf.set_mode(F, ZETA)
-    tf.push(5.0, [0.0, 0.0, 0.2])
-    tf.push(1.0, [0.01, 0.0, 0.2])   # time went back (a new stream): taken as it is
-    np.testing.assert_allclose(tf.target(1.0)[0], [0.01, 0.0, 0.2], atol=1e-15)
+    tf.push(5.0, a)
+    tf.push(1.0, b)   # time went back (a new stream): shaped from where it stood
+    times, amps = shaper_impulses('zv', F, ZETA)
+    np.testing.assert_allclose(tf.target(1.0 + 1e-6)[0], a + amps[0] * (b - a), atol=1e-15)
+    np.testing.assert_allclose(tf.target(1.0 + times[-1] + 1e-6)[0], b, atol=1e-15)
     assert not TargetFilter().enabled and TargetFilter('zv').enabled
+
+
+@pytest.mark.parametrize('feedforward', [False, True])
+def test_a_step_dated_before_the_held_target_is_still_a_move(feedforward):
+    """A held target, then a 10 mm step whose time came out 30 ms before the last held one.
+
+    (A node kept off the CPU between reading its clocks dated a target
+    early.)  The commands must not step: the stream starts again from
+    where it stands, and the step is the smooth move it is otherwise.
+    """
+    a, b = np.array([0.0, 0.0, 0.2]), np.array([0.01, 0.0, 0.2])
+    tf = TargetFilter('smooth', dynamic_feedforward=feedforward, lag_s=0.05)
+    tf.set_mode(F, ZETA)
+    for k in range(100):
+        tf.push(0.02 * k, a)
+        tf.target(0.02 * k)
+    t_step = 0.02 * 99 - 0.03
+    tf.push(t_step, b)
+    first = tf.target(0.02 * 99 + 0.01)[0]
+    assert np.linalg.norm(first - a) < 0.05 * np.linalg.norm(b - a)   # barely moved
+    assert tf.busy(0.02 * 99 + 0.01)
+    end = t_step + tf.jumps.duration_s
+    np.testing.assert_allclose(tf.target(end + 0.01)[0], b, atol=1e-12)
 
 
 def test_the_reference_is_shaped_not_shifted():
