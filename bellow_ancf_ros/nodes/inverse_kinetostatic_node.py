@@ -239,9 +239,9 @@ class InverseKinetostaticNode(LifecycleNode):
         if self._feedback.wanted or self._targets.wanted:
             self._modes = ModeWatch(self, self._feedback.mode_check())
             self._modes.start(start)   # the first answer now, at the start equilibrium
-        self._feedback.configure(model, self._worker.submit, self._modes)
-        lag_s = float(self.get_parameter('feedback_loop_lag_s').value)
-        self._targets.configure(self._modes, self._worker.submit, lag_s, cfg.first_mode_error)
+        self._feedback.configure(model, self._worker.resubmit, self._modes)   # (re-solves: never
+        lag_s = float(self.get_parameter('feedback_loop_lag_s').value)   # over a new target)
+        self._targets.configure(self._modes, self._worker.resubmit, lag_s, cfg.first_mode_error)
         self._configured = True
         self.get_logger().info(
             f'configured: robot {cfg.name!r} ({cfg.n_segments} segment(s), {model.A} actuators, '

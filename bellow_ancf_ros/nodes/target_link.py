@@ -116,6 +116,7 @@ class TargetLink:
         # a stream's commands on its grid (wall clock only: under use_sim_time the lockstep)
         self._pacer = None if self._clock.simulated else CommandPacer()
         self._due: tuple | None = None   # (regular intake, due) of the target being solved
+        self.stale_resolves = 0   # older targets queued again after a newer one, re-solved as it
 
     def _read_kind(self) -> str:
         kind = self.node.get_parameter('target_shaping').value
@@ -259,6 +260,13 @@ class TargetLink:
             if filt is None:
                 return (pos, z), (pos, z)
             now, self._due = self._clock.now(), None
+            last = self._last_item
+            if last is not None and item is not last and item[3] < last[3]:
+                # an older target queued again after a newer one was taken (a re-solve
+                # tick that raced a new target): a re-solve of the newest, never a
+                # stream going back in time (which starts the stream again)
+                self.stale_resolves += 1
+                return filt.targets(now)
             if item is not self._last_item:
                 self._last_item = item
                 filt.push(wanted_at, pos, z, at=now)   # (a late solve is no stop of the stream)
