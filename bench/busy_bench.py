@@ -362,7 +362,8 @@ def _cpu_use(a: dict, b: dict) -> dict:
     wall = b['wall'] - a['wall']
     use = {k: (b[k] - a[k]) / wall for k in a if k != 'wall'}
     ours = sum(v for k, v in use.items() if k not in ('busy', 'steal'))
-    use['others'] = use['busy'] - ours
+    # (the machine's ticks and the processes' are read apart: a few ticks either way)
+    use['others'] = max(use['busy'] - ours, 0.0)
     use['burners'] = sum(v for k, v in use.items() if k.startswith('burner'))
     return {k: round(v, 3) for k, v in use.items()}
 
