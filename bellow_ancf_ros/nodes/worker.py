@@ -95,6 +95,7 @@ class LatestWorker:
         # the start credit is the CPU's: wall clock even under use_sim_time (as its waits)
         self._credit, self._credit_t = float(BURST), time.monotonic()
         self.submitted = 0
+        self.resubmitted = 0   # (queued again: a re-solve, a budget slice)
         self.dropped = 0
         self.processed = 0
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
@@ -116,6 +117,7 @@ class LatestWorker:
                 return False
             self._item = item
             self._has_item = True
+            self.resubmitted += 1
             self._cond.notify_all()
             return True
 

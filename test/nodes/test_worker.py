@@ -83,6 +83,28 @@ def test_latest_worker_processes_only_the_newest():
         w.stop()
 
 
+def test_a_re_solve_never_displaces_a_new_item():
+    """``resubmit`` (a re-solve tick's) queues only when nothing newer waits."""
+    gate = threading.Event()
+    seen = []
+
+    def process(item):
+        seen.append(item)
+        if item == 'old':
+            gate.wait(5.0)
+
+    w = worker.LatestWorker(process)
+    try:
+        assert w.resubmit('old') and _wait(lambda: seen == ['old'])
+        w.submit('new')
+        assert not w.resubmit('old')   # (the new target waits: it is solved, not this)
+        gate.set()
+        assert _wait(lambda: w.idle())
+        assert seen == ['old', 'new'] and w.resubmitted == 1 and w.dropped == 0
+    finally:
+        w.stop()
+
+
 def test_latest_worker_bounds_the_rate():
     """Token bucket: at most BURST starts back to back, then one per period."""
     starts = []
