@@ -269,11 +269,12 @@ class ControlClock:
         A zero stamp (or none) is now; a stamp in the future is now unless
         ``future`` (a target wanted later, e.g. a previewed trajectory).
         The two clocks are read back to back, the ROS clock on both sides
-        of this one, up to :data:`TIME_OF_READS` times: a thread kept off
-        the CPU between two reads (a busy computer) would otherwise date
-        the stamp as early as it waited, and a target sent after another
-        could come out wanted before it (a target filter then starts its
-        stream again: an unshaped step, measured twice in some 60 busy runs).
+        of this one, up to :data:`TIME_OF_READS` times, and the tightest
+        read is used: a thread kept off the CPU between two single reads
+        would date the stamp as early as it waited, and a target sent after
+        another could come out wanted before it (the target stream then
+        starts again).  Measured beside one CPU-bound process per core, the
+        first read took at most 0.28 ms in some 32,000.
         """
         if stamp is None or (stamp.sec == 0 and stamp.nanosec == 0) or not hasattr(
                 self.node, 'get_clock'):
