@@ -102,9 +102,9 @@ LATE_S = 1.5          # the step's error is judged from this long after it on
 SEED = 7              # the motion capture's noise, outliers and dropouts
 RATIO_GOAL = 1.3      # a busy figure at most this many times the quiet one
 REPEATS = 3           # quiet and busy runs per robot: the figures are their medians
-RIG_NICE_HELP = ("the simulated robot's niceness (default 0: the nodes' and the burners' "
-                 'priority; negative, with the privilege to: above them, as the hardware it '
-                 'stands for, which a busy computer does not slow)')
+RIG_NICE_HELP = ("the simulated robot's niceness, its session's too (default 0: the nodes' and "
+                 "the burners' priority; negative, with the privilege to: above them, as the "
+                 'hardware it stands for, which a busy computer does not slow)')
 PLANNERS = ('clock', 'timer')
 PLANNER_HELP = ("how the bench's planner stamps its targets: clock (default), each pose the "
                 'path at the time it is stamped with, when it is sent; timer, a lab\'s planner '

@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ['NodeProcess', 'Recorder', 'SimulationStalled', 'TargetSender', 'child_env',
-           'clock_parameters', 'hardware_parameters', 'machine_state', 'message_time',
-           'plant_effects', 'start_clock', 'stop_all', 'tidy', 'wait_until', 'wait_up']
+           'clock_parameters', 'group_nice', 'hardware_parameters', 'machine_state',
+           'message_time', 'plant_effects', 'start_clock', 'stop_all', 'tidy', 'wait_until',
+           'wait_up']
 
 #: Wall seconds without the simulation's clock moving before a wait gives up.
 STALL_S = 30.0
@@ -78,6 +79,22 @@ def start_clock(rec: 'SpunNode', procs, ready, clock_users: int, timeout: float)
             raise
 
 
+def group_nice(pid: int, nice: int) -> bool:
+    """Give the session of ``pid`` (its autogroup) the niceness ``nice``; whether it took.
+
+    With the kernel's autogroups (``/proc/sys/kernel/sched_autogroup_enabled``)
+    every session is one scheduling group and a process's own niceness
+    counts only inside it: a node in a session of its own, as here, beside
+    CPU-bound processes in sessions of theirs would get the same share
+    whatever its ``nice -n``.  False without autogroups or the privilege.
+    """
+    try:
+        Path(f'/proc/{pid}/autogroup').write_text(f'{int(nice)}\n')
+    except OSError:
+        return False
+    return True
+
+
 class NodeProcess:
     """One node as a child process (``params``: name -> value, ``remaps``: from -> to)."""
 
@@ -86,9 +103,11 @@ class NodeProcess:
         """Start ``python -m bellow_ancf_ros.nodes.<module>``; its log goes to ``log_dir``.
 
         ``nice``: run it that much nicer (``nice -n``; negative: above this
-        process, which needs the privilege to).
+        process, which needs the privilege to), its session's scheduling
+        group too (:func:`group_nice`).
         """
         self.module = module
+        self.nice = int(nice)
         self._interrupted = False
         self.log_path = log_dir / f'{tag}{module}.log'
         self.cmd = ((['nice', '-n', str(int(nice))] if nice else [])
@@ -105,6 +124,8 @@ class NodeProcess:
             self.proc = subprocess.Popen(self.cmd, env=self.env, stdout=log,
                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                          start_new_session=True)
+        if self.nice:
+            group_nice(self.proc.pid, self.nice)
         self._interrupted = False
 
     def silent(self) -> bool:

@@ -15,7 +15,7 @@ def _hangs(mark):
 
 def _process(tmp_path, cmd):
     p = NodeProcess.__new__(NodeProcess)
-    p.module, p.cmd, p.env = 'hanging_node', cmd, child_env(0)
+    p.module, p.cmd, p.env, p.nice = 'hanging_node', cmd, child_env(0), 0
     p.log_path = tmp_path / 'hanging_node.log'
     p._start('w')
     return p
@@ -128,3 +128,23 @@ def test_the_node_processes_import_this_package(tmp_path):
     out = subprocess.run([sys.executable, '-c', code], env={**env, 'PYTHONPATH': str(first)},
                          cwd=tmp_path, capture_output=True, text=True, check=True).stdout.strip()
     assert Path(out).resolve() == Path(bellow_ancf_ros.__file__).resolve()
+
+
+def test_group_nice_sets_the_niceness_of_a_sessions_scheduling_group(tmp_path):
+    """With autogroups, a process's own niceness counts only inside its session."""
+    import os
+    import subprocess
+    from pathlib import Path
+    if not Path('/proc/self/autogroup').exists():
+        assert not pipeline.group_nice(os.getpid(), 5)
+        return
+    child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'],
+                             start_new_session=True)
+    try:
+        assert pipeline.group_nice(child.pid, 5)
+        assert Path(f'/proc/{child.pid}/autogroup').read_text().split()[-1] == '5'
+        assert Path('/proc/self/autogroup').read_text() != Path(
+            f'/proc/{child.pid}/autogroup').read_text()   # (its own group; ours untouched)
+    finally:
+        child.kill()
+        child.wait()
