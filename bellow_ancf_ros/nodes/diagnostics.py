@@ -21,7 +21,8 @@ from .ros_util import WARN_THROTTLE_S, control_clock
 __all__ = [
     'HEARTBEAT_PERIOD_S', 'REFUSAL_DIAG_INTERVAL_S', 'STATUS_PERIOD_S', 'Heartbeat', 'Refusals',
     'ThrottledStatus', 'diagnostic_status', 'inverse_values', 'publish_diagnostic',
-    'lifecycle_level', 'lifecycle_state', 'solve_outcome', 'solve_values',
+    'lifecycle_level', 'lifecycle_state', 'matched_subscribers', 'solve_outcome',
+    'solve_values',
 ]
 
 #: Minimum interval between two WARN diagnostics of the same refusal reason [s].
@@ -109,6 +110,19 @@ class Heartbeat:
         publish_diagnostic(self.node, self.pub, self.name, self._hardware_id(), level, message,
                            values)
         self.published += 1
+
+
+def matched_subscribers(pub) -> int:
+    """How many subscriptions ``pub`` has matched (0 without it, or once destroyed).
+
+    For ``pressure_command``: the regulators' driver and any recorder.  A
+    driver that is not matched yet misses the commands sent meanwhile and
+    then takes the newest at once (a step).
+    """
+    try:
+        return 0 if pub is None else int(pub.get_subscription_count())
+    except Exception:  # noqa: BLE001 - destroyed meanwhile (a cleanup)
+        return 0
 
 
 def solve_values(stats: worker.SolveStats) -> dict:

@@ -355,11 +355,11 @@ class InverseKinetostaticNode(LifecycleNode):
         state = diagnostics.lifecycle_state(self, self._active, self._configured)
         cfg = self._cfg
         values = {
-            'lifecycle_state': state,
+            'lifecycle_state': state, 'pressure_unit': self._unit(),
             'robot': cfg.name if cfg is not None else '',
             'robot_config': self.get_parameter('robot_config').value,
-            'pressure_unit': self._unit(),
             'payload_kg': self.get_parameter('payload_kg').value,
+            'pressure_command_subscribers': diagnostics.matched_subscribers(self._pub_cmd),
         }
         values.update(solve_values(self.solve_stats))
         values.update({f'targets_{k}': v for k, v in self.stats.items()})

@@ -401,6 +401,7 @@ def test_heartbeat_1hz_in_every_lifecycle_state(h, one):
     first = beats()[-1]
     assert kv(first)['lifecycle_state'] == 'unconfigured'
     assert kv(first)['last_solve_age_s'] == 'never' and kv(first)['solves'] == '0'
+    assert kv(first)['pressure_command_subscribers'] == '0'   # (no publisher yet)
     assert first.level == DiagnosticStatus.WARN
     # about 1 Hz: 3 more beats take 2-3 s, 1.5-6 s allowed (receipt times, loaded machine)
     n0, t0 = len(beats()), time.monotonic()
@@ -420,6 +421,9 @@ def test_heartbeat_1hz_in_every_lifecycle_state(h, one):
     st = beats()[-1]
     values = kv(st)
     assert values['lifecycle_state'] == 'active' and values['robot'] == 'one_segment'
+    # who hears the commands: the harness's recorder (a regulator driver would count too)
+    assert values['pressure_command_subscribers'] == str(node._pub_cmd.get_subscription_count())
+    assert int(values['pressure_command_subscribers']) >= 1
     assert st.hardware_id == 'one_segment'
     assert 0.0 <= float(values['last_solve_age_s']) < 3.0
     assert values['last_solve_ok'] == 'true'
