@@ -44,8 +44,15 @@ usual age at arrival) plus the 95th percentile of how late the last 100
 were ready (at most one interval of the stream), its pose carried to that time
 (:meth:`pace`, called by the node before it publishes), instead of when
 its solve happened to end; re-solves and a held or braking stream's
-commands go out at once.  Diagnostics: ``command_margin_ms`` and
-``commands_paced_late`` (late / paced).
+commands go out at once.  And when a moving stream's next target is late
+(:data:`EXPECT_MARGIN` of an interval after its regular intake; a planner
+kept waiting by a busy computer), the newest is solved again then, carried
+on along the stream, up to :data:`EXPECT_TICKS` times in a row: the
+commands keep the grid instead of standing until the late target comes
+and then stepping (measured with a planner that sent 15 % of its targets
+late by 10 ms on average: the two-segment 10x circle 0.20-0.36 mm RMSE in
+four runs, against 0.33 and 0.47 mm before and 0.14-0.19 mm on time).
+Diagnostics: ``command_margin_ms`` and ``commands_paced_late`` (late / paced).
 """
 
 from __future__ import annotations
@@ -66,6 +73,10 @@ __all__ = ['SHAPING_RATE_HZ', 'STREAM_DEFER_S', 'TARGET_PARAMETER_TABLE', 'Targe
 SHAPING_RATE_HZ = 50.0
 #: A shaper level is solved this long after its impulse time [s] (the level is then in).
 IMPULSE_LEAD_S = 0.001
+#: A moving stream's next target counts as late this many intervals after its regular intake.
+EXPECT_MARGIN = 0.3
+#: At most this many re-solves in a row for late targets of a moving stream.
+EXPECT_TICKS = 3
 #: No modal analysis until this long after a moving stream's newest target [s]
 #: (:meth:`~.mode_watch.ModeWatch.defer`; longer than a stopped stream's brake).
 STREAM_DEFER_S = 0.5
@@ -111,6 +122,7 @@ class TargetLink:
         self._resubmit: Callable[[Any], None] | None = None
         self._modes = None                          # the node's ModeWatch
         self._levels: list = []   # one-shot re-solves at impulse times (_level_timer)
+        self._expect = None   # one-shot re-solve when a moving stream's next target is late
         self._last_pose = None
         self._last_pose_t: float | None = None     # when the newest pose was first wanted
         # a stream's commands on its grid (wall clock only: under use_sim_time the lockstep)
@@ -185,9 +197,9 @@ class TargetLink:
             self._cancel_levels()
 
     def _cancel_levels(self) -> None:
-        for timer in self._levels:
+        for timer in self._levels + ([self._expect] if self._expect is not None else []):
             timer.cancel()
-        self._levels = []
+        self._levels, self._expect = [], None
         self._last_pose = self._last_pose_t = None
 
     def _schedule_levels(self, item, filt: TargetFilter, wanted_at: float) -> None:
@@ -216,6 +228,33 @@ class TargetLink:
         for t_i in filt.shaper.times[1:]:
             self._levels.append(self._level_timer(
                 max(wanted_at + float(t_i) + IMPULSE_LEAD_S - now, 0.0), level))
+
+    def _expect_next(self, item, regular: float, interval: float, left: int) -> None:
+        """Re-solve ``item`` if no newer target is taken by ``regular`` plus a margin.
+
+        A moving stream's next target is regularly taken in at ``regular``;
+        if it is late (a planner kept waiting by a busy computer), the newest
+        is solved again then, carried on by the feedforward to that time,
+        so the commands keep the stream's grid instead of waiting for the
+        late target and then stepping (an irregular staircase rings the
+        robot's mode).  At most ``left`` intervals in a row (then the
+        stream's stale time and its brake take over).  Call with the lock held.
+        """
+        if self._expect is not None:
+            self._expect.cancel()
+        self._expect = None
+        resubmit = self._resubmit
+        if left <= 0 or resubmit is None:
+            return
+
+        def late() -> None:
+            with self._lock:
+                if self._last_item is not item or self._filter is None:
+                    return
+                self._expect_next(item, regular + interval, interval, left - 1)
+            resubmit(item)
+        self._expect = self._level_timer(
+            max(regular + EXPECT_MARGIN * interval - self._clock.now(), 0.0), late)
 
     def _level_timer(self, delay_s: float, fn: Callable[[], None]):
         """Call ``fn`` once ``delay_s`` of control time from now (``is_alive``, ``cancel``).
@@ -277,6 +316,7 @@ class TargetLink:
                 if tick is not None and self._pacer is not None:   # (item[3]: its arrival)
                     self._due = self._pacer.due(tick[0], item[3], tick[1])
                     now = max(now, self._due[1] or now)   # (carried to when it goes out)
+                    self._expect_next(item, self._due[0] + tick[1], tick[1], EXPECT_TICKS)
             return filt.targets(now)
 
     def pace(self) -> None:
