@@ -267,8 +267,9 @@ class BusyClient(SpunNode):
             diag = list(self.diag)
         for m in reversed(diag):
             for st in m.status:
-                if st.name.endswith(': simulated robot') and 'command_publishers' in _values(st):
-                    return int(_values(st)['command_publishers'])
+                n = _values(st).get('command_publishers')
+                if n is not None and st.name.endswith(': simulated robot'):
+                    return int(n)
         return None
 
     def ready(self) -> bool:

@@ -306,7 +306,7 @@ class TargetLink:
                 # stream going back in time (which starts the stream again)
                 self.stale_resolves += 1
                 return filt.targets(now)
-            if item is not self._last_item:
+            if item is not last:
                 self._last_item = item
                 filt.push(wanted_at, pos, z, at=now)   # (a late solve is no stop of the stream)
                 self._schedule_levels(item, filt, wanted_at)
