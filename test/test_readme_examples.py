@@ -249,15 +249,20 @@ def _default_sigint():
 
 
 def test_venv_node_commands_start_and_stop(tmp_path):
-    env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(fresh_domain())
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
-    env['PYTHONUNBUFFERED'] = '1'
-    procs = []
-    for _, line in code_lines():
+    """Every document's venv node lines start and stop; each block in its own ROS domain.
+
+    A block is what a user runs together: two blocks' inverse nodes on one
+    domain would share ``/pressure_command``, which the owner check refuses.
+    """
+    base = dict(os.environ)
+    base['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    base['PYTHONPATH'] = str(REPO) + os.pathsep + base.get('PYTHONPATH', '')
+    base['PYTHONUNBUFFERED'] = '1'
+    procs, domains = [], {}
+    for block, line in code_lines():
         if not line.startswith('.venv/bin/python -m bellow_ancf_ros.nodes.'):
             continue
+        env = domains.setdefault(block, {**base, 'ROS_DOMAIN_ID': str(fresh_domain())})
         args = shlex.split(line)
         module = args[2].rsplit('.', 1)[1]
         robot = _given_parameters(args, module).get('robot_config', 'one_segment')
