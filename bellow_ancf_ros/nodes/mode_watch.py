@@ -68,13 +68,20 @@ class ModeWatch:
         self._thread = threading.Thread(target=self._loop, name='first-mode', daemon=True)
         self._thread.start()
 
-    def stop(self) -> None:
-        """End the thread (joined)."""
+    def stop(self, timeout: float = 5.0) -> bool:
+        """End the thread: joined for up to ``timeout`` [s]; False if it still runs.
+
+        An analysis cannot be interrupted: one still running after the join
+        is let finish, but its answer reaches no listener and it logs
+        nothing (the node it would log on is being destroyed).
+        """
         self._stop.set()
         self._wake.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        self._thread = None
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout)
+            return not thread.is_alive()
+        return True
 
     def quiet(self, until: float) -> None:
         """No modal analysis starts before ``until`` (control time, ``ControlClock``)."""
@@ -103,7 +110,7 @@ class ModeWatch:
         before = self.result
         self._answered_at, self._answered_load = self._clock.now(), fw.load
         res = self.check.update(fw, self._answered_at)
-        if res is None:
+        if res is None or self._stop.is_set():   # (stopped meanwhile: nobody listens)
             return
         self.result = res
         for fn in self._listeners:
@@ -127,5 +134,7 @@ class ModeWatch:
             try:
                 self._answer(fw)
             except Exception as exc:  # noqa: BLE001 - a modal analysis never stops the node
+                if self._stop.is_set():
+                    return
                 log.error(f'first mode not computed: {type(exc).__name__}: {exc}',
                           throttle_duration_sec=10.0)
