@@ -179,19 +179,24 @@ def lifecycle_state(node, active: bool, configured: bool) -> str:
 
 
 def lifecycle_level(state: str, yielded_to: str = '', last_solve_ok=None,
-                    configure_error: str = '', recovery: str = '') -> tuple:
+                    configure_error: str = '', recovery: str = '',
+                    subscribers: int | None = None) -> tuple:
     """A controller's heartbeat level and message for its lifecycle ``state``.
 
     ``yielded_to``: why it went inactive for another publisher of its
     commands ('' when it did not); ``last_solve_ok``: False when the last
     solve failed; ``configure_error``: why the last configure failed, and
-    ``recovery`` the way out.
+    ``recovery`` the way out; ``subscribers``: how many subscriptions its
+    commands have matched (0 while active: nothing hears them, a WARN).
     """
     if state == 'inactive' and yielded_to:
         return DiagnosticStatus.ERROR, f'inactive: {yielded_to}'
     if state == 'active':
         if last_solve_ok is False:
             return DiagnosticStatus.WARN, 'active; the last solve failed'
+        if subscribers == 0:
+            return (DiagnosticStatus.WARN, 'active, but nothing subscribes to its pressure '
+                    'commands: no regulator driver hears them (check the topic and remappings)')
         return DiagnosticStatus.OK, 'active: pressure commands enabled'
     if state == 'inactive':
         return DiagnosticStatus.OK, 'inactive: pressure commands disabled'

@@ -369,7 +369,8 @@ class InverseKinetostaticNode(LifecycleNode):
         level, message = diagnostics.lifecycle_level(
             state, owner.status() if owner is not None and owner.yielded else '',
             self.solve_stats.summary()['last_ok'], self._configure_error,
-            contract.configure_failed_hint(self._node_path()))
+            contract.configure_failed_hint(self._node_path()),
+            values['pressure_command_subscribers'])
         return level, message, values
 
     @property

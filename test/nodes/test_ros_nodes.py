@@ -390,6 +390,26 @@ def test_robot_config_refused_while_configured_with_the_way_out(h, one):
     assert node.is_active and node.model.A == 6
 
 
+def test_an_active_node_whose_commands_nobody_hears_says_so_on_its_heartbeat(h):
+    """A WARN while no subscription matches pressure_command (a driver on another topic)."""
+    h.record(DiagnosticArray, '/diagnostics', command_qos())
+    node = h.add(InverseKinetostaticNode, remap={'pressure_command': 'unheard_command'})
+    name = 'inverse_kinetostatic_node: status'
+
+    def newest():
+        beats = diag_statuses(h, name)
+        return beats[-1] if beats and kv(beats[-1])['lifecycle_state'] == 'active' else None
+    wait_for(lambda: newest() is not None, what='an active heartbeat')
+    st = newest()
+    assert kv(st)['pressure_command_subscribers'] == '0'
+    assert st.level == DiagnosticStatus.WARN and 'nothing subscribes' in st.message, st.message
+    h.record(Float64MultiArray, 'unheard_command')   # the driver, wired at last
+    wait_for(lambda: node._pub_cmd.get_subscription_count() >= 1, what='the driver matched')
+    wait_for(lambda: newest() is not None and newest().level == DiagnosticStatus.OK,
+             what='an OK heartbeat once heard')
+    assert kv(newest())['pressure_command_subscribers'] == '1'
+
+
 def test_heartbeat_1hz_in_every_lifecycle_state(h, one):
     """diagnostic_updater-like status: state, robot, solve statistics, extensible."""
     node, pub, _ = setup_inverse(h, autostart=False)
