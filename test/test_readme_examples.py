@@ -262,7 +262,9 @@ def test_venv_node_commands_start_and_stop(tmp_path):
     for block, line in code_lines():
         if not line.startswith('.venv/bin/python -m bellow_ancf_ros.nodes.'):
             continue
-        env = domains.setdefault(block, {**base, 'ROS_DOMAIN_ID': str(fresh_domain())})
+        if block not in domains:   # (a domain drawn once per block)
+            domains[block] = {**base, 'ROS_DOMAIN_ID': str(fresh_domain())}
+        env = domains[block]
         args = shlex.split(line)
         module = args[2].rsplit('.', 1)[1]
         robot = _given_parameters(args, module).get('robot_config', 'one_segment')

@@ -62,9 +62,9 @@ class ModeWatch:
 
     def start(self, start_fw=None) -> None:
         """Answer for ``start_fw`` now (if given and converged), then watch in the thread."""
+        self._stop.clear()   # (before the first answer: a stopped watch's answers reach nobody)
         if start_fw is not None and start_fw.converged:
             self._answer(start_fw)
-        self._stop.clear()
         self._thread = threading.Thread(target=self._loop, name='first-mode', daemon=True)
         self._thread.start()
 

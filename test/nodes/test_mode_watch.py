@@ -77,3 +77,16 @@ def test_an_answer_before_stop_is_heard_and_stop_joins():
         threading.Event().wait(0.02)
     assert len(heard) == 1 and heard[0].frequency_hz == 10.0
     assert watch.stop() is True
+
+
+def test_a_watch_started_again_after_stop_answers_its_start_pose():
+    node, check = _Node(), _SlowCheck()
+    check.release.set()
+    watch, heard = ModeWatch(node, check), []
+    watch.listen(lambda before, res: heard.append(res))
+    fw = types.SimpleNamespace(success=True, converged=True, load=None)
+    watch.start(fw)
+    assert len(heard) == 1 and watch.stop() is True
+    watch.start(fw)   # answered at once, before the thread: not refused as stopped
+    assert len(heard) == 2
+    assert watch.stop() is True
