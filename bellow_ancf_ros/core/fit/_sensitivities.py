@@ -70,16 +70,29 @@ class RecordingModel:
             self._models[key] = RobotModel(self.config(values), self.n_elements)
         return self._models[key]
 
-    def solve(self, values, check_stability=False):
+    def solve(self, values, check_stability=False, give_up_after: int | None = None):
         """Forward solves of every sample; None for a sample whose solve failed.
 
         Each solve starts from the same sample's last solution, moved to first
         order by the last sensitivities (``x + dx/dtheta * dtheta``) when known.
+        ``give_up_after``: once that many samples failed, the rest are not
+        solved (None too).  A sample whose solve fails costs the most (a warm
+        and then a cold solve, each to its budget: 0.3-0.4 s for two segments
+        against about 2 ms converged), and a trial point of a fit far outside
+        the robot's range fails at most of them.  The solutions become the
+        next warm starts only when every sample converged: a point where one
+        failed is one a fit refuses, and its solutions, far from the next
+        point's, would lead the next solves to other equilibria (measured:
+        a fit that then stalled at its start for 8 evaluations).
         """
         values = np.asarray(values, dtype=float)
         model = self.model(values)
-        out, prev = [], None
+        out, prev, failed = [], None, 0
+        warm_before = list(self._warm), list(self._dx)
         for i, p in enumerate(self.P):
+            if give_up_after is not None and failed >= give_up_after:
+                out.extend([None] * (len(self.P) - i))
+                break
             warm = self._warm[i] or prev
             if self._warm[i] is not None and self._dx[i] is not None:
                 dv = values - self._dx[i][1]
@@ -96,6 +109,9 @@ class RecordingModel:
                 out.append(fw)
             else:
                 out.append(None)
+                failed += 1
+        if failed:
+            self._warm, self._dx = warm_before
         return out
 
     @staticmethod

@@ -149,7 +149,6 @@ class _Problem:
         self.k = len(cal.keys)
         self.sig = np.array([1e-4, 1e-4 / length])
         self._cache = (None, None)
-        self.failed = 0
 
     def reweight(self, sig):
         """New noise levels (position, axis) of the weights; forget the last evaluation."""
@@ -167,8 +166,8 @@ class _Problem:
         if self._cache[0] == key:
             return self._cache[1]
         values = self.unpack(v)[0]
-        try:
-            fws = self.cal.solve(values)
+        try:   # (one failed sample's penalty refuses the point: the rest need no solve)
+            fws = self.cal.solve(values, give_up_after=1)
         except ConfigError:
             fws = [None] * len(self.m)
         self._cache = (key, fws)
@@ -183,9 +182,7 @@ class _Problem:
     def residual(self, v, fws=None):
         ep, ez = self.errors(v, fws)
         r = np.concatenate([ep / self.sig[0], ez / self.sig[1]], axis=1)
-        bad = ~np.all(np.isfinite(r), axis=1)
-        self.failed = int(bad.sum())
-        r[bad] = _PENALTY
+        r[~np.all(np.isfinite(r), axis=1)] = _PENALTY
         r = r.ravel()
         if self.prior is not None:
             r = np.concatenate([r, v[: self.k] * self.prior])
@@ -312,10 +309,6 @@ def calibrate(cfg: RobotConfig, rec: Recording, keys: Sequence[str] | None = Non
         prob.reweight(sig)
         if change < 0.1:
             break
-    if prob.failed:
-        raise CalibrationError(f'the forward model does not converge for {prob.failed} '
-                               'sample(s) at the '
-                               'fitted parameters')
     res = _result(cal, prob, v, sol, before, nfev, time.perf_counter() - start)
     if (res.rmse_after_mm > WORSE_THAN_NOMINAL * res.rmse_before_mm
             and res.rmse_after_deg > WORSE_THAN_NOMINAL * res.rmse_before_deg):
@@ -377,6 +370,10 @@ def _result(cal: RecordingModel, prob: _Problem, v, sol, before, nfev,
     n = len(prob.m)
     values, R, t, _ = prob.unpack(v)
     fws = cal.solve(values, check_stability=True)
+    failed = sum(fw is None for fw in fws)
+    if failed:
+        raise CalibrationError(f'the forward model does not converge for {failed} '
+                               'sample(s) at the fitted parameters')
     unstable = [i + 1 for i, fw in enumerate(fws) if fw is not None and fw.stable is False]
     ep, ez = prob.errors(v, fws)
     after = _rmse(ep, ez, prob.n)
