@@ -519,6 +519,15 @@ def test_cli_does_not_import_rclpy():
     assert proc.returncode == 0
 
 
+def test_nothing_loads_scipy_stats_until_a_fit_needs_its_t_quantiles():
+    """``scipy.stats`` takes 0.9 s to import: a node process or a solve never pays it."""
+    code = ('import sys, bellow_ancf_ros.core, bellow_ancf_ros.cli; '
+            'sys.exit(int("scipy.stats" in sys.modules))')
+    proc = subprocess.run([sys.executable, '-c', code], cwd=REPO, env=subprocess_env(),
+                          timeout=120)
+    assert proc.returncode == 0
+
+
 # ----------------------------------------------------------------- demo
 def test_demo_runs(capsys):
     code = demo.main()
