@@ -157,29 +157,29 @@ def validate_payload(value: Any, maximum: float = PAYLOAD_MAX_KG) -> float:
 
 
 def parameter_problem(name: str, value: Any) -> str:
-    """Why a node parameter value is refused ('' if it is fine).
+    """Why a node parameter value is refused ('' if it is fine): key, value, what is allowed.
 
     Shared by the nodes' set-parameters callbacks: ``payload_kg``,
     ``pressure_unit``, ``max_rate_hz``, ``base_frame``, ``robot_config``
     (must load); other names are not checked here.
     """
+    allowed = ''
     try:
         if name == 'payload_kg':
             validate_payload(value)
-        elif name == 'pressure_unit':
-            check_unit(value)
-        elif name == 'max_rate_hz':
-            if not (isinstance(value, float) and math.isfinite(value) and value > 0):
-                return f'max_rate_hz must be a positive number, got {value}'
-        elif name == 'base_frame':
-            if not isinstance(value, str) or not value:
-                return 'base_frame must be a non-empty string'
+        elif name == 'pressure_unit' and value not in PRESSURE_UNITS:
+            allowed = ' or '.join(map(repr, sorted(PRESSURE_UNITS)))
+        elif name == 'max_rate_hz' and not (isinstance(value, float) and math.isfinite(value)
+                                            and value > 0):
+            allowed = 'a positive number of Hz'
+        elif name == 'base_frame' and (not isinstance(value, str) or not value):
+            allowed = 'a non-empty frame name'
         elif name == 'robot_config':
             from ..core import load_robot
             load_robot(value)  # takes effect on the next configure
     except ValueError as exc:  # ConfigError is a ValueError
-        return str(exc)
-    return ''
+        return f'{name} = {value!r} is not allowed: {exc}'
+    return f'{name} = {value!r} is not allowed; allowed: {allowed}' if allowed else ''
 
 
 # ---------------------------------------------------------------- targets

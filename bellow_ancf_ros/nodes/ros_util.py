@@ -152,6 +152,52 @@ def allowed_values(d: ParameterDescriptor) -> str:
     return ', '.join(parts)
 
 
+def _descriptor_refusal(d: ParameterDescriptor, param) -> str:
+    """What rclpy refuses in ``param`` (an rclpy ``Parameter``) against ``d``: 'type', 'range'.
+
+    Or '' when it passes.  rclpy checks the type and the range itself, before
+    any set-parameters callback, and its reply names neither the key nor the
+    value: the nodes log their own line for it (:func:`guard_parameters`).
+    """
+    kind = param.type_.value
+    if kind == ParameterType.PARAMETER_NOT_SET or d.dynamic_typing:
+        return ''
+    if kind != d.type:
+        return 'type'
+    for r in list(d.floating_point_range) + list(d.integer_range):
+        if not (r.from_value <= param.value <= r.to_value):   # (NaN too)
+            return 'range'
+    return ''
+
+
+def _log_descriptor_refusals(node) -> None:
+    """Log a line naming key, value and what is allowed for each change rclpy refuses.
+
+    rclpy refuses a wrong type or a value outside the descriptor's range before
+    any set-parameters callback, with a reply that names neither the key nor
+    the value (``Wrong parameter type, expected 'Type.DOUBLE' got
+    'Type.INTEGER'``: ``ros2 param set ... payload_kg 1``) and nothing in the
+    node's log.  A pre-set callback (once per node) sees every change first.
+    """
+    if getattr(node, '_bellow_refusals_logged', False):
+        return
+    node._bellow_refusals_logged = True
+
+    def before_set(params):
+        for p in params:
+            d = _descriptor_of(node, p.name) if node.has_parameter(p.name) else None
+            if d is None:   # (rclpy's reply: 'Invalid access to undeclared parameter(s): []')
+                node.get_logger().warning(
+                    f'refused parameter change: {p.name!r} is not a parameter of this node '
+                    '(ros2 param list names them)')
+            elif _descriptor_refusal(d, p):
+                node.get_logger().warning(
+                    f'refused parameter change: {p.name} = {p.value!r} is not allowed; '
+                    f'allowed: {allowed_values(d)}')
+        return params
+    node.add_pre_set_parameters_callback(before_set)
+
+
 def _override_value(node, name: str) -> Any:
     """The start-up value given for ``name`` (params file or ``-p``), or None."""
     p = getattr(node, '_parameter_overrides', {}).get(name)
@@ -165,6 +211,7 @@ def declare(node, name: str, default: Any, d: ParameterDescriptor) -> Any:
     or of the wrong type; this turns them into one line with the allowed values.
     Returns the parameter's value.
     """
+    _log_descriptor_refusals(node)
     try:
         return node.declare_parameter(name, default, d).value
     except (InvalidParameterValueException, InvalidParameterTypeException) as exc:

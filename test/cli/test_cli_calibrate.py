@@ -300,3 +300,34 @@ def test_rewritten_robot_file_has_no_stale_comment():
     # without a note (no command to name), the comments are the original's
     plain = _values_in_place(original, d)
     assert '(paper V.B)' in plain and note not in plain
+
+
+def test_a_d_eff_identify_deff_measured_is_kept_out_of_the_default_fit(tmp_path, capsys):
+    """The README's "Your own robot": identify deff on its rig, then calibrate on its bag.
+
+    The poses cannot tell ``D_eff`` from ``stiffness_scale`` (correlation
+    +0.999): fitted together, an identified 8.083 mm went to 7.62 mm and the
+    scale to 0.80 (the robot's: 0.90).  The default keys now keep the
+    measured one, and the scale comes out at the robot's.
+    """
+    from pathlib import Path
+    repo = Path(__file__).resolve().parents[2]
+    mine = tmp_path / 'my_robot.yaml'
+    mine.write_text(Path(load_robot('one_segment').source).read_text())
+    code, _, err = _run(capsys, 'identify', 'deff', '--config', str(mine), '--yaml-out',
+                        str(mine), '--csv', str(repo / 'data' / 'pressure_force.csv'))
+    assert code == 0, err
+    identified = load_robot(str(mine)).d_eff
+    code, out, err = _run(capsys, 'calibrate', '--config', str(mine), '--bag',
+                          str(repo / 'data' / 'one_segment_bag'), '--json')
+    assert code == 0, err
+    assert (f'actuator.d_eff_mm stays at {identified * 1e3:g} mm, as identify deff measured '
+            'it') in err
+    got = json.loads(out.strip().splitlines()[-1])['parameters']
+    assert 'actuator.d_eff_mm' not in got
+    assert got['stiffness_scale']['value'] == pytest.approx(0.90, abs=0.01)
+    # a file whose D_eff nobody measured: the default keys as before
+    code, out, err = _run(capsys, 'calibrate', '--config', 'one_segment', '--bag',
+                          str(repo / 'data' / 'one_segment_bag'), '--json')
+    assert code == 0 and 'stays at' not in err
+    assert 'actuator.d_eff_mm' in json.loads(out.strip().splitlines()[-1])['parameters']

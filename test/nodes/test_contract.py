@@ -42,6 +42,19 @@ def test_units_and_labels():
             contract.pressure_label(bad)
 
 
+def test_a_refused_parameter_names_its_key_its_value_and_what_is_allowed():
+    for name, bad, allowed in (('pressure_unit', 'psi', "allowed: 'Pa' or 'kPa'"),
+                               ('max_rate_hz', -1.0, 'allowed: a positive number of Hz'),
+                               ('base_frame', '', 'allowed: a non-empty frame name'),
+                               ('payload_kg', -0.5, 'must not be negative'),
+                               ('robot_config', 'no_such_robot', 'no_such_robot')):
+        reason = contract.parameter_problem(name, bad)
+        assert reason.startswith(f'{name} = {bad!r} is not allowed') and allowed in reason
+    for name, good in (('pressure_unit', 'kPa'), ('max_rate_hz', 20.0), ('base_frame', 'base'),
+                       ('payload_kg', 0.05), ('robot_config', 'one_segment'), ('other', 1)):
+        assert contract.parameter_problem(name, good) == ''
+
+
 # ------------------------------------------------------------------ safety gate
 def test_safe_pressures_accepts_and_returns_floats():
     p = contract.safe_pressures([0, 150e3, -50e3], P_MIN, P_MAX, 3)

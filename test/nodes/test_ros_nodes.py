@@ -496,7 +496,7 @@ def test_pressure_unit_kpa_label_and_values(h, one):
     assert np.all(np.abs(msg.data) > 1e3)
 
 
-def test_payload_parameter_refused_and_applied(h, one):
+def test_payload_parameter_refused_and_applied(h, one, capfd):
     node, pub, _ = setup_inverse(h)
     name = f'{h.ns}/inverse_kinetostatic_node'
     setp = h.service(SetParameters, name + '/set_parameters')
@@ -512,11 +512,22 @@ def test_payload_parameter_refused_and_applied(h, one):
     target = solve_forward(one, [50e3, 50e3, 50e3]).position + [0.004, 0.0, 0.0]
     p0 = np.array(send_and_wait_command(h, pub, target_msg(target)).data)
 
-    for bad in (-0.01, 5.0, float('nan')):
+    capfd.readouterr()
+    for bad in (-0.01, 5.0, float('nan'), 1, 'heavy'):   # (1: `ros2 param set ... payload_kg 1`)
         r = set_payload(bad)
         assert not r.successful, bad
         assert r.reason, 'a refusal must say why'
         assert get_payload() == 0.0
+    # rclpy's reply names neither key nor value: the node's log does, with what is allowed
+    err = capfd.readouterr().err
+    for bad in ('-0.01', '5.0', 'nan', '1', "'heavy'"):
+        assert (f'refused parameter change: payload_kg = {bad} is not allowed; allowed: '
+                'a floating-point number (write 1.0, not 1), from 0 to 1') in err, (bad, err)
+    r = h.call(setp, SetParameters.Request(parameters=[
+        Parameter('payload_g', value=50.0).to_parameter_msg()])).results[0]
+    assert not r.successful
+    assert ("refused parameter change: 'payload_g' is not a parameter of this node"
+            in capfd.readouterr().err)
     r = set_payload(0.05)
     assert r.successful and get_payload() == 0.05
     p1 = np.array(send_and_wait_command(h, pub, target_msg(target)).data)
