@@ -157,16 +157,17 @@ def _descriptor_refusal(d: ParameterDescriptor, param) -> str:
 
     Or '' when it passes.  rclpy checks the type and the range itself, before
     any set-parameters callback, and its reply names neither the key nor the
-    value: the nodes log their own line for it (:func:`guard_parameters`).
+    value: the nodes log their own line for it (:func:`_log_descriptor_refusals`).
     """
     kind = param.type_.value
     if kind == ParameterType.PARAMETER_NOT_SET or d.dynamic_typing:
         return ''
     if kind != d.type:
         return 'type'
-    for r in list(d.floating_point_range) + list(d.integer_range):
-        if not (r.from_value <= param.value <= r.to_value):   # (NaN too)
-            return 'range'
+    if kind in (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_INTEGER):
+        for r in list(d.floating_point_range) + list(d.integer_range):
+            if not (r.from_value <= param.value <= r.to_value):   # (NaN too)
+                return 'range'
     return ''
 
 
