@@ -651,6 +651,8 @@ def command_steps(cmds: list, outliers: list) -> tuple[list, list]:
     circle, a command 1.75 periods after the one before stepped 6.83 kPa,
     3.9 kPa per period, where the others stepped up to 4.6 kPa).
     """
+    if cmds and not np.any(cmds[-1][1]):   # the run's closing vent, should it land on the
+        cmds = cmds[:-1]   # run's end: no step of the loop's (it would make the goal moot)
     times = [t for t, _ in cmds]
     period = float(np.median(np.diff(times))) if len(times) > 2 else 0.0
     after, normal = [], []

@@ -135,3 +135,6 @@ def test_command_steps_are_per_control_period():
     cmds[-1] = (cmds[-1][0], cmds[-1][1] + 6e3)
     after, _ = demo.command_steps(cmds, outliers=[0.22])
     assert after == [pytest.approx(10.0)]
+    # the vent that closes a run is no step of the loop's (its tens of kPa: the goal moot)
+    vented = cmds + [(cmds[-1][0] + 0.02, np.zeros(2))]
+    assert demo.command_steps(vented, outliers=[0.22]) == demo.command_steps(cmds, [0.22])
