@@ -390,7 +390,7 @@ def _result(cal: RecordingModel, prob: _Problem, v, sol, before, nfev,
     scale = np.concatenate([cal.scales, np.full(3, prob.L), np.ones(3)])
     cov_phys = cov * np.outer(scale, scale)
     se = np.sqrt(np.clip(np.diag(cov_phys), 0, None))
-    from scipy import stats   # (here: its import costs every node process 0.5 s at start)
+    from scipy import stats   # (here: importing it costs a node process some 0.9 s at start)
     tq = stats.t.ppf(0.975, dof)
     names = list(cal.keys) + ['frame.x', 'frame.y', 'frame.z', 'frame.rx', 'frame.ry', 'frame.rz']
     warnings, corr = _separability(names, Jd, _pinv_sym(Jd.T @ Jd / s2))

@@ -397,7 +397,7 @@ def fit_deff(pressure_pa, force_n, confidence: float = 0.95) -> DeffFit:
         raise ValueError(f'need at least 3 points at 2 or more distinct pressures, got {p.size}')
     if not 0.0 < confidence < 1.0:
         raise ValueError(f'confidence must lie in (0, 1), got {confidence}')
-    from scipy import stats   # (here: its import costs every node process 0.5 s at start)
+    from scipy import stats   # (here: importing it costs a node process some 0.9 s at start)
     lr = stats.linregress(p, f)
     slope, se = float(lr.slope), float(lr.stderr)
     if not slope > 0:
