@@ -44,7 +44,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from ..core import ConfigError, limit_blas_threads, numba_cache
-from . import contract
+from . import contract, node_program
 from .realtime import use_realtime
 
 __all__ = [
@@ -915,7 +915,7 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
         except Exception:
             rclpy.try_shutdown()
             raise
-        program = args is None and _is_the_program(node_class, name)
+        program = args is None and node_program() == name
         run_node(node, before_destroy=before_destroy, keep_until_exit=program)
         if program:
             # the node's own executable: everything is done (vented, destroyed, shut down),
@@ -928,10 +928,3 @@ def main_for(node_class, before_destroy=None, node_name: str | None = None, fact
         if _EXIT_STATUS[0]:
             sys.exit(_EXIT_STATUS[0])
     return main
-
-
-def _is_the_program(node_class, name: str) -> bool:
-    """True when this process runs the node's executable (``python -m`` or its console script)."""
-    spec = getattr(sys.modules.get('__main__'), '__spec__', None)
-    return ((spec is not None and spec.name == node_class.__module__)
-            or os.path.basename(sys.argv[0] if sys.argv else '') == name)
