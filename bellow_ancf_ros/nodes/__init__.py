@@ -64,19 +64,6 @@ def _stopped_while_loading(signum, frame) -> None:  # pragma: no cover - signal 
 
 
 _PROGRAM = _node_program(getattr(_sys, 'orig_argv', []), _sys.argv)
-
-
-def node_program() -> str:
-    """The node executable this process runs (one of :data:`NODE_PROGRAMS`), or ''.
-
-    Read from the command line when this package was first imported: a
-    node's ``main`` ends the process itself (:func:`.ros_util.main_for`)
-    only when it is this process's program, not when a script or a test
-    calls it.
-    """
-    return _PROGRAM
-
-
 if _PROGRAM:   # (ros_util.init_rclpy puts the node's own handlers in place)
     _signal.signal(_signal.SIGINT, _stopped_while_loading)
     _signal.signal(_signal.SIGTERM, _stopped_while_loading)
