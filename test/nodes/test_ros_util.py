@@ -1,13 +1,16 @@
 """ros_util: what rclpy's own parameter checks refuse, in words; a node's way out."""
 
 import math
+import os
+import signal
+import subprocess
+import sys
 import time
 
 from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 
-from bellow_ancf_ros.nodes.ros_util import (_descriptor_refusal, _release_node, allowed_values,
-                                            descriptor)
+from bellow_ancf_ros.nodes.ros_util import _descriptor_refusal, allowed_values, descriptor
 
 
 def test_what_rclpy_refuses_before_any_callback_is_named_type_or_range():
@@ -39,34 +42,61 @@ def _publishers_gone(watcher, topic, within_s):
     return False
 
 
-def test_a_node_taken_off_its_kept_executor_leaves_the_graph_at_once(ros_context):
+#: A console script's node at its end: ``run_node(keep_until_exit=True)`` returns on the first
+#: line of stdin (as on a first SIGINT) and the process stays up until the second, so that a
+#: publisher gone before then left through run_node, not through the process's exit.
+_LEAVING = """
+import os, sys, threading
+import rclpy
+from std_msgs.msg import Float64MultiArray
+from bellow_ancf_ros.nodes import ros_util
+rclpy.init()
+node = rclpy.create_node('leaving')
+node.create_publisher(Float64MultiArray, 'probe', 10)
+def stop():
+    sys.stdin.readline()
+    ros_util.request_stop()
+threading.Thread(target=stop, daemon=True).start()
+print('UP', flush=True)
+ros_util.run_node(node, keep_until_exit=True)
+print('LEFT', flush=True)
+sys.stdin.readline()
+os._exit(0)
+"""
+
+
+def test_a_console_scripts_node_leaves_the_graph_before_its_process_exits(ros_context):
     """run_node's end of a console script's node: off the EventsExecutor, kept until the exit.
 
-    The node off its executor, destroyed, its context shut down, the executor
-    kept.  Without :func:`_release_node` the node's publisher stayed in the
-    graph until the middleware's lease ran out (20 s).
+    Without :func:`_release_node` the node's publisher stayed in the graph
+    until the middleware's lease ran out (20 s).  In a process of its own:
+    freeing an EventsExecutor hung a process, holding the GIL, so this
+    test's worker never holds one.
     """
     import rclpy
-    from rclpy.context import Context
-    from rclpy.experimental import EventsExecutor
-    from std_msgs.msg import Float64MultiArray
 
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_context.get_domain_id()),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
+    proc = subprocess.Popen([sys.executable, '-c', _LEAVING], env=env, text=True,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, start_new_session=True)
     watcher = rclpy.create_node('watcher', context=ros_context)
-    own = Context()   # (the leaving node's process: its own context, the same domain)
-    rclpy.init(context=own, domain_id=ros_context.get_domain_id())
-    node = rclpy.create_node('leaving', context=own)
-    publisher = node.create_publisher(Float64MultiArray, 'probe', 10)   # (a node's attribute)
-    executor = EventsExecutor(context=own)
-    executor.add_node(node)
-    deadline = time.monotonic() + 10.0
-    while watcher.count_publishers('/probe') == 0 and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    assert watcher.count_publishers('/probe') == 1
-    executor.remove_node(node)
-    _release_node(executor)
-    node.destroy_node()
-    own.try_shutdown()
-    kept = [executor, publisher]   # (as run_node keeps them: never freed before os._exit)
-    assert _publishers_gone(watcher, '/probe', 3.0), 'the publisher stayed in the graph'
-    assert kept
-    watcher.destroy_node()
+    try:
+        assert proc.stdout.readline().strip() == 'UP'
+        deadline = time.monotonic() + 20.0
+        while watcher.count_publishers('/probe') == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert watcher.count_publishers('/probe') == 1
+        proc.stdin.write('stop\n')
+        proc.stdin.flush()
+        assert proc.stdout.readline().strip() == 'LEFT'
+        assert _publishers_gone(watcher, '/probe', 3.0), 'the publisher stayed in the graph'
+        assert proc.poll() is None   # (still up: the publisher left before the process did)
+        proc.stdin.write('exit\n')
+        proc.stdin.flush()
+        assert proc.wait(timeout=10.0) == 0, proc.stdout.read()
+    finally:
+        watcher.destroy_node()
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10.0)
