@@ -390,9 +390,22 @@ def scheduling(pid: int) -> dict:
     return {'threads': n, 'fifo': fifo, 'priority': prio}
 
 
+#: A burner: ends with the process that started it (the kernel's parent-death signal; a test
+#: run killed before it stopped its burners left them loading both cores for later runs).
+BURNER = ('import ctypes, os, signal, sys\n'
+          'ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG\n'
+          'if os.getppid() != int(sys.argv[1]):   # (its starter had gone already)\n'
+          '    sys.exit()\n'
+          'while True: pass')
+
+
 def start_burners(n: int) -> list:
-    """``n`` CPU-bound processes (``python -c "while True: pass"``), at our priority."""
-    return [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+    """``n`` CPU-bound processes (``python -c "while True: pass"``), at our priority.
+
+    Started from the main thread: each ends when this process does (a parent
+    death signal fires when the thread that started the process ends).
+    """
+    return [subprocess.Popen([sys.executable, '-c', BURNER, str(os.getpid())],
                              stdin=subprocess.DEVNULL, start_new_session=True)
             for _ in range(n)]
 
