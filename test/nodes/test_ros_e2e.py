@@ -33,24 +33,11 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from bellow_ancf_ros.core import load_robot, solve_forward  # noqa: E402
 from bellow_ancf_ros.core.experiments.trajectories import default_parameters  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos, spin_until_closed  # noqa: E402
+from ros_processes import wait_for  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_TIMEOUT = 30.0
 TIMEOUT = 15.0
-
-
-def wait_for(pred, timeout=TIMEOUT, what='condition', every=None, action=None):
-    """Poll ``pred`` until true; optionally repeat ``action`` every ``every`` seconds."""
-    deadline = time.monotonic() + timeout
-    next_action = time.monotonic()
-    while time.monotonic() < deadline:
-        if action is not None and time.monotonic() >= next_action:
-            action()
-            next_action = time.monotonic() + every
-        if pred():
-            return
-        time.sleep(0.005)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
 
 # ------------------------------------------------------------------ processes

@@ -17,15 +17,7 @@ from bellow_ancf_ros.core import load_robot  # noqa: E402
 from bellow_ancf_ros.core.fit._excitation import excitation_sequence  # noqa: E402
 from bellow_ancf_ros.nodes.excitation_publisher import ExcitationPublisher  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
-
-
-def wait_for(pred, timeout=20.0, what='condition'):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return
-        time.sleep(0.005)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+from ros_processes import wait_for  # noqa: E402
 
 
 @pytest.mark.parametrize('unit', ['Pa', 'kPa'])
@@ -50,8 +42,8 @@ def test_steps_through_the_sequence_then_vents(ros_context, unit, capfd):
     try:
         node = ExcitationPublisher(namespace=ns, context=ros_context, parameter_overrides=params)
         ex.add_node(node)
-        wait_for(lambda: node.finished, what='the end of the excitation')
-        wait_for(lambda: len(got) and np.all(np.asarray(got[-1].data) == 0.0), what='the vent')
+        wait_for(lambda: node.finished, 20.0, 'the end of the excitation')
+        wait_for(lambda: len(got) and np.all(np.asarray(got[-1].data) == 0.0), 20.0, 'the vent')
     finally:
         ex.shutdown()
         thread.join(timeout=5)

@@ -39,21 +39,13 @@ from bellow_ancf_ros.nodes.forward_kinetostatic_node import ForwardKinetostaticN
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos, spin_until_closed  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
+from ros_processes import wait_for  # noqa: E402
 
 TIMEOUT = 10.0
 _ns_counter = itertools.count()
 
 
 # ------------------------------------------------------------------ fixtures
-
-
-def wait_for(pred, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return
-        time.sleep(0.005)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
 
 class Harness:

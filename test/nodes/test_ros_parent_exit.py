@@ -34,7 +34,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from bellow_ancf_ros.nodes import ros_util  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
-from ros_processes import node_process_env, REPO, SpunClient  # noqa: E402
+from ros_processes import node_process_env, REPO, SpunClient, wait_for  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith('linux'),
                                 reason='PR_SET_CHILD_SUBREAPER (to wait for an orphan) is Linux')
@@ -69,15 +69,6 @@ for line in started[0].stdout:
     sys.stdout.buffer.write(line)
     sys.stdout.flush()
 """
-
-
-def wait_for(pred, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return
-        time.sleep(0.01)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
 
 @pytest.fixture

@@ -30,7 +30,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from bellow_ancf_ros.core.model import shipped_robot_names  # noqa: E402
 from bellow_ancf_ros.nodes import ros_util  # noqa: E402
 from bellow_ancf_ros.nodes.ros_util import command_qos  # noqa: E402
-from ros_processes import node_process_env, REPO, SpunClient  # noqa: E402
+from ros_processes import node_process_env, REPO, SpunClient, wait_for  # noqa: E402
 
 STARTUP_TIMEOUT = 30.0
 TIMEOUT = 15.0
@@ -47,15 +47,6 @@ def node_lines(out: str) -> list:
     """The non-blank lines a node process wrote, without Fast DDS's shared-memory race line."""
     return [line for line in out.splitlines()
             if line.strip() and FASTDDS_SHM_RACE not in line]
-
-
-def wait_for(pred, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return
-        time.sleep(0.01)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
 
 def _default_sigint():

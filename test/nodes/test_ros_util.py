@@ -5,12 +5,12 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 
 from bellow_ancf_ros.nodes.ros_util import _descriptor_refusal, allowed_values, descriptor
+from ros_processes import wait_for
 
 
 def test_what_rclpy_refuses_before_any_callback_is_named_type_or_range():
@@ -30,16 +30,6 @@ def test_what_rclpy_refuses_before_any_callback_is_named_type_or_range():
     assert _descriptor_refusal(payload, Parameter('payload_kg', Parameter.Type.NOT_SET)) == ''
     assert allowed_values(payload) == ('a floating-point number (write 1.0, not 1), '
                                        'from 0 to 1')
-
-
-def _publishers_gone(watcher, topic, within_s):
-    """Whether ``topic`` has no publisher left within ``within_s`` (the graph ``watcher`` sees)."""
-    deadline = time.monotonic() + within_s
-    while time.monotonic() < deadline:
-        if watcher.count_publishers(topic) == 0:
-            return True
-        time.sleep(0.05)
-    return False
 
 
 #: A console script's node at its end: ``run_node(keep_until_exit=True)`` returns on the first
@@ -83,14 +73,12 @@ def test_a_console_scripts_node_leaves_the_graph_before_its_process_exits(ros_co
     watcher = rclpy.create_node('watcher', context=ros_context)
     try:
         assert proc.stdout.readline().strip() == 'UP'
-        deadline = time.monotonic() + 20.0
-        while watcher.count_publishers('/probe') == 0 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert watcher.count_publishers('/probe') == 1
+        wait_for(lambda: watcher.count_publishers('/probe') == 1, 20.0, 'the publisher')
         proc.stdin.write('stop\n')
         proc.stdin.flush()
         assert proc.stdout.readline().strip() == 'LEFT'
-        assert _publishers_gone(watcher, '/probe', 3.0), 'the publisher stayed in the graph'
+        wait_for(lambda: watcher.count_publishers('/probe') == 0, 3.0,
+                 'the publisher to leave the graph')
         assert proc.poll() is None   # (still up: the publisher left before the process did)
         proc.stdin.write('exit\n')
         proc.stdin.flush()

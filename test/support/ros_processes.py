@@ -9,6 +9,7 @@ from ros_domains import fresh_domain  # noqa: E402
 import signal
 import subprocess
 import threading
+import time
 
 import rclpy
 from rclpy.context import Context
@@ -55,6 +56,24 @@ def interrupt_all(procs, wait_s: float) -> list:
             os.killpg(proc.pid, signal.SIGKILL)
             outputs.append(proc.communicate(timeout=5.0)[0])
     return outputs
+
+
+def wait_for(pred, timeout=15.0, what='condition', every=None, action=None):
+    """Poll ``pred`` until true, else AssertionError naming ``what``.
+
+    ``action``: called first and then every ``every`` seconds while waiting
+    (e.g. a target published again until a node answers).
+    """
+    deadline = time.monotonic() + timeout
+    next_action = time.monotonic()
+    while time.monotonic() < deadline:
+        if action is not None and time.monotonic() >= next_action:
+            action()
+            next_action = time.monotonic() + every
+        if pred():
+            return
+        time.sleep(0.005)
+    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
 
 class SpunClient:
