@@ -31,7 +31,7 @@ from bellow_ancf_ros.core import solve_forward  # noqa: E402
 from bellow_ancf_ros.core.control import shaper_impulses  # noqa: E402
 from bellow_ancf_ros.nodes.inverse_kinetostatic_node import InverseKinetostaticNode  # noqa: E402
 from bellow_ancf_ros.nodes.regulator_driver import RegulatorDriver  # noqa: E402
-from bellow_ancf_ros.nodes.ros_util import ControlClock  # noqa: E402
+from bellow_ancf_ros.nodes.ros_util import ControlClock, spin_until_closed  # noqa: E402
 from bellow_ancf_ros.nodes.trajectory_publisher import TrajectoryPublisher  # noqa: E402
 import test_ros_nodes as _rn  # noqa: E402
 from test_ros_nodes import pose_of, pressure_msg, setup_inverse, target_msg, wait_for  # noqa: E402
@@ -259,10 +259,12 @@ def test_a_watched_timers_call_holds_the_reports_until_its_callback_returned(h, 
                              parameter_overrides=[Parameter('use_sim_time', value=True)])
     ex = MultiThreadedExecutor(num_threads=3, context=h.ctx)
     ex.add_node(node)
-    spin = threading.Thread(target=ex.spin, daemon=True)
+    done = threading.Event()
+    spin = threading.Thread(target=spin_until_closed, args=(ex, h.ctx, done), daemon=True)
     spin.start()
     reports = h.record(Header, f'{h.ns}/lockstep_clock')
     entered, gate = threading.Event(), threading.Event()
+    report = None
     try:
         report = lockstep.LockstepReport(node)
         c = clock(10.0, factor=0.0)   # 10 s, again every 2 ms
@@ -280,11 +282,15 @@ def test_a_watched_timers_call_holds_the_reports_until_its_callback_returned(h, 
         gate.set()
         wait_for(lambda: any(abs(seconds(m.stamp) - 10.15) < 1e-9 for _, m in list(reports)),
                  what='the report of 10.15 s once the callback returned')
-        report.destroy()
     finally:
+        # the spinning ends first, then the executor and the entities go: destroyed while a
+        # spin thread built its wait set or a task ended, rclpy raised InvalidHandle there
         gate.set()
-        ex.shutdown(timeout_sec=2.0)
+        done.set()
         spin.join(5.0)
+        ex.shutdown(timeout_sec=2.0)
+        if report is not None:
+            report.destroy()
         node.destroy_node()
 
 
