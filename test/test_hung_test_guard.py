@@ -27,10 +27,10 @@ def test_after():
 '''
 
 
-def _run(tmp_path, *args):
-    """Run HANGS under pytest with only the guard as plugin, a 2 s limit; (status, output, s)."""
-    (tmp_path / 'test_hangs.py').write_text(HANGS)
-    env = dict(os.environ, BELLOW_HUNG_TEST_S='2',
+def _run(tmp_path, *args, tests=HANGS):
+    """Run ``tests`` under pytest, only the guard as plugin, 2 s limits; (status, output, s)."""
+    (tmp_path / 'test_hangs.py').write_text(tests)
+    env = dict(os.environ, BELLOW_HUNG_TEST_S='2', BELLOW_HUNG_EXIT_S='2',
                PYTHONPATH=str(SUPPORT) + os.pathsep + os.environ.get('PYTHONPATH', ''))
     t0 = time.monotonic()
     res = subprocess.run([sys.executable, '-m', 'pytest', '-p', 'hung_test_guard', '-q',
@@ -55,3 +55,11 @@ def test_under_xdist_the_worker_ends_and_the_other_tests_still_run(tmp_path):
     assert 'in test_hangs_in_a_sleep' in out
     assert "crashed while running 'test_hangs.py::test_hangs_in_a_sleep'" in out
     assert '1 failed, 2 passed' in out
+
+
+def test_a_process_that_hangs_after_its_run_ends_with_the_stacks(tmp_path):
+    hangs_at_exit = ('import atexit, time\natexit.register(time.sleep, 120)\n\n\n'
+                     'def test_ok():\n    pass\n')
+    status, out, seconds = _run(tmp_path, tests=hangs_at_exit)
+    assert status != 0 and seconds < 60, out
+    assert '1 passed' in out and 'Timeout (0:00:02)!' in out

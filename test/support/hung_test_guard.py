@@ -11,8 +11,10 @@ process: under pytest-xdist the worker, which xdist reports as crashed in
 that test before it goes on with a new worker; without xdist the run, with
 a non-zero status.
 
-``BELLOW_HUNG_TEST_S`` in the environment sets the limit [s] (tests of this
-plugin use a short one).
+The run's own end (the interpreter's finalisation, where rclpy's objects
+are freed) gets ``HUNG_EXIT_S`` the same way.  ``BELLOW_HUNG_TEST_S`` and
+``BELLOW_HUNG_EXIT_S`` in the environment set the limits [s] (tests of this
+plugin use short ones).
 """
 
 import faulthandler
@@ -23,6 +25,8 @@ import pytest
 #: Longer than any test of the suite on a busy 2-core machine (the longest, a main-job run in
 #: the serial phase, takes a few minutes), far shorter than CI's limit for the whole run.
 HUNG_TEST_S = float(os.environ.get('BELLOW_HUNG_TEST_S', '900'))
+#: From the end of the run to the process's exit: the finalisation takes seconds.
+HUNG_EXIT_S = float(os.environ.get('BELLOW_HUNG_EXIT_S', '120'))
 
 _STDERR: list = []
 
@@ -40,3 +44,8 @@ def pytest_runtest_protocol(item, nextitem):
         yield
     finally:
         faulthandler.cancel_dump_traceback_later()
+
+
+def pytest_unconfigure(config):
+    """Arm the watchdog for the process's end (never disarmed: the exit ends it)."""
+    faulthandler.dump_traceback_later(HUNG_EXIT_S, exit=True, file=_STDERR[-1])
