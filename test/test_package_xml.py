@@ -60,7 +60,7 @@ LOCAL_TEST_HELPERS = {'conftest', 'reference_beams', 'calibration_data', 'make_s
                       'update_readme', 'remedies_bench', 'family_bench', 'busy_bench',
                       'demo_table', 'demo_results', 'effects_bench', 'ros_processes',
                       'redundant_bench', 'stream_latency', 'ros_domains', 'integrator_checks',
-                      'dynamics_bench'}
+                      'dynamics_bench', 'hung_test_guard'}
 
 
 def dependencies():
