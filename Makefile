@@ -24,7 +24,7 @@ $(STAMP): requirements.txt setup.py
 	touch $@
 
 # main job: model vs a mismatched simulated robot, feedforward then closed loop, then the loads
-# phase (an unannounced payload and a push, sensed and compensated; ROS processes; 12 to 20 min
+# phase (an unannounced payload and a push, sensed and compensated; ROS processes; 9 to 20 min
 # on a quiet 2-core machine, longer on a busy one)
 # the loads phase runs even when a closed-loop goal is missed; the exit status is 1 at the end
 demo: $(STAMP)
