@@ -17,7 +17,8 @@ PKG = 'bellow_ancf_ros'
 sys.path.insert(0, str(TEST_DIR / 'support'))
 from ros_domains import fresh_domain  # noqa: E402
 # a test that hangs ends its process with every thread's stack (see hung_test_guard)
-from hung_test_guard import pytest_configure, pytest_runtest_protocol  # noqa: E402,F401
+from hung_test_guard import (pytest_configure, pytest_runtest_protocol,  # noqa: E402,F401
+                             pytest_unconfigure)
 
 # Small dense matrices: single-threaded BLAS is faster, and much faster on a loaded 2-core machine.
 limit_blas_threads()

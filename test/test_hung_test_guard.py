@@ -63,3 +63,10 @@ def test_a_process_that_hangs_after_its_run_ends_with_the_stacks(tmp_path):
     status, out, seconds = _run(tmp_path, tests=hangs_at_exit)
     assert status != 0 and seconds < 60, out
     assert '1 passed' in out and 'Timeout (0:00:02)!' in out
+
+
+def test_the_suite_runs_with_every_hook_of_the_guard(request):
+    import hung_test_guard
+    for name in ('pytest_configure', 'pytest_runtest_protocol', 'pytest_unconfigure'):
+        impls = getattr(request.config.pluginmanager.hook, name).get_hookimpls()
+        assert any(i.function is getattr(hung_test_guard, name) for i in impls), name
