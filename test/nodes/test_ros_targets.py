@@ -311,7 +311,7 @@ def test_regulator_play_is_compensated_in_every_command_not_the_vent(h, one):
         n0 = h.count('pressure_command')
         pub.publish(target_msg(target))
         wait_for(lambda: h.count('pressure_command') > n0, what='a command')
-        # the target's first command: a second one for it may follow (once in 7 runs of the
+        # the target's first command: a second one for it may follow (once in 9 runs of the
         # ROS phase: the pressures themselves, the valves standing where they were wanted)
         with h.lock:
             sent.append(np.asarray(h.msgs['pressure_command'][n0][1].data))
