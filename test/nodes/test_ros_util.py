@@ -10,7 +10,7 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 
 from bellow_ancf_ros.nodes.ros_util import _descriptor_refusal, allowed_values, descriptor
-from ros_processes import wait_for
+from ros_processes import node_process_env, wait_for
 
 
 def test_what_rclpy_refuses_before_any_callback_is_named_type_or_range():
@@ -65,8 +65,7 @@ def test_a_console_scripts_node_leaves_the_graph_before_its_process_exits(ros_co
     """
     import rclpy
 
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_context.get_domain_id()),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
+    env = dict(node_process_env(), ROS_DOMAIN_ID=str(ros_context.get_domain_id()))
     proc = subprocess.Popen([sys.executable, '-c', _LEAVING], env=env, text=True,
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, start_new_session=True)
