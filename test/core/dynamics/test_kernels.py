@@ -9,6 +9,7 @@ from bellow_ancf_ros.core.dynamics import GeneralizedAlpha
 from bellow_ancf_ros.core.dynamics._integrator import REFACTOR_ERROR
 from bellow_ancf_ros.core.dynamics._kernels import (compact_factors, lu_solve, refactor,
                                                     split_factors, symbolic_factors)
+from bellow_ancf_ros.core.dynamics._inertia import Inertia
 
 
 def _chord_matrix(model, pressures, step_s):
@@ -70,3 +71,33 @@ def test_integrator_factorises_afresh_when_kept_pivots_fail(one):
     x = np.empty(one.N)
     lu_solve(lu, b, np.empty(one.N), x)
     np.testing.assert_allclose(A @ x, b, rtol=0, atol=1e-9 * np.abs(b).max())
+
+
+def test_the_chord_matrix_is_mass_damping_and_stiffness_seen_in_material_coordinates(two):
+    """The compiled assembly against the sparse matrices of the model and ``Inertia``.
+
+    The dynamic block: ``(T^-1 J T^-1 + b' M + g' D) / b'`` with the static
+    Jacobian ``J``, ``T`` the stretch map, ``D`` the Kelvin-Voigt damping
+    matrix (``Inertia.damping_matrix``, its own assembly); the constraints'
+    rows and columns seen through ``T^-1``, the multipliers scaled by ``b'``.
+    """
+    h = 0.004
+    ig, A = _chord_matrix(two, np.array([30e3, 0.0, 10e3, 0.0, 20e3, 5e3]), h)
+    st, m = ig.state, two
+    bp = (1 - ig.alpha_m) / ((1 - ig.alpha_f) * h * h * ig.beta)
+    gp = ig.gamma / (h * ig.beta)
+    ti = 1.0 / ig.inertia.scale(st.stretch)
+    ev = m.evaluate(np.concatenate([st.q * ti, st.mu]), st.stretch, 1.0, st.load, jacobian=True)
+    J = ev.jacobian.toarray()
+    nq = m.nq
+    inertia = Inertia(m, ig.inertia.damping_time, 0.0)
+    assert inertia.damping_time > 0
+    ref = np.zeros((m.N, m.N))
+    ref[:nq, :nq] = (ti[:, None] * J[:nq, :nq] * ti[None, :]
+                     + bp * inertia.mass_matrix(0.0).toarray()
+                     + gp * inertia.damping_matrix(st.q, st.stretch).toarray()) / bp
+    ref[:nq, nq:] = ti[:, None] * J[:nq, nq:]
+    ref[nq:, :nq] = J[nq:, :nq] * ti[None, :]
+    ref[nq:, nq:] = J[nq:, nq:] * bp
+    scale = np.abs(ref).max()
+    np.testing.assert_allclose(A.toarray(), ref, rtol=0, atol=1e-12 * scale)
