@@ -23,8 +23,8 @@ kernel) plus ``beta' M + gamma' D``, scaled as Arnold & Bruels advise (the
 dynamic rows by ``1/beta'``, the multipliers by ``beta'``) so that its
 conditioning does not degrade as ``h -> 0``.  The factorisation is kept
 from step to step (a chord method) and refreshed when the iterations slow
-down, when the iterations its steps took beyond two add up to what a
-factorisation costs (``_kernels.FACTOR_ITERATIONS``: a matrix made far from
+down, when the iterations its steps took beyond those of its first step
+add up to what a factorisation costs (``_kernels.FACTOR_ITERATIONS``: a matrix made far from
 where the robot now is), or when the step or the mass changes.  A step that does not converge
 within its budget is retried as two half steps, down to a limit; past it
 the integration stops with a :class:`~bellow_ancf_ros.core.status.DynamicsStatus`
@@ -247,7 +247,7 @@ class GeneralizedAlpha:
         self._build_pattern()
         self._lu = None       # the chord matrix's factors (the tuple of _kernels.lu_solve)
         self._lu_key = None
-        self._stale = np.zeros(1, dtype=np.int64)   # run_steps' count against the factors
+        self._stale = np.zeros(3, dtype=np.int64)   # run_steps' count against the factors
         # factors of the identity: for the call that runs the predictor alone
         self._lu_dummy = split_factors(spla.splu(sp.identity(model.N, format="csc")))
         self._work = tuple(np.empty(model.N) for _ in range(4))

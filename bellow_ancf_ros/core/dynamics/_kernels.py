@@ -512,11 +512,10 @@ def chord_iterations(st0, prev, weights, predict, st, coef, inputs, kargs, mass,
 
 #: :func:`run_steps` asks for the chord matrix at the step's current iterate.
 NEED_FACTOR = 1
-#: Iterations a step takes with a fresh chord matrix (the update, then the error it leaves).
-FRESH_ITERATIONS = 2
-#: What a factorisation costs, in iterations (measured: 0.46 ms against 39 us for one
-#: segment, 0.89 ms against 67 us for two, both at twice the model's elements).
-FACTOR_ITERATIONS = 10
+#: What a factorisation costs, in iterations: 10-16 measured (the values assembled and
+#: factorised, one to three segments, the model's elements and twice as many; one segment
+#: at twice the model's: 0.33-0.47 ms against 39-44 us an iteration).
+FACTOR_ITERATIONS = 15
 
 
 @njit(cache=True, nogil=True)
@@ -562,13 +561,14 @@ def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kar
       :func:`chord_iterations` without the stretches;
     * ``ctl = (inv_scale, tol, max_iter, lu_step, stale)``: ``lu_step`` the
       step the chord matrix ``lu`` was made for (0: none yet); ``stale``
-      (int64, (1,)): the iterations its steps took beyond
-      :data:`FRESH_ITERATIONS`, counted in place; once they add up to a
+      (int64, (3,)), kept in place from call to call: the iterations its
+      steps took beyond those of the first full step with it, that
+      baseline, and whether it is still to be taken.  Once they add up to a
       factorisation (:data:`FACTOR_ITERATIONS`) the next step asks for a
-      fresh one (rent until it adds up to the price, then buy: never more
-      than twice the cost of the best schedule; a matrix grown stale as the
-      robot moves far from where it was made converges slowly, at a rate
-      still below :data:`SLOW_RATE`);
+      fresh matrix (rent until the rent adds up to the price, then buy:
+      never more than twice the cost of the best schedule).  A matrix made
+      far from where the robot now is converges slowly, though at a rate
+      below :data:`SLOW_RATE`;
     * ``rec = (row (n,), check (n,), dofs)``: after step ``k``, when
       ``row[k] >= 0``, the coordinates ``dofs`` go to ``out[0][row[k]]`` and,
       when ``check[k]``, :func:`state_checks` (kinetic, potential, largest
@@ -604,8 +604,7 @@ def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kar
         code, n, last = chord_iterations(cur, prev, weights, predict, nxt, step_coef, inputs,
                                          kargs, mass, lu,
                                          (inv_scale, tol, it, max_iter, last, refreshed), work)
-        if refreshed:
-            stale[0] = 0
+        fresh_from = it   # iterations of this step before its matrix was made (refreshed)
         it += n
         total += n
         if code == 1 and it < max_iter:
@@ -613,7 +612,15 @@ def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kar
         if code != 0:
             return (4 if code == 1 else code), k, it, last, total
         # converged: the history moves on, the state becomes the step's
-        stale[0] += max(n - FRESH_ITERATIONS, 0)
+        if refreshed:   # the extra iterations count against this step's (or the next one's)
+            stale[0] = 0
+            stale[1] = n
+            stale[2] = 1 if fresh_from > 0 else 0
+        elif stale[2]:
+            stale[1] = n
+            stale[2] = 0
+        else:
+            stale[0] += max(n - stale[1], 0)
         acc0 = cur[2]
         mu0 = cur[4]
         if count[0] >= 1:
