@@ -24,8 +24,9 @@ dynamic rows by ``1/beta'``, the multipliers by ``beta'``) so that its
 conditioning does not degrade as ``h -> 0``.  The factorisation is kept
 from step to step (a chord method) and refreshed when the iterations slow
 down, when the iterations its steps took beyond those of its first step
-add up to what a factorisation costs (``_kernels.FACTOR_ITERATIONS``: a matrix made far from
-where the robot now is), or when the step or the mass changes.  A step that does not converge
+add up to about what a factorisation costs (``_kernels.FACTOR_ITERATIONS``:
+a matrix made far from where the robot now is), or when the step or the
+mass changes.  A step that does not converge
 within its budget is retried as two half steps, down to a limit; past it
 the integration stops with a :class:`~bellow_ancf_ros.core.status.DynamicsStatus`
 that says why, and the state stays at the last converged step: never a

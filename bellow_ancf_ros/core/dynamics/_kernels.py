@@ -512,10 +512,14 @@ def chord_iterations(st0, prev, weights, predict, st, coef, inputs, kargs, mass,
 
 #: :func:`run_steps` asks for the chord matrix at the step's current iterate.
 NEED_FACTOR = 1
-#: What a factorisation costs, in iterations: 10-16 measured (the values assembled and
-#: factorised, one to three segments, the model's elements and twice as many; one segment
-#: at twice the model's: 0.33-0.47 ms against 39-44 us an iteration).
-FACTOR_ITERATIONS = 15
+#: Iterations counted against a chord matrix after which the next step makes it afresh
+#: (:func:`run_steps`).  A factorisation costs 13-21 iterations (measured, its values
+#: assembled and factorised: one and two segments, the model's elements and twice as many).
+#: A step's iteration beyond its matrix's first full step's is not counted: in a smooth run
+#: (the bench's sine) a step takes one more as the robot moves on, and a matrix made afresh
+#: for it did not pay back (7 % more CPU, counting it); the 10x circle's steps took two to
+#: four more.
+FACTOR_ITERATIONS = 10
 
 
 @njit(cache=True, nogil=True)
@@ -562,13 +566,12 @@ def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kar
     * ``ctl = (inv_scale, tol, max_iter, lu_step, stale)``: ``lu_step`` the
       step the chord matrix ``lu`` was made for (0: none yet); ``stale``
       (int64, (3,)), kept in place from call to call: the iterations its
-      steps took beyond those of the first full step with it, that
-      baseline, and whether it is still to be taken.  Once they add up to a
-      factorisation (:data:`FACTOR_ITERATIONS`) the next step asks for a
-      fresh matrix (rent until the rent adds up to the price, then buy:
-      never more than twice the cost of the best schedule).  A matrix made
-      far from where the robot now is converges slowly, though at a rate
-      below :data:`SLOW_RATE`;
+      steps took beyond one more than the first full step with it, that
+      step's, and whether it is still to be taken.  Once they add up to
+      :data:`FACTOR_ITERATIONS` the next step asks for a fresh matrix (rent
+      until the rent adds up to the price, then buy).  A matrix made far
+      from where the robot now is converges slowly, though at a rate below
+      :data:`SLOW_RATE`;
     * ``rec = (row (n,), check (n,), dofs)``: after step ``k``, when
       ``row[k] >= 0``, the coordinates ``dofs`` go to ``out[0][row[k]]`` and,
       when ``check[k]``, :func:`state_checks` (kinetic, potential, largest
@@ -612,7 +615,7 @@ def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kar
         if code != 0:
             return (4 if code == 1 else code), k, it, last, total
         # converged: the history moves on, the state becomes the step's
-        if refreshed:   # the extra iterations count against this step's (or the next one's)
+        if refreshed:   # the iterations count against this step's (or the next one's)
             stale[0] = 0
             stale[1] = n
             stale[2] = 1 if fresh_from > 0 else 0
@@ -620,7 +623,7 @@ def run_steps(cur, nxt, hist, steps, lams, k0, resume, coef, stage1, qpoint, kar
             stale[1] = n
             stale[2] = 0
         else:
-            stale[0] += max(n - stale[1], 0)
+            stale[0] += max(n - stale[1] - 1, 0)
         acc0 = cur[2]
         mu0 = cur[4]
         if count[0] >= 1:
