@@ -167,6 +167,8 @@ def rotation_between(z_from: Any, z_to: Any) -> np.ndarray:
     ax, ay, az = np.asarray(z_from, dtype=float).reshape(3).tolist()
     bx, by, bz = np.asarray(z_to, dtype=float).reshape(3).tolist()
     n = math.sqrt(ax * ax + ay * ay + az * az) * math.sqrt(bx * bx + by * by + bz * bz)
+    if not n > 0.0:   # (a zero vector has no direction: NaN, as numpy's division gave it)
+        return np.full(3, math.nan)
     cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx   # (a x b, scalar:
     s = math.sqrt(cx * cx + cy * cy + cz * cz) / n     # numpy's cross costs 20 times more)
     angle = math.atan2(s, (ax * bx + ay * by + az * bz) / n)

@@ -102,6 +102,7 @@ def test_hat_is_the_cross_product_and_rotation_vector_round_trip():
                                b / np.linalg.norm(b), atol=1e-12)
     assert np.linalg.norm(r) == pytest.approx(geometry.angle_between(a, b), abs=1e-12)
     np.testing.assert_array_equal(geometry.rotation_between(a, 3.0 * a), np.zeros(3))
+    assert np.isnan(geometry.rotation_between(np.zeros(3), b)).all()
     tiny = geometry.rotation_between([0.0, 0.0, 2.0], [1e-9, 0.0, 1.0])   # (not lost to rounding)
     np.testing.assert_allclose(tiny, [0.0, 1e-9, 0.0], rtol=1e-6, atol=0)
 
