@@ -5,11 +5,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from bellow_ancf_ros.core import solve_forward
-from bellow_ancf_ros.core.dynamics import GeneralizedAlpha
+from bellow_ancf_ros.core.dynamics import GeneralizedAlpha, Inertia
 from bellow_ancf_ros.core.dynamics._integrator import REFACTOR_ERROR
 from bellow_ancf_ros.core.dynamics._kernels import (compact_factors, lu_solve, refactor,
                                                     split_factors, symbolic_factors)
-from bellow_ancf_ros.core.dynamics._inertia import Inertia
 
 
 def _chord_matrix(model, pressures, step_s):
