@@ -9,7 +9,9 @@ statuses at high solve rates (:class:`ThrottledStatus`).
 from __future__ import annotations
 
 import math
+import re
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -240,23 +242,40 @@ def solve_outcome(inv, usable: bool, budget: bool, more: bool, unsafe=None,
             'unreachable', True)
 
 
-class Refusals:
-    """Reporting of refused inputs: a throttled warning always, a WARN diagnostic rate-limited.
+#: Kinds of refusal whose log lines :class:`Refusals` throttles apart (the oldest forgotten).
+_REFUSAL_KINDS = 64
+#: The numbers in a refusal's reason (values, stamps): its kind is the reason without them.
+_NUMBERS = re.compile(r'[-+]?(?:\d+\.?\d*(?:e[-+]?\d+)?|nan|inf)', re.IGNORECASE)
 
-    At most one WARN diagnostic every :data:`REFUSAL_DIAG_INTERVAL_S` per
-    reason (a flood of bad input cannot flood ``/diagnostics``).  ``what``
-    names the input (``targets``, ``pressures``).
+
+class Refusals:
+    """Reporting of refused inputs: a warning per kind of reason, a WARN diagnostic rate-limited.
+
+    The log line is throttled per kind of reason (the reason without its
+    numbers), at most one every :data:`WARN_THROTTLE_S`: a NaN target right
+    after a target in a wrong frame is logged too (rclpy's throttle, per
+    call site, let the first hide the second).  At most one WARN diagnostic
+    every :data:`REFUSAL_DIAG_INTERVAL_S` per reason (a flood of bad input
+    cannot flood ``/diagnostics``).  ``what`` names the input (``targets``,
+    ``pressures``).
     """
 
     def __init__(self, node, what: str, publish_diag) -> None:
         self.node, self.what, self.publish_diag = node, what, publish_diag
         self._clock = control_clock(node)   # the rate limit: control time (use_sim_time)
         self._last = ('', -math.inf)
+        self._logged: dict[str, float] = {}   # kind of reason -> when last logged (monotonic)
 
     def report(self, reason: str, total: int) -> None:
         """Log and report one refusal (``total``: refusals so far)."""
-        self.node.get_logger().warning(f'{self.what} refused: {reason}',
-                                       throttle_duration_sec=WARN_THROTTLE_S)
+        kind = _NUMBERS.sub('#', reason)
+        t = time.monotonic()
+        if t - self._logged.get(kind, -math.inf) >= WARN_THROTTLE_S:
+            self._logged.pop(kind, None)
+            if len(self._logged) >= _REFUSAL_KINDS:
+                del self._logged[next(iter(self._logged))]
+            self._logged[kind] = t
+            self.node.get_logger().warning(f'{self.what} refused: {reason}')
         now = self._clock.now()
         if reason != self._last[0] or now - self._last[1] >= REFUSAL_DIAG_INTERVAL_S:
             self._last = (reason, now)

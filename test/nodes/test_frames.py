@@ -180,4 +180,22 @@ def test_refusal_reaches_log_and_diagnostics_once_per_interval():
         refusals.report(str(info.value), k + 1)
     assert len(diags) == 1
     assert "frame 'world'" in diags[0][1] and "tf2 knows 'rigid_body_1', 'world'" in diags[0][1]
-    assert all(t is not None and "tf2 knows no frame 'base'" in line for line, t in log.lines)
+    assert len(log.lines) == 1 and "tf2 knows no frame 'base'" in log.lines[0][0]
+
+
+def test_a_refusal_of_another_kind_is_logged_at_once():
+    """A NaN target right after one in a wrong frame: both logged; repeats of each throttled.
+
+    rclpy's throttle is per call site: the first refusal's line hid the
+    second's (a lab-style trial: the NaN refusal reached /diagnostics only).
+    Numbers in a reason (values, stamps) do not make it another kind.
+    """
+    log = FakeLogger()
+    node = SimpleNamespace(get_logger=lambda: log)
+    refusals = Refusals(node, 'targets', lambda *a: None)
+    for k in range(3):
+        refusals.report(f"target frame 'world' is not the base frame 'base' (stamp {k}.5)", k)
+        refusals.report(f'target position must be 3 finite numbers, got [{k}.0, nan, inf]', k)
+    assert [line for line, _ in log.lines] == [
+        "targets refused: target frame 'world' is not the base frame 'base' (stamp 0.5)",
+        'targets refused: target position must be 3 finite numbers, got [0.0, nan, inf]']
